@@ -1,0 +1,182 @@
+# The simulated chip: stands in for `machine` so the firmware runs unchanged on the
+# MicroPython unix port. Time is virtual: timers fire only when the firmware idles
+# (machine.idle), and every output edge is recorded with its virtual time.
+#
+# It also models the printer around the chip: STEP/DIR edges move the axes, and the
+# min endstops read triggered at or below position 0, where the axes start.
+#
+# Edge records are 64-bit words: time_us << 8 | gpio << 1 | level, flushed to a file
+# in native byte order outside the step loop. Recording never allocates, so the step
+# loop can run with the heap locked.
+from array import array
+import micropython
+
+GPIO_COUNT = 30
+_CAPACITY = 8192
+_FLUSH_AT = _CAPACITY - 256  # one tick writes far fewer edges than this
+
+now_us = 0
+quantum_us = 1000  # virtual time one idle() call advances
+heap_lock_ticks = False  # lock the heap around every timer callback
+
+_edges = array("Q", bytes(8 * _CAPACITY))
+_n = 0
+_out = None
+_levels = bytearray(GPIO_COUNT)
+_timers = []
+# Printer model: what each pin is to the mechanics.
+_role = bytearray(GPIO_COUNT)  # 1 + index for STEP pins, 0 otherwise
+_dir_of = bytearray(GPIO_COUNT)  # STEP pin -> its DIR pin
+_endstop_axis = bytearray(GPIO_COUNT)  # 1 + axis for endstop inputs
+positions = array("i", bytes(4 * 16))  # steps per STEP pin index
+step_names = []
+
+
+def attach_world(pin_map, step_names_in_order):
+    """Tell the model which pins are STEP, DIR and endstops (names as in board.PINS)."""
+    for i, name in enumerate(step_names_in_order):
+        step_names.append(name)
+        g = pin_map[name + "_step"]
+        _role[g] = 1 + i
+        _dir_of[g] = pin_map[name + "_dir"]
+    for axis, name in enumerate(("x", "y", "z")):
+        _endstop_axis[pin_map[name + "_min"]] = 1 + axis
+
+
+def record_to(path):
+    global _out
+    _out = open(path, "wb")
+
+
+def flush():
+    global _n
+    if _out is not None and _n:
+        _out.write(memoryview(_edges)[0:_n])
+    _n = 0
+
+
+def close():
+    flush()
+    if _out is not None:
+        _out.close()
+
+
+def _record(gpio, level):
+    global _n
+    _edges[_n] = (now_us << 8) | (gpio << 1) | level
+    _n += 1
+    if _n >= _CAPACITY:  # a flush outside idle() would be a bug: drop nothing, stop
+        raise RuntimeError("edge buffer overflow")
+
+
+class Pin:
+    IN = 0
+    OUT = 1
+    OPEN_DRAIN = 2
+    PULL_UP = 1
+    PULL_DOWN = 2
+
+    def __init__(self, gpio, mode=-1, pull=-1, value=None):
+        if not 0 <= gpio < GPIO_COUNT:
+            raise ValueError("GPIO %d does not exist (0..%d)" % (gpio, GPIO_COUNT - 1))
+        self.gpio = gpio
+        self.mode = mode
+        if value is not None:
+            self.value(value)
+        elif mode == Pin.OUT and now_us == 0:
+            _record(gpio, _levels[gpio])
+
+    def value(self, v=None):
+        g = self.gpio
+        if v is None:
+            axis = _endstop_axis[g]
+            if axis:
+                return 1 if positions[axis - 1] <= 0 else 0
+            return _levels[g]
+        v = 1 if v else 0
+        if _levels[g] != v:
+            _levels[g] = v
+            _record(g, v)
+            idx = _role[g]
+            if idx and v:
+                if _levels[_dir_of[g]]:
+                    positions[idx - 1] += 1
+                else:
+                    positions[idx - 1] -= 1
+        elif now_us == 0:
+            _record(g, v)  # every signal gets a value at #0
+
+    def on(self):
+        self.value(1)
+
+    def off(self):
+        self.value(0)
+
+    def __call__(self, v=None):
+        return self.value(v)
+
+
+class Timer:
+    ONE_SHOT = 0
+    PERIODIC = 1
+
+    def __init__(self, id=-1, **kw):
+        self._cb = None
+        if kw:
+            self.init(**kw)
+
+    def init(self, mode=1, freq=None, period=None, callback=None, hard=False):
+        if freq:
+            self.period_us = 1000000 // freq
+        else:
+            self.period_us = int(period * 1000)
+        if self.period_us < 1:
+            raise ValueError("timer period below 1 us")
+        self._cb = callback
+        self._next = now_us + self.period_us
+        if self not in _timers:
+            _timers.append(self)
+
+    def deinit(self):
+        if self in _timers:
+            _timers.remove(self)
+
+
+def idle():
+    """Advance virtual time by quantum_us, firing due timer callbacks."""
+    global now_us
+    end = now_us + quantum_us
+    for t in _timers:
+        cb = t._cb
+        per = t.period_us
+        nxt = t._next
+        if heap_lock_ticks:
+            while nxt <= end:
+                now_us = nxt
+                micropython.heap_lock()
+                cb(t)
+                micropython.heap_unlock()
+                nxt += per
+                if _n > _FLUSH_AT:
+                    flush()
+        else:
+            while nxt <= end:
+                now_us = nxt
+                cb(t)
+                nxt += per
+                if _n > _FLUSH_AT:
+                    flush()
+        t._next = nxt
+    now_us = end
+
+
+def disable_irq():
+    return 0
+
+
+def enable_irq(state=0):
+    pass
+
+
+def unique_id():
+    return b"mixstep-sim"

@@ -1,0 +1,74 @@
+# Assembles the printer from the board's settings, as APrinter does in one place:
+# each part gets its pins, timer and parameters passed in. On a board this file runs
+# at boot; the simulation imports it and calls run() with its own console.
+from array import array
+import sys
+import machine
+import board
+from mixfw import stepper as st, mixer
+from mixfw.pins import Pins
+from mixfw.planner import Planner
+from mixfw.printer import Printer
+from mixfw.console import StreamConsole
+from mixfw import cmd_motion, cmd_mixing, cmd_thermal, cmd_report
+
+
+def _ticks(us, tick_us):
+    return max(1, -(-us // tick_us))
+
+
+def build(settings=None, pin_map=None):
+    settings = settings or board.SETTINGS
+    pin_map = pin_map or board.PINS
+    tick_us = settings["tick_us"]
+    mem = array("i", bytes(4 * st.mem_words(settings["queue_blocks"])))
+    mem[st.S_PULSE_TICKS] = _ticks(settings["step_pulse_us"], tick_us)
+    mem[st.S_DIR_TICKS] = _ticks(settings["dir_setup_us"], tick_us)
+    mem[st.MIX_BASE + mixer.M_N] = settings["drives"]
+    mem[st.MIX_BASE + mixer.M_ID] = -1
+    pins = Pins(machine, pin_map, settings)
+    for i, m in enumerate(pins.step_masks):
+        mem[st.MASK_BASE + i] = m
+    for i, m in enumerate(pins.dir_masks):
+        mem[st.DIR_MASK_BASE + i] = m
+    planner = Planner(mem, settings, machine.idle, machine.disable_irq, machine.enable_irq)
+    printer = Printer(settings["line_buffer_bytes"], machine.idle)
+    motion = cmd_motion.Motion(planner, pins, settings)
+    cmd_motion.register(printer, motion)
+    cmd_mixing.register(printer, cmd_mixing.Mixing(planner, settings))
+    cmd_thermal.register(printer, cmd_thermal.Thermal(settings))
+    cmd_report.register(printer, cmd_report.Reports(printer, motion, planner, board.NAME))
+    printer.finish.append(planner.synchronize)
+    printer.mem = mem
+    printer.planner = planner
+    printer.irq = st.make_irq(mem, pins.out, pins.endstops)
+    return printer
+
+
+def start_timer(printer, tick_us):
+    # The timer owns the step loop. A hard callback where the port has one (rp2 since
+    # MicroPython 1.26); ESP32 timers are soft only.
+    freq = 1000000 // tick_us
+    try:
+        return machine.Timer(-1, mode=machine.Timer.PERIODIC, freq=freq,
+                             callback=printer.irq, hard=True)
+    except (TypeError, ValueError):
+        return machine.Timer(-1, mode=machine.Timer.PERIODIC, freq=freq,
+                             callback=printer.irq)
+
+
+def run(console=None):
+    printer = build()
+    timer = start_timer(printer, board.SETTINGS["tick_us"])
+    if console is None:
+        console = StreamConsole(sys.stdin.buffer, sys.stdout.buffer)
+    console.write("start\n")
+    try:
+        printer.serve(console)
+    finally:
+        timer.deinit()
+    return printer
+
+
+if __name__ == "__main__":
+    run()

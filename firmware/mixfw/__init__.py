@@ -1,0 +1,1 @@
+# mixstep firmware: one module per concern; main.py assembles them from the board's settings.

@@ -1,0 +1,185 @@
+# Motion commands: G0/G1, G4, G28, G90/G91, G92, G20/G21, M82/M83, M400, M17/M18/M84.
+# Handlers parse and check; the planner does the work.
+from mixfw.gcode import GcodeError
+from mixfw.planner import steps_from_mm
+from mixfw import stepper as st
+
+AXIS_LETTERS = "XYZE"
+
+
+class Motion:
+    """Modal state owned by the command side: logical position, G92 offsets, modes."""
+
+    def __init__(self, planner, pins, settings):
+        self.planner = planner
+        self.pins = pins
+        self.pos_mm = [0.0, 0.0, 0.0, 0.0]  # logical, as G-code sees it
+        self.offset_mm = [0.0, 0.0, 0.0, 0.0]  # machine = logical + offset (G92)
+        self.absolute = True
+        self.absolute_e = True
+        self.feed_mm_s = settings["default_feed_mm_s"]
+        self.travel_mm = settings["travel_mm"]
+        self.homing_feed_mm_s = settings["homing_feed_mm_s"]
+        self.drives = settings["drives"]
+        self.dir_masks = pins.axis_dir_masks()
+        self.enabled = 0  # bit per driver: X Y Z then drives
+
+    def machine_steps(self):
+        spm = self.planner.steps_per_mm
+        return [steps_from_mm(self.pos_mm[i] + self.offset_mm[i], spm[i]) for i in range(4)]
+
+    def enable_for(self, axes_mask):
+        want = axes_mask & 7
+        if axes_mask & 8:
+            want |= ((1 << self.drives) - 1) << 3
+        for i in range(3 + self.drives):
+            if (want >> i) & 1 and not (self.enabled >> i) & 1:
+                self.pins.set_enabled(i, True)
+        self.enabled |= want
+
+    def disable(self, axes_mask):
+        self.planner.synchronize()
+        want = axes_mask & 7
+        if axes_mask & 8:
+            want |= ((1 << self.drives) - 1) << 3
+        for i in range(3 + self.drives):
+            if (want >> i) & 1:
+                self.pins.set_enabled(i, False)
+        self.enabled &= ~want
+
+    # G0/G1 X Y Z E F: straight move. Example: G1 X10 Y5 E0.4 F1800
+    def g1(self, line):
+        f = line.float("F", -1.0)
+        if line.has("F"):
+            if f <= 0:
+                raise GcodeError("feed rate F must be > 0, got %s" % f)
+            self.feed_mm_s = f / 60.0
+        target = list(self.pos_mm)
+        moved = 0
+        for i in range(4):
+            ch = AXIS_LETTERS[i]
+            if line.has(ch):
+                v = line.float(ch)
+                relative = not (self.absolute_e if i == 3 else self.absolute)
+                target[i] = target[i] + v if relative else v
+                moved |= 1 << i
+        if not moved:
+            return None
+        spm = self.planner.steps_per_mm
+        steps = [steps_from_mm(target[i] + self.offset_mm[i], spm[i]) for i in range(4)]
+        delta = [steps[i] - self.planner.position_steps[i] for i in range(4)]
+        axes = 0
+        for i in range(4):
+            if delta[i]:
+                axes |= 1 << i
+        if axes:
+            self.enable_for(axes)
+            self.planner.add_move(steps, self.feed_mm_s, dir_masks=self.dir_masks)
+        self.pos_mm = target
+        return None
+
+    # G4 P<ms> | S<s>: dwell after the queued moves. Example: G4 P500
+    def g4(self, line):
+        seconds = line.float("S", 0.0) + line.float("P", 0.0) / 1000.0
+        if seconds < 0:
+            raise GcodeError("dwell time must be >= 0")
+        if seconds > 0:
+            self.planner.add_dwell(seconds)
+        return None
+
+    # G28 [X] [Y] [Z]: home the named axes, or all, to their min endstops. Example: G28 X Y
+    def g28(self, line):
+        axes = [i for i in range(3) if line.has(AXIS_LETTERS[i])] or [0, 1, 2]
+        planner = self.planner
+        mem = planner.mem
+        for i in axes:
+            planner.synchronize()
+            self.enable_for(1 << i)
+            target = list(planner.position_steps)
+            reach_mm = 1.5 * self.travel_mm[i]
+            target[i] -= int(reach_mm * planner.steps_per_mm[i] + 0.5)
+            planner.add_move(target, self.homing_feed_mm_s[i], homing_axes=1 << i,
+                             dir_masks=self.dir_masks)
+            planner.synchronize()
+            if not (mem[st.S_HOME_STOP] >> i) & 1:
+                raise GcodeError("homing %s failed: no endstop within %.0f mm"
+                                 % (AXIS_LETTERS[i], reach_mm))
+            mem[st.S_POS + i] = 0
+            steps = list(planner.position_steps)
+            steps[i] = 0
+            planner.set_position_steps(steps)
+            self.pos_mm[i] = 0.0
+            self.offset_mm[i] = 0.0
+        return None
+
+    # G90 / G91: absolute / relative coordinates (E follows, as in Marlin).
+    def g90(self, line):
+        self.absolute = self.absolute_e = True
+
+    def g91(self, line):
+        self.absolute = self.absolute_e = False
+
+    # M82 / M83: absolute / relative E only.
+    def m82(self, line):
+        self.absolute_e = True
+
+    def m83(self, line):
+        self.absolute_e = False
+
+    # G92 [X Y Z E]: say where the axes are now, without moving. Example: G92 E0
+    def g92(self, line):
+        named = [i for i in range(4) if line.has(AXIS_LETTERS[i])]
+        for i in named or range(4):
+            v = line.float(AXIS_LETTERS[i], 0.0)
+            self.offset_mm[i] += self.pos_mm[i] - v
+            self.pos_mm[i] = v
+
+    # G20: inches are refused; G21: millimetres, the only unit.
+    def g20(self, line):
+        raise GcodeError("G20 (inch units) is not supported; use G21 (mm)")
+
+    def g21(self, line):
+        pass
+
+    # M400: wait for every queued move to finish.
+    def m400(self, line):
+        self.planner.synchronize()
+
+    def _axes_named(self, line):
+        mask = 0
+        for i in range(4):
+            if line.has(AXIS_LETTERS[i]):
+                mask |= 1 << i
+        return mask or 15
+
+    # M17 [X Y Z E]: enable stepper drivers.
+    def m17(self, line):
+        self.enable_for(self._axes_named(line))
+
+    # M18 / M84 [X Y Z E]: disable drivers once the queued moves are done.
+    def m18(self, line):
+        if line.has("S"):
+            raise GcodeError("M18/M84 S (idle timeout) is not supported")
+        self.disable(self._axes_named(line))
+
+
+def register(printer, motion):
+    m = motion
+    for name, fn, text in (
+        ("G0", m.g1, "rapid move (same as G1)"),
+        ("G1", m.g1, "straight move X Y Z E F"),
+        ("G4", m.g4, "dwell P<ms> or S<s>"),
+        ("G28", m.g28, "home axes to min endstops"),
+        ("G90", m.g90, "absolute coordinates"),
+        ("G91", m.g91, "relative coordinates"),
+        ("G92", m.g92, "set position"),
+        ("G20", m.g20, "inch units (refused)"),
+        ("G21", m.g21, "millimetre units"),
+        ("M82", m.m82, "absolute E"),
+        ("M83", m.m83, "relative E"),
+        ("M400", m.m400, "wait for moves to finish"),
+        ("M17", m.m17, "enable drivers"),
+        ("M18", m.m18, "disable drivers"),
+        ("M84", m.m18, "disable drivers"),
+    ):
+        printer.register(name, fn, text)

@@ -1,0 +1,45 @@
+# Consoles: where G-code lines come from and replies go to.
+import select
+
+
+class StreamConsole:
+    """A byte stream pair such as USB/UART serial, or stdin/stdout on the unix port.
+
+    blocking=False: readinto() returns at once with what has arrived (0 if nothing),
+    so the main loop can idle while the step loop runs.
+    blocking=True: readinto() waits for the next byte. The simulation uses this so its
+    virtual time advances only when the firmware itself waits, which makes a trace
+    independent of how fast the host happens to be."""
+
+    def __init__(self, rx, tx, blocking=False):
+        self.rx = rx
+        self.tx = tx
+        self.blocking = blocking
+        self.one = bytearray(1)
+        self.one_mv = memoryview(self.one)
+        self.poller = select.poll()
+        self.poller.register(rx, select.POLLIN)
+
+    def readinto(self, mv):
+        """Bytes read into mv, 0 if none are waiting, -1 at end of stream."""
+        n = 0
+        limit = len(mv)
+        one = self.one_mv
+        while n < limit:
+            if not (self.blocking and n == 0):
+                ready = False
+                for _obj, ev in self.poller.ipoll(0):
+                    ready = ev & (select.POLLIN | select.POLLHUP | select.POLLERR)
+                if not ready:
+                    break
+            got = self.rx.readinto(one)
+            if not got:
+                return n if n else -1
+            mv[n] = self.one[0]
+            n += 1
+            if self.one[0] == 10:
+                break
+        return n
+
+    def write(self, text):
+        self.tx.write(text)

@@ -1,0 +1,168 @@
+# The mixer: which filament drive gets each extrusion step.
+#
+# Weights are integers that never change inside a block. The choice is an exact
+# divisor (Sainte-Lague) schedule: drive i takes its k-th step of a period at the
+# "due time" (2k+1)/(2*w_i), and the step goes to the drive with the earliest due
+# time, ties to the lowest index. From a fresh start 20/30/50 gives the seed's
+# sequence 3,2,1,3,2,3,3,1,2,3. Unlike the seed's largest-error rule this schedule
+# has an exact inverse: stepping back takes the drive with the latest previous due
+# time, ties to the highest index, so n steps back and n forward restore every
+# count and every drive position, however lopsided the weights.
+#
+# All state lives in one preallocated array('i') section (see the M_ offsets) so
+# the step loop can call mix_step() with the heap locked.
+from mixfw.compat import micropython, const, ptr32
+
+MAX_DRIVES = const(6)
+# Normalised weights sum to at most this before the gcd is taken out, so products
+# in the schedule stay below 2**30 (the chips' small-int limit).
+WEIGHT_SCALE = const(10000)
+
+# Offsets inside the mixer section. M_ID..M_W has the same shape as a block's mix
+# words, so starting a block is one copy (mix_load).
+M_ID = const(0)  # id of the mix loaded, -1 for none
+M_W = const(1)  # weights, MAX_DRIVES words
+M_N = const(7)  # number of drives fitted
+M_SUM = const(8)  # sum of weights: the period of the schedule
+M_Q = const(9)  # steps taken in the current period
+M_C = const(10)  # per-drive steps in the current period, MAX_DRIVES words
+M_WORDS = const(16)
+
+
+class MixError(ValueError):
+    pass
+
+
+def _gcd(a, b):
+    while b:
+        a, b = b, a % b
+    return a
+
+
+def normalize(weights, drives):
+    """Non-negative numbers -> integer weights (tuple of `drives`) with the gcd taken out.
+
+    Every positive weight keeps at least 1, so no drive asked for is dropped. An all-zero
+    or negative mix is refused: the step loop would have no drive to step."""
+    if len(weights) > drives:
+        raise MixError("mix has %d weights but only %d drives" % (len(weights), drives))
+    vals = [float(w) for w in weights] + [0.0] * (drives - len(weights))
+    for i, v in enumerate(vals):
+        if v < 0 or v != v:
+            raise MixError("weight for drive %d is %s; weights must be >= 0" % (i, v))
+    total = sum(vals)
+    if total <= 0:
+        raise MixError("all-zero mix refused: at least one drive needs a weight > 0")
+    # Largest remainder, so the scaled weights sum to exactly WEIGHT_SCALE.
+    exact = [v * WEIGHT_SCALE / total for v in vals]
+    ints = [int(x) for x in exact]
+    order = sorted(range(drives), key=lambda i: ints[i] - exact[i])
+    short = WEIGHT_SCALE - sum(ints)
+    for i in order[:short]:
+        ints[i] += 1
+    for i in range(drives):
+        if vals[i] > 0 and ints[i] == 0:
+            ints[i] = 1
+    g = 0
+    for w in ints:
+        g = _gcd(g, w)
+    return tuple(w // g for w in ints)
+
+
+@micropython.viper
+def mix_load(mem: ptr32, base: int, src: int):
+    """Copy a mix (id and weights at mem[src:]) into the mixer and restart its schedule."""
+    mem[base + M_ID] = mem[src]
+    total = 0
+    i = 0
+    while i < MAX_DRIVES:
+        w = mem[src + 1 + i]
+        mem[base + M_W + i] = w
+        mem[base + M_C + i] = 0
+        total += w
+        i += 1
+    mem[base + M_SUM] = total
+    mem[base + M_Q] = 0
+
+
+def load(mem, base, mix_id, weights):
+    """Load a normalised mix from the main loop (tests, start-up)."""
+    mem[base + M_ID] = mix_id
+    for i in range(MAX_DRIVES):
+        mem[base + M_W + i] = weights[i] if i < len(weights) else 0
+    mix_load(mem, base, base)
+
+
+@micropython.viper
+def mix_step(mem: ptr32, base: int, reverse: int) -> int:
+    """Pick the drive for one extrusion step (reverse != 0: undo one). Never allocates."""
+    n = mem[base + M_N]
+    total = mem[base + M_SUM]
+    q = mem[base + M_Q]
+    w_at = base + M_W
+    c_at = base + M_C
+    best = -1
+    best_num = 0
+    best_w = 1
+    i = 0
+    if reverse == 0:
+        if q >= total:
+            while i < n:
+                mem[c_at + i] = 0
+                i += 1
+            q = 0
+            i = 0
+        while i < n:
+            w = mem[w_at + i]
+            if w > 0:
+                num = 2 * mem[c_at + i] + 1
+                if best < 0 or num * best_w < best_num * w:
+                    best = i
+                    best_num = num
+                    best_w = w
+            i += 1
+        if best >= 0:
+            mem[c_at + best] += 1
+            mem[base + M_Q] = q + 1
+    else:
+        if q <= 0:
+            while i < n:
+                mem[c_at + i] = mem[w_at + i]
+                i += 1
+            q = total
+            i = 0
+        while i < n:
+            w = mem[w_at + i]
+            if w > 0:
+                num = 2 * mem[c_at + i] - 1
+                if best < 0 or num * best_w >= best_num * w:
+                    best = i
+                    best_num = num
+                    best_w = w
+            i += 1
+        if best >= 0:
+            mem[c_at + best] -= 1
+            mem[base + M_Q] = q - 1
+    return best
+
+
+class Tools:
+    """Virtual tools T0..T15: each a normalised mix. Owned by the command side; a block
+    copies the mix it was queued with, so changing a tool never alters queued moves."""
+
+    def __init__(self, drives, count=16):
+        if not 1 <= drives <= MAX_DRIVES:
+            raise MixError("drive count %d outside 1..%d" % (drives, MAX_DRIVES))
+        self.drives = drives
+        self.count = count
+        self.mixes = [self.default(t) for t in range(count)]
+
+    def default(self, tool):
+        if tool < self.drives:
+            return tuple(1 if i == tool else 0 for i in range(self.drives))
+        return tuple(1 for _ in range(self.drives))
+
+    def check(self, tool):
+        if not 0 <= tool < self.count:
+            raise MixError("tool %d out of range 0..%d" % (tool, self.count - 1))
+        return tool

@@ -1,0 +1,293 @@
+# The planner: a ring of blocks with trapezoidal speed profiles and look-ahead
+# junction speeds. It works in floats in the main loop and hands the step loop
+# integer records (see stepper.py). Each block carries its own mix, so a mix or tool
+# change reaches only moves queued after it.
+#
+# Pure logic: the hooks that touch the chip (waiting, masking the interrupt) are
+# passed in by main.py, so host tools can plan on CPython too.
+from math import sqrt
+from mixfw import stepper as st
+from mixfw.mixer import MAX_DRIVES
+
+_INF = 1e30
+
+
+def steps_from_mm(mm, steps_per_mm):
+    """The one rounding rule from millimetres to absolute steps (half away from zero)."""
+    v = mm * steps_per_mm
+    return int(v + 0.5) if v >= 0 else -int(0.5 - v)
+
+
+class PlanError(ValueError):
+    pass
+
+
+class Planner:
+    def __init__(self, mem, settings, idle, irq_off, irq_on):
+        self.mem = mem
+        self.idle = idle
+        self._irq_off = irq_off
+        self._irq_on = irq_on
+        q = settings["queue_blocks"]
+        self.queue = q
+        mem[st.S_QUEUE] = q
+        self.steps_per_mm = list(settings["steps_per_mm"])
+        self.max_feed_mm_s = settings["max_feed_mm_s"]
+        self.max_accel_mm_s2 = settings["max_accel_mm_s2"]
+        self.acceleration_mm_s2 = settings["acceleration_mm_s2"]
+        self.retract_acceleration_mm_s2 = settings["retract_acceleration_mm_s2"]
+        self.junction_deviation_mm = settings["junction_deviation_mm"]
+        tick_us = settings["tick_us"]
+        self.tick_s = tick_us * 1e-6
+        pulse_ticks = mem[st.S_PULSE_TICKS]
+        # A STEP pin is high for pulse_ticks and low at least as long.
+        self.max_step_rate = 1.0 / (2 * pulse_ticks * self.tick_s)
+        self.position_steps = [0, 0, 0, 0]
+        # Per-slot planning data, float side.
+        self.mm = [0.0] * q
+        self.accel = [0.0] * q
+        self.nominal = [0.0] * q
+        self.max_entry = [0.0] * q
+        self.entry = [0.0] * q
+        self.exit = [0.0] * q  # exit speed baked into the slot's integer record
+        self.unit = [None] * q
+        self.prev_unit = None
+        self.prev_nominal = 0.0
+        self.mix_id = 0
+        self.mix = (1,) + (0,) * (MAX_DRIVES - 1)
+
+    # --- queue state, shared with the step loop ---
+    def _count(self):
+        n = self.mem[st.S_HEAD] - self.mem[st.S_TAIL]
+        return n + self.queue if n < 0 else n
+
+    def busy(self):
+        m = self.mem
+        return m[st.S_HEAD] != m[st.S_TAIL] or m[st.S_ACTIVE]
+
+    def synchronize(self):
+        """Wait until every queued block has run (M400)."""
+        while self.busy():
+            self.idle()
+        self.prev_unit = None
+        self.prev_nominal = 0.0
+
+    def _wait_for_slot(self):
+        while self._count() >= self.queue - 1:
+            self.idle()
+        if not self.busy():
+            self.prev_unit = None
+            self.prev_nominal = 0.0
+
+    def set_mix(self, mix_id, weights):
+        self.mix_id = mix_id & 0x3FFFFFFF
+        self.mix = tuple(weights) + (0,) * (MAX_DRIVES - len(weights))
+
+    def set_position_steps(self, steps):
+        """Redefine where the axes are (G92, homing) once the queue is empty."""
+        self.synchronize()
+        self.position_steps = list(steps)
+
+    # --- adding blocks ---
+    def _new_slot(self):
+        self._wait_for_slot()
+        slot = self.mem[st.S_HEAD]
+        return slot, st.BLOCK_BASE + slot * st.B_WORDS
+
+    def _commit(self, slot):
+        nxt = slot + 1
+        self.mem[st.S_HEAD] = 0 if nxt >= self.queue else nxt
+
+    def add_dwell(self, seconds):
+        ticks = int(seconds / self.tick_s + 0.5)
+        slot, b = self._new_slot()
+        m = self.mem
+        for i in range(st.B_WORDS):
+            m[b + i] = 0
+        m[b + st.B_FLAGS] = st.F_DWELL
+        m[b + st.B_DWELL] = ticks
+        self._set_plan(slot, 0.0, 0.0, 0.0, 0.0, None)
+        self._commit(slot)
+        self.prev_unit = None
+        self.prev_nominal = 0.0
+
+    def add_move(self, target_steps, feed_mm_s, homing_axes=0, dir_masks=None):
+        """Queue a straight move to absolute step targets [x, y, z, e]. Returns False if
+        the move is shorter than one step on every axis (nothing to do)."""
+        if feed_mm_s <= 0:
+            raise PlanError("feed rate must be > 0")
+        pos = self.position_steps
+        spm = self.steps_per_mm
+        delta = [target_steps[i] - pos[i] for i in range(4)]
+        steps = [abs(d) for d in delta]
+        n = max(steps)
+        if n == 0:
+            return False
+        if n >= 0x3FFFFFFF:
+            raise PlanError("move too long: %d steps" % n)
+        d_mm = [delta[i] / spm[i] for i in range(4)]
+        xyz_mm = sqrt(d_mm[0] * d_mm[0] + d_mm[1] * d_mm[1] + d_mm[2] * d_mm[2])
+        dist = xyz_mm if steps[0] or steps[1] or steps[2] else abs(d_mm[3])
+        inv = 1.0 / dist
+        speed = feed_mm_s
+        accel = self.acceleration_mm_s2 if xyz_mm > 0 and (steps[0] or steps[1] or steps[2]) \
+            else self.retract_acceleration_mm_s2
+        for i in range(4):
+            if steps[i]:
+                share = abs(d_mm[i]) * inv
+                speed = min(speed, self.max_feed_mm_s[i] / share)
+                accel = min(accel, self.max_accel_mm_s2[i] / share)
+        speed = min(speed, self.max_step_rate * dist / n)
+        len4 = sqrt(xyz_mm * xyz_mm + d_mm[3] * d_mm[3])
+        unit = [v / len4 for v in d_mm]
+
+        slot, b = self._new_slot()
+        # Junction speed from the deviation model; a stop if the queue ran empty.
+        max_entry = 0.0
+        if self.prev_unit is not None and not homing_axes:
+            pu = self.prev_unit
+            cos_theta = -(pu[0] * unit[0] + pu[1] * unit[1] + pu[2] * unit[2] + pu[3] * unit[3])
+            if cos_theta < -0.999999:
+                vj = _INF
+            elif cos_theta > 0.999999:
+                vj = 0.0
+            else:
+                sin_half = sqrt(0.5 * (1.0 - cos_theta))
+                vj = sqrt(accel * self.junction_deviation_mm * sin_half / (1.0 - sin_half))
+            max_entry = min(vj, speed, self.prev_nominal)
+
+        m = self.mem
+        m[b + st.B_N] = n
+        flags = 0
+        dset = 0
+        dclr = 0
+        masks = dir_masks
+        for i in range(4):
+            m[b + st.B_STEPS + i] = steps[i]
+            neg = delta[i] < 0
+            if neg:
+                flags |= st.F_NEG << i
+            mask = masks[i] if masks else 0
+            if neg:
+                dclr |= mask
+            else:
+                dset |= mask
+        if homing_axes:
+            flags |= st.F_HOMING | (homing_axes << st.F_HOME_SHIFT)
+        m[b + st.B_FLAGS] = flags
+        m[b + st.B_DIR_SET] = dset
+        m[b + st.B_DIR_CLR] = dclr
+        m[b + st.B_DWELL] = 0
+        m[b + st.B_MIX] = self.mix_id
+        for i in range(MAX_DRIVES):
+            m[b + st.B_MIX + 1 + i] = self.mix[i]
+        self._set_plan(slot, dist, accel, speed, max_entry, unit)
+        self.entry[slot] = min(max_entry, sqrt(2.0 * accel * dist))
+        self._recalculate(slot)
+        self._commit(slot)
+        self.position_steps = list(target_steps)
+        if homing_axes:
+            self.prev_unit = None
+            self.prev_nominal = 0.0
+        else:
+            self.prev_unit = unit
+            self.prev_nominal = speed
+        return True
+
+    def _set_plan(self, slot, mm, accel, nominal, max_entry, unit):
+        self.mm[slot] = mm
+        self.accel[slot] = accel
+        self.nominal[slot] = nominal
+        self.max_entry[slot] = max_entry
+        self.entry[slot] = 0.0
+        self.exit[slot] = 0.0
+        self.unit[slot] = unit
+
+    # --- look-ahead ---
+    def _recalculate(self, newest):
+        """Backward then forward pass over the blocks not yet started, then refresh
+        their integer records. The newest block must stop at its end."""
+        m = self.mem
+        q = self.queue
+        tail = m[st.S_TAIL]
+        first = tail
+        if m[st.S_ACTIVE]:
+            first = tail + 1 if tail + 1 < q else 0
+        if first == newest and m[st.S_ACTIVE]:
+            # Its entry is what the running block was planned to leave at.
+            self.entry[newest] = min(self.entry[newest], self.exit[tail])
+        # Backward pass.
+        k = newest
+        nxt_entry = 0.0
+        while True:
+            a2d = 2.0 * self.accel[k] * self.mm[k]
+            e = min(self.max_entry[k], sqrt(nxt_entry * nxt_entry + a2d))
+            if k == first and m[st.S_ACTIVE]:
+                e = min(e, self.exit[tail])
+            self.entry[k] = e
+            nxt_entry = e
+            if k == first:
+                break
+            k = k - 1 if k > 0 else q - 1
+        # Forward pass, then records.
+        k = first
+        while True:
+            nk = k + 1 if k + 1 < q else 0
+            exit_speed = 0.0 if k == newest else self.entry[nk]
+            if k != newest:
+                reach = sqrt(self.entry[k] * self.entry[k] + 2.0 * self.accel[k] * self.mm[k])
+                if exit_speed > reach:
+                    exit_speed = reach
+                    self.entry[nk] = reach
+            self._write_trapezoid(k, exit_speed)
+            if k == newest:
+                break
+            k = nk
+
+    def _write_trapezoid(self, slot, exit_speed):
+        m = self.mem
+        b = st.BLOCK_BASE + slot * st.B_WORDS
+        if m[b + st.B_FLAGS] & st.F_DWELL:
+            return
+        n = m[b + st.B_N]
+        mm = self.mm[slot]
+        a = self.accel[slot]
+        v0 = self.entry[slot]
+        v1 = exit_speed
+        vn = self.nominal[slot]
+        f = n / mm  # lead steps per mm of path
+        two_a = 2.0 * a
+        accel_steps = (vn * vn - v0 * v0) / two_a * f
+        decel_steps = (vn * vn - v1 * v1) / two_a * f
+        if accel_steps + decel_steps > n:
+            # The nominal speed is never reached: accelerate to where the ramps meet.
+            accel_steps = ((v1 * v1 - v0 * v0) / two_a * f + n) * 0.5
+            accel_steps = min(max(accel_steps, 0.0), float(n))
+            decel_steps = n - accel_steps
+            vn = sqrt(v0 * v0 + two_a * accel_steps / f)
+        k = self.tick_s * st.ONE * f
+        acc = a * f * self.tick_s * self.tick_s * st.ONE
+        acc_i = max(1, int(acc + 0.5))
+        # The slowest rate a block may fall to: reached from rest within half a step,
+        # so a block that ends at a stop still finishes.
+        floor = int(sqrt(acc * st.ONE))
+        r_nom = max(int(vn * k), floor)
+        r0 = min(max(int(v0 * k), floor), r_nom)
+        r1 = min(max(int(v1 * k), floor), r_nom)
+        accel_until = int(accel_steps + 0.5)
+        decel_after = n - int(decel_steps + 0.5)
+        if decel_after < accel_until:
+            decel_after = accel_until
+        state = self._irq_off()
+        try:
+            if slot == m[st.S_TAIL] and m[st.S_ACTIVE]:
+                return  # the step loop has it: too late to change
+            m[b + st.B_RATE_INIT] = r0
+            m[b + st.B_RATE_NOM] = r_nom
+            m[b + st.B_RATE_FINAL] = r1
+            m[b + st.B_ACCEL] = acc_i
+            m[b + st.B_ACCEL_UNTIL] = accel_until
+            m[b + st.B_DECEL_AFTER] = decel_after
+            self.exit[slot] = v1
+        finally:
+            self._irq_on(state)

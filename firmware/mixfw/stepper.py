@@ -1,0 +1,235 @@
+# The step loop: one viper function, run from machine.Timer on a board and from the
+# virtual clock in the simulation. It reads the integer block records the planner
+# prepared, walks a fixed-point velocity ramp per tick, spreads minor-axis steps
+# with Bresenham, hands E steps to the mixer, and writes STEP/DIR edges through
+# `out(set_mask, clr_mask)` in GPIO-number space.
+#
+# Every word the loop compares is kept non-negative: ptr32 loads zero-extend on the
+# 64-bit unix port, so a stored -1 would read back as 4294967295 there.
+#
+# Rules (see DESIGN.md): no allocation, no floats, nothing that can raise. All state
+# lives in one preallocated array('i') whose layout is defined here; the planner
+# writes only block records and S_HEAD, the step loop writes everything else.
+from mixfw.compat import micropython, const, ptr32
+from mixfw import mixer
+from mixfw.mixer import mix_step, mix_load
+
+# Fixed point for rates: lead-axis steps per tick times 2**28. A rate is at most
+# half a step per tick, so rate + phase stays below 2**30 (the chips' small ints).
+RATE_SHIFT = const(28)
+ONE = const(0x10000000)
+
+AXES = const(4)  # X Y Z E; E is split over the drives by the mixer
+X = const(0)
+Y = const(1)
+Z = const(2)
+E = const(3)
+
+# Step-loop state words.
+S_HEAD = const(0)  # next free block slot (written by the planner)
+S_TAIL = const(1)  # block being run or next to run
+S_ACTIVE = const(2)  # 1 while the tail block has started
+S_EVENT = const(3)  # lead-axis steps done in the block
+S_PHASE = const(4)
+S_RATE = const(5)
+S_ERR = const(6)  # Bresenham counters, one per axis (4 words), kept in 1..n
+S_PULSE_MASK = const(10)  # STEP pins raised by the last step
+S_PULSE_LEFT = const(11)  # ticks until they fall
+S_WAIT = const(12)  # ticks of DIR setup or dwell still to wait
+S_DIR = const(13)  # current DIR pin levels
+S_POS = const(14)  # position in steps per axis (4 words)
+S_DRIVE_POS = const(18)  # position in steps per mixing drive (6 words)
+S_PULSE_TICKS = const(24)
+S_DIR_TICKS = const(25)
+S_QUEUE = const(26)  # block slots
+S_HOME_STOP = const(27)  # axes stopped by their endstop in this homing block
+S_TICKS = const(28)  # tick counter, wraps at 2**30
+S_BLOCKS_DONE = const(29)  # blocks finished, wraps at 2**30
+S_WORDS = const(32)
+
+MIX_BASE = const(32)  # mixer section, mixer.M_WORDS long
+MASK_BASE = const(48)  # STEP pin masks: X Y Z then the drives (9 words)
+DIR_MASK_BASE = const(57)  # DIR pin masks in the same order (9 words)
+BLOCK_BASE = const(72)
+
+# Block record words.
+B_N = const(0)  # lead-axis steps (step events)
+B_STEPS = const(1)  # steps per axis X Y Z E, absolute (4 words)
+B_DIR_SET = const(5)  # DIR pins to raise at block start
+B_DIR_CLR = const(6)
+B_FLAGS = const(7)
+B_RATE_INIT = const(8)
+B_RATE_NOM = const(9)
+B_RATE_FINAL = const(10)
+B_ACCEL = const(11)  # rate change per tick
+B_ACCEL_UNTIL = const(12)  # step event where acceleration ends
+B_DECEL_AFTER = const(13)  # step event where deceleration starts
+B_DWELL = const(14)  # ticks, for dwell blocks
+B_MIX = const(15)  # mix id then 6 weights: same shape as the mixer's M_ID..M_W
+B_WORDS = const(24)
+
+# Flag bits.
+F_DWELL = const(1)
+F_HOMING = const(2)
+F_NEG = const(4)  # shifted by axis: F_NEG << X .. F_NEG << E are negative moves
+F_HOME_SHIFT = const(8)  # homing axis mask (X=1, Y=2, Z=4) << F_HOME_SHIFT
+
+
+assert mixer.M_ID == 0  # the step loop reads the loaded mix id at MIX_BASE
+
+
+def mem_words(queue_blocks):
+    return BLOCK_BASE + queue_blocks * B_WORDS
+
+
+@micropython.viper
+def _finish(mem: ptr32):
+    mem[S_ACTIVE] = 0
+    tail = mem[S_TAIL] + 1
+    if tail >= mem[S_QUEUE]:
+        tail = 0
+    mem[S_TAIL] = tail
+    mem[S_BLOCKS_DONE] = (mem[S_BLOCKS_DONE] + 1) & 0x3FFFFFFF
+
+
+@micropython.viper
+def _start(mem: ptr32, b: int) -> int:
+    """Begin the block at word b. Returns the DIR pins whose level changed."""
+    mem[S_ACTIVE] = 1
+    mem[S_EVENT] = 0
+    mem[S_HOME_STOP] = 0
+    flags = mem[b + B_FLAGS]
+    if flags & F_DWELL:
+        mem[S_WAIT] = mem[b + B_DWELL]
+        return 0
+    n = mem[b + B_N]
+    half = n - (n >> 1)
+    mem[S_ERR + 0] = half
+    mem[S_ERR + 1] = half
+    mem[S_ERR + 2] = half
+    mem[S_ERR + 3] = half
+    mem[S_RATE] = mem[b + B_RATE_INIT]
+    if mem[b + B_STEPS + E] != 0 and mem[b + B_MIX] != mem[MIX_BASE]:
+        mix_load(mem, MIX_BASE, b + B_MIX)
+    old = mem[S_DIR]
+    new = (old & (0 - 1 - mem[b + B_DIR_CLR])) | mem[b + B_DIR_SET]
+    changed = old ^ new
+    if changed:
+        mem[S_DIR] = new
+        # The tick that writes DIR is the first tick of the setup time.
+        mem[S_WAIT] = mem[S_DIR_TICKS] - 1
+    return changed
+
+
+@micropython.viper
+def tick(mem: ptr32, out, endstops) -> int:
+    """One timer tick. Returns 1 if a step was taken."""
+    mem[S_TICKS] = (mem[S_TICKS] + 1) & 0x3FFFFFFF
+    clr = 0
+    left = mem[S_PULSE_LEFT]
+    if left > 0:
+        left -= 1
+        mem[S_PULSE_LEFT] = left
+        if left == 0:
+            clr = mem[S_PULSE_MASK]
+    b = BLOCK_BASE + mem[S_TAIL] * B_WORDS
+    if mem[S_ACTIVE] == 0:
+        if mem[S_TAIL] == mem[S_HEAD]:
+            if clr:
+                out(0, clr)
+            return 0
+        changed = int(_start(mem, b))
+        if changed:
+            out(mem[S_DIR] & changed, clr | (changed & (0 - 1 - mem[S_DIR])))
+            return 0
+    wait = mem[S_WAIT]
+    if wait > 0:
+        mem[S_WAIT] = wait - 1
+        if clr:
+            out(0, clr)
+        if wait == 1 and (mem[b + B_FLAGS] & F_DWELL):
+            _finish(mem)
+        return 0
+    flags = mem[b + B_FLAGS]
+    if flags & F_DWELL:  # a zero-length dwell
+        _finish(mem)
+        if clr:
+            out(0, clr)
+        return 0
+    # Velocity ramp, per tick so speed is linear in time.
+    event = mem[S_EVENT]
+    rate = mem[S_RATE]
+    phase = mem[S_PHASE] + rate
+    if event < mem[b + B_ACCEL_UNTIL]:
+        rate += mem[b + B_ACCEL]
+        if rate > mem[b + B_RATE_NOM]:
+            rate = mem[b + B_RATE_NOM]
+    elif event >= mem[b + B_DECEL_AFTER]:
+        rate -= mem[b + B_ACCEL]
+        if rate < mem[b + B_RATE_FINAL]:
+            rate = mem[b + B_RATE_FINAL]
+    else:
+        rate = mem[b + B_RATE_NOM]
+    mem[S_RATE] = rate
+    # A step waits while a STEP pin is still high or has just fallen (its low time).
+    if phase < ONE or left != 0 or clr != 0:
+        mem[S_PHASE] = phase
+        if clr:
+            out(0, clr)
+        return 0
+    mem[S_PHASE] = phase - ONE
+    stopped = 0
+    if flags & F_HOMING:
+        homing = (flags >> F_HOME_SHIFT) & 7
+        stopped = mem[S_HOME_STOP] | (int(endstops()) & homing)
+        mem[S_HOME_STOP] = stopped
+        if stopped == homing:
+            _finish(mem)
+            if clr:
+                out(0, clr)
+            return 0
+    n = mem[b + B_N]
+    step = 0
+    axis = 0
+    while axis < 4:
+        err = mem[S_ERR + axis] + mem[b + B_STEPS + axis]
+        if err > n:
+            err -= n
+            if ((stopped >> axis) & 1) == 0:
+                neg = (flags >> axis) & F_NEG
+                if axis == E:
+                    drive = int(mix_step(mem, MIX_BASE, neg))
+                    if drive >= 0:
+                        step |= mem[MASK_BASE + 3 + drive]
+                        if neg:
+                            mem[S_DRIVE_POS + drive] -= 1
+                        else:
+                            mem[S_DRIVE_POS + drive] += 1
+                else:
+                    step |= mem[MASK_BASE + axis]
+                if neg:
+                    mem[S_POS + axis] -= 1
+                else:
+                    mem[S_POS + axis] += 1
+        mem[S_ERR + axis] = err
+        axis += 1
+    if step:
+        mem[S_PULSE_MASK] = step
+        mem[S_PULSE_LEFT] = mem[S_PULSE_TICKS]
+        out(step, clr)
+    elif clr:
+        out(0, clr)
+    event += 1
+    mem[S_EVENT] = event
+    if event >= n:
+        _finish(mem)
+    return 1
+
+
+def make_irq(mem, out, endstops):
+    """The timer callback, bound once so the interrupt does no lookups."""
+
+    def irq(_timer):
+        tick(mem, out, endstops)
+
+    return irq
