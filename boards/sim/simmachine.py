@@ -9,6 +9,7 @@
 # in native byte order outside the step loop. Recording never allocates, so the step
 # loop can run with the heap locked.
 from array import array
+import gc
 import micropython
 
 GPIO_COUNT = 30
@@ -24,6 +25,10 @@ _n = 0
 _out = None
 _levels = bytearray(GPIO_COUNT)
 _timers = []
+# Live heap, sampled after a collection once per _HEAP_EVERY idle calls.
+_HEAP_EVERY = 500
+_idle_calls = 0
+heap_peak_bytes = 0
 # Printer model: what each pin is to the mechanics.
 _role = bytearray(GPIO_COUNT)  # 1 + index for STEP pins, 0 otherwise
 _dir_of = bytearray(GPIO_COUNT)  # STEP pin -> its DIR pin
@@ -41,6 +46,10 @@ def attach_world(pin_map, step_names_in_order):
         _dir_of[g] = pin_map[name + "_dir"]
     for axis, name in enumerate(("x", "y", "z")):
         _endstop_axis[pin_map[name + "_min"]] = 1 + axis
+
+
+def buffer_bytes():
+    return len(_edges) * 8
 
 
 def record_to(path):
@@ -144,7 +153,14 @@ class Timer:
 
 def idle():
     """Advance virtual time by quantum_us, firing due timer callbacks."""
-    global now_us
+    global now_us, _idle_calls, heap_peak_bytes
+    _idle_calls += 1
+    if _idle_calls >= _HEAP_EVERY:
+        _idle_calls = 0
+        gc.collect()
+        used = gc.mem_alloc()
+        if used > heap_peak_bytes:
+            heap_peak_bytes = used
     end = now_us + quantum_us
     for t in _timers:
         cb = t._cb

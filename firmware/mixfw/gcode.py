@@ -71,6 +71,7 @@ class Parser:
         ln.present = 0
         ln.valued = 0
         ln.letter = ""
+        ln.number = 0
         mant = ln.mant
         decimals = ln.decimals
         first = True

@@ -1,5 +1,7 @@
 # Intake: bytes from a console -> complete lines in one fixed-size buffer.
-# A line that overflows the buffer, or holds bytes that are not printable ASCII, is
+# As in Marlin, a `;` comment is not stored, so long slicer comments never fill the
+# buffer; the parser still handles `;` and `( )` for lines that reach it. A line that
+# overflows the buffer, or holds bytes that are not printable ASCII, is
 # flagged and answered with an error when its end arrives; the stream goes on.
 
 LINE_OK = 1
@@ -14,13 +16,17 @@ class Intake:
         self.n = 0
         self.fault = 0
         self.bad_byte = 0
+        self.in_comment = False
 
     def feed(self, c):
         """Take one byte. Returns 0 until a line ends, then LINE_OK or a fault code.
         The line is buf[:n] until take() is called."""
         if c == 10:
             return self.fault or LINE_OK
-        if c == 13 or self.fault:
+        if c == 13 or self.fault or self.in_comment:
+            return 0
+        if c == 59:
+            self.in_comment = True
             return 0
         if (c < 32 and c != 9) or c > 126:
             self.fault = LINE_BAD_BYTE
@@ -36,6 +42,7 @@ class Intake:
         """Forget the line just returned so the next one starts empty."""
         self.n = 0
         self.fault = 0
+        self.in_comment = False
 
     def error_text(self, status):
         if status == LINE_TOO_LONG:

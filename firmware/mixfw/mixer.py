@@ -53,16 +53,19 @@ def normalize(weights, drives):
     total = sum(vals)
     if total <= 0:
         raise MixError("all-zero mix refused: at least one drive needs a weight > 0")
-    # Largest remainder, so the scaled weights sum to exactly WEIGHT_SCALE.
-    exact = [v * WEIGHT_SCALE / total for v in vals]
-    ints = [int(x) for x in exact]
-    order = sorted(range(drives), key=lambda i: ints[i] - exact[i])
-    short = WEIGHT_SCALE - sum(ints)
-    for i in order[:short]:
-        ints[i] += 1
-    for i in range(drives):
-        if vals[i] > 0 and ints[i] == 0:
-            ints[i] = 1
+    if total <= WEIGHT_SCALE and all(v == int(v) for v in vals):
+        ints = [int(v) for v in vals]  # already exact: 1:1:1 stays 1:1:1
+    else:
+        # Largest remainder, so the scaled weights sum to exactly WEIGHT_SCALE.
+        exact = [v * WEIGHT_SCALE / total for v in vals]
+        ints = [int(x) for x in exact]
+        order = sorted(range(drives), key=lambda i: ints[i] - exact[i])
+        short = WEIGHT_SCALE - sum(ints)
+        for i in order[:short]:
+            ints[i] += 1
+        for i in range(drives):
+            if vals[i] > 0 and ints[i] == 0:
+                ints[i] = 1
     g = 0
     for w in ints:
         g = _gcd(g, w)

@@ -1,0 +1,96 @@
+"""The mixer's error diffusion, run on the MicroPython unix port."""
+import json
+
+from hypothesis import given, settings, strategies as st
+
+MIXER = """
+from array import array
+from mixfw import mixer
+mem = array('i', bytes(4 * mixer.M_WORDS))
+def setup(weights):
+    mem[mixer.M_N] = len(weights)
+    mixer.load(mem, 0, 1, mixer.normalize(weights, len(weights)))
+"""
+
+
+def test_seed_sequence_from_fresh_start(mp):
+    seq = mp.json(MIXER + """
+setup([20, 30, 50])
+print([mixer.mix_step(mem, 0, 0) + 1 for _ in range(10)])
+""")
+    assert seq == [3, 2, 1, 3, 2, 3, 3, 1, 2, 3]
+
+
+def test_weights_are_any_nonnegative_numbers_normalised_to_integers(mp):
+    out = mp.json(MIXER + """
+import json
+print(json.dumps([mixer.normalize([0.2, 0.3, 0.5], 3), mixer.normalize([20, 30, 50], 3),
+                  mixer.normalize([1e-6, 1], 2), mixer.normalize([1, 1, 1], 6)]))
+""")
+    assert out == [[2, 3, 5], [2, 3, 5], [1, 10000], [1, 1, 1, 0, 0, 0]]
+
+
+def test_all_zero_and_negative_mixes_are_refused(mp):
+    out = mp.json(MIXER + """
+import json
+res = []
+for w in ([0, 0, 0], [1, -1, 0], []):
+    try:
+        mixer.normalize(w, 3)
+        res.append("accepted")
+    except mixer.MixError as e:
+        res.append(str(e))
+print(json.dumps(res))
+""")
+    assert out[0].startswith("all-zero mix refused")
+    assert "must be >= 0" in out[1]
+    assert out[2].startswith("all-zero mix refused")
+
+
+def test_proportions_over_a_period_are_exact(mp):
+    counts = mp.json(MIXER + """
+setup([1, 2, 3, 4, 5, 985])
+c = [0] * 6
+for _ in range(1000 * 7):
+    c[mixer.mix_step(mem, 0, 0)] += 1
+print(c)
+""")
+    assert counts == [7, 14, 21, 28, 35, 6895]
+
+
+@settings(max_examples=40, deadline=None)
+@given(weights=st.lists(st.integers(0, 1000), min_size=2, max_size=6).filter(any),
+       moves=st.lists(st.integers(-400, 400), min_size=1, max_size=12))
+def test_retract_then_unretract_restores_every_drive(mp, weights, moves):
+    """Any walk forward and back returns each drive to where it was at the same E
+    position, and reverse steps undo forward steps exactly, one by one."""
+    result = mp.json(MIXER + """
+import json
+weights, moves = json.loads(%r)
+setup(weights)
+pos = [0] * len(weights)
+at = {0: list(pos)}
+e = 0
+history = []
+ok = True
+for m in moves:
+    for _ in range(abs(m)):
+        if m > 0:
+            d = mixer.mix_step(mem, 0, 0)
+            pos[d] += 1
+            e += 1
+            history.append(d)
+        else:
+            d = mixer.mix_step(mem, 0, 1)
+            pos[d] -= 1
+            e -= 1
+            if history:
+                ok = ok and history.pop() == d
+        if e in at:
+            ok = ok and at[e] == pos
+        else:
+            at[e] = list(pos)
+        ok = ok and min(w for w in weights) >= 0
+print(json.dumps(ok))
+""" % json.dumps([weights, moves]))
+    assert result is True

@@ -1,0 +1,1 @@
+"""mixstep host tools: run the firmware in simulation, and work with its traces."""

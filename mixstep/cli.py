@@ -1,0 +1,36 @@
+"""The `mixstep` command."""
+import argparse
+import json
+import sys
+
+from mixstep import paths
+
+
+def _sim(args):
+    from mixstep import sim
+    report = sim.run(args.gcode or paths.EXAMPLE_GCODE, args.trace, args.report,
+                     heap_lock=args.heap_lock)
+    summary = {k: report[k] for k in ("lines", "sim_seconds", "wall_seconds", "steps")}
+    summary["errors"] = len(report["errors"])
+    print(json.dumps(summary, indent=2))
+    for e in report["errors"][:20]:
+        print(e, file=sys.stderr)
+    return 1 if report["errors"] else 0
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog="mixstep", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+    p = sub.add_parser("sim", help="run G-code on the simulated printer; write a trace and report")
+    p.add_argument("gcode", nargs="?", help="G-code file (default: the example 3-colour print)")
+    p.add_argument("--trace", help="write the GPIO trace here (VCD)")
+    p.add_argument("--report", help="write the JSON report here")
+    p.add_argument("--heap-lock", action="store_true",
+                   help="lock the MicroPython heap around every step-loop call")
+    p.set_defaults(run=_sim)
+    args = parser.parse_args(argv)
+    return args.run(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

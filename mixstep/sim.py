@@ -1,0 +1,51 @@
+"""`mixstep sim`: stream a G-code file through the simulated printer, one line per
+`ok` as a host does, and write the GPIO trace (VCD) and a JSON report."""
+import json
+import os
+import tempfile
+import time
+from pathlib import Path
+
+from mixstep import trace
+from mixstep.simprinter import SimPrinter
+
+
+def run(gcode_path, trace_path=None, report_path=None, heap_lock=False):
+    gcode_path = Path(gcode_path)
+    tmp = tempfile.TemporaryDirectory(prefix="mixstep-sim-")
+    edges = Path(tmp.name) / "run.edges"
+    wall0 = time.perf_counter()
+    printer = SimPrinter(edges_path=edges, heap_lock=heap_lock)
+    errors = []
+    lines = 0
+    with open(gcode_path, "r", encoding="ascii", errors="replace") as f:
+        for number, raw in enumerate(f, 1):
+            replies = printer.send(raw.rstrip("\r\n"))
+            lines += 1
+            for text in replies:
+                if text.startswith("Error:"):
+                    errors.append("line %d: %s" % (number, text))
+    fw = printer.finish()
+    sim_wall = time.perf_counter() - wall0
+    if trace_path:
+        trace.write_vcd(edges, trace_path)
+    steps = trace.net_steps(edges)
+    wall = time.perf_counter() - wall0
+    report = {
+        "gcode": str(gcode_path),
+        "lines": lines,
+        "errors": errors,
+        "steps": steps,
+        "firmware_steps": fw["steps"],
+        "sim_seconds": fw["sim_us"] / 1e6,
+        "wall_seconds": round(wall, 3),
+        "firmware_wall_seconds": round(sim_wall, 3),
+        "heap_at_rest_bytes": fw["heap_at_rest_bytes"],
+        "heap_peak_bytes": fw["heap_peak_bytes"],
+        "heap_locked_step_loop": fw["heap_locked"],
+        "trace": str(trace_path) if trace_path else None,
+    }
+    if report_path:
+        Path(report_path).write_text(json.dumps(report, indent=2) + "\n")
+    tmp.cleanup()
+    return report

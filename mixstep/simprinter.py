@@ -1,0 +1,57 @@
+"""The simulated printer as a host sees it: a process that takes G-code lines and
+answers them, here the firmware running on the MicroPython unix port."""
+import json
+import subprocess
+
+from mixstep import paths
+
+SIM_MAIN = paths.BOARDS / "sim" / "sim_main.py"
+
+
+class SimPrinter:
+    def __init__(self, edges_path=None, heap_lock=False, heap_size="2M", board="sim"):
+        cmd = [paths.micropython(), "-X", "heapsize=" + heap_size, str(SIM_MAIN)]
+        if edges_path:
+            cmd += ["--edges", str(edges_path)]
+        if heap_lock:
+            cmd.append("--heap-lock")
+        self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     env=paths.micropython_env(board), bufsize=0)
+        self.out = self.proc.stdout
+        self.report = None
+        banner = self._readline()
+        if banner != "start":
+            raise RuntimeError("firmware did not start: %r" % banner)
+
+    def _readline(self):
+        raw = self.out.readline()
+        if not raw:
+            code = self.proc.wait()
+            raise RuntimeError("firmware exited (status %s) before answering" % code)
+        return raw.decode("ascii", "replace").rstrip("\r\n")
+
+    def send(self, line):
+        """Send one line; return the lines the firmware printed before its `ok`, and
+        the `ok` line itself last."""
+        self.proc.stdin.write(line.encode("ascii", "replace") + b"\n")
+        replies = []
+        while True:
+            text = self._readline()
+            replies.append(text)
+            if text == "ok" or text.startswith("ok "):
+                return replies
+
+    def finish(self):
+        """Close the stream; the firmware drains its queue and reports."""
+        self.proc.stdin.close()
+        extra = []
+        for raw in self.out:
+            text = raw.decode("ascii", "replace").rstrip("\r\n")
+            if text.startswith("//sim "):
+                self.report = json.loads(text[6:])
+            else:
+                extra.append(text)
+        code = self.proc.wait()
+        if code != 0 or self.report is None:
+            raise RuntimeError("simulation failed (status %s): %s" % (code, extra))
+        return self.report
