@@ -10,10 +10,11 @@ from mixstep import trace
 from mixstep.simprinter import SimPrinter
 
 
-def run(gcode_path, trace_path=None, report_path=None, heap_lock=False):
+def run(gcode_path, trace_path=None, report_path=None, heap_lock=False, edges_path=None):
+    """edges_path keeps the raw edge records (see trace.read_edges) for analysis."""
     gcode_path = Path(gcode_path)
     tmp = tempfile.TemporaryDirectory(prefix="mixstep-sim-")
-    edges = Path(tmp.name) / "run.edges"
+    edges = Path(edges_path) if edges_path else Path(tmp.name) / "run.edges"
     wall0 = time.perf_counter()
     printer = SimPrinter(edges_path=edges, heap_lock=heap_lock)
     errors = []
