@@ -27,3 +27,8 @@ sim: setup
 
 clean:
 	rm -rf $(VENV) out build *.egg-info
+
+# Cost of one step-loop call (viper vs bytecode vs an empty viper call) on the unix port.
+.PHONY: step-cost
+step-cost: setup
+	MICROPYPATH=firmware:boards/sim $(VENV)/bin/micropython bench/step_cost.py

@@ -41,6 +41,7 @@ def build(settings=None, pin_map=None):
     printer.finish.append(planner.synchronize)
     printer.mem = mem
     printer.planner = planner
+    printer.pins = pins
     printer.irq = st.make_irq(mem, pins.out, pins.endstops)
     return printer
 

@@ -1,0 +1,104 @@
+# Cost of one step-loop call on the MicroPython unix port, for a tick in which X, Y, Z
+# and E all step with six mixing drives active and the mixer choosing; also an idle
+# tick (no step due). Each is given as a ratio to an empty viper function with the
+# same arguments, called the same way in the same run, and for the viper step loop
+# and the same source compiled as plain bytecode.
+#   MICROPYPATH=firmware:boards/sim micropython bench/step_cost.py
+import sys
+import json
+import time
+import micropython
+import simmachine
+
+sys.modules["machine"] = simmachine
+import board
+import main
+from mixfw import stepper as st, mixer
+
+CALLS = 200000
+
+
+@micropython.viper
+def empty(mem: ptr32, out, endstops) -> int:
+    return 0
+
+
+def no_pins(set_mask, clr_mask):
+    pass
+
+
+def bytecode_module(path, extra):
+    src = open(path).read().replace("@micropython.viper\n", "")
+    ns = {"__name__": "bytecode"}
+    exec(src, ns)
+    ns.update(extra)
+    return ns
+
+
+def time_calls(fn, mem, out, endstops):
+    simmachine.flush()
+    i = 0
+    t0 = time.ticks_us()
+    while i < CALLS:
+        fn(mem, out, endstops)
+        i += 1
+    return time.ticks_diff(time.ticks_us(), t0) / CALLS
+
+
+def stepping_printer(settings):
+    printer = main.build(settings)
+    mem = printer.mem
+    mem[st.S_PULSE_TICKS] = 0  # STEP stays high: every call is a full stepping tick
+    b = st.BLOCK_BASE
+    n = 1 << 29
+    mem[b + st.B_N] = n
+    for i in range(4):
+        mem[b + st.B_STEPS + i] = n
+    mem[b + st.B_RATE_INIT] = mem[b + st.B_RATE_NOM] = mem[b + st.B_RATE_FINAL] = st.ONE
+    mem[b + st.B_ACCEL_UNTIL] = 0
+    mem[b + st.B_DECEL_AFTER] = n
+    mem[b + st.B_MIX] = 7
+    for i in range(6):
+        mem[b + st.B_MIX + 1 + i] = 1 + i  # six drives, unequal, all active
+    mem[st.S_HEAD] = 1
+    return printer
+
+
+def idle_printer(settings):
+    printer = stepping_printer(settings)
+    b = st.BLOCK_BASE
+    mem = printer.mem
+    mem[b + st.B_RATE_INIT] = mem[b + st.B_RATE_NOM] = mem[b + st.B_RATE_FINAL] = 1
+    return printer
+
+
+def main_bench():
+    names = ["x", "y", "z"] + ["e%d" % i for i in range(6)]
+    simmachine.attach_world(board.PINS, names)
+    settings = board.SETTINGS
+    simmachine.now_us = 1  # past #0, so only real level changes are recorded
+    mixer_bc = bytecode_module("firmware/mixfw/mixer.py", {})
+    stepper_bc = bytecode_module("firmware/mixfw/stepper.py", {})
+    stepper_bc["mix_step"] = mixer_bc["mix_step"]
+    stepper_bc["mix_load"] = mixer_bc["mix_load"]
+    res = {}
+    p = stepping_printer(settings)
+    out, endstops = p.pins.out, p.pins.endstops
+    res["empty_viper_us"] = time_calls(empty, p.mem, out, endstops)
+    res["step_tick_us"] = time_calls(st.tick, p.mem, out, endstops)
+    p = stepping_printer(settings)
+    res["step_tick_no_pin_writes_us"] = time_calls(st.tick, p.mem, no_pins, endstops)
+    p = stepping_printer(settings)
+    res["step_tick_bytecode_us"] = time_calls(stepper_bc["tick"], p.mem, p.pins.out, p.pins.endstops)
+    p = idle_printer(settings)
+    res["idle_tick_us"] = time_calls(st.tick, p.mem, p.pins.out, p.pins.endstops)
+    p = idle_printer(settings)
+    res["idle_tick_bytecode_us"] = time_calls(stepper_bc["tick"], p.mem, p.pins.out, p.pins.endstops)
+    e = res["empty_viper_us"]
+    res["step_loop_ratio"] = res["step_tick_us"] / e
+    res["idle_tick_ratio"] = res["idle_tick_us"] / e
+    res["bytecode_step_loop_ratio"] = res["step_tick_bytecode_us"] / e
+    print(json.dumps(res))
+
+
+main_bench()
