@@ -1,6 +1,7 @@
 # Assembles the printer from the board's settings, as APrinter does in one place:
-# each part gets its pins, timer and parameters passed in. On a board this file runs
-# at boot; the simulation imports it and calls run() with its own console.
+# each part gets its pins, timer and parameters passed in, in dependency order. On a
+# board this file runs at boot; the simulation imports it and calls run() with its
+# own consoles.
 from array import array
 import sys
 import machine
@@ -12,6 +13,9 @@ from mixfw.printer import Printer
 from mixfw.console import StreamConsole
 from mixfw import cmd_motion, cmd_mixing, cmd_thermal, cmd_report
 
+# Commands whose arguments are text, not numbers.
+RAW_COMMANDS = ()
+
 
 def _ticks(us, tick_us):
     return max(1, -(-us // tick_us))
@@ -21,6 +25,7 @@ def build(settings=None, pin_map=None):
     settings = settings or board.SETTINGS
     pin_map = pin_map or board.PINS
     tick_us = settings["tick_us"]
+    # Step-loop memory: one array for state, mixer, pin masks and the block ring.
     mem = array("i", bytes(4 * st.mem_words(settings["queue_blocks"])))
     mem[st.S_PULSE_TICKS] = _ticks(settings["step_pulse_us"], tick_us)
     mem[st.S_DIR_TICKS] = _ticks(settings["dir_setup_us"], tick_us)
@@ -31,9 +36,12 @@ def build(settings=None, pin_map=None):
         mem[st.MASK_BASE + i] = m
     for i, m in enumerate(pins.dir_masks):
         mem[st.DIR_MASK_BASE + i] = m
-    planner = Planner(mem, settings, machine.idle, machine.disable_irq, machine.enable_irq)
-    printer = Printer(settings["line_buffer_bytes"], machine.idle)
-    motion = cmd_motion.Motion(planner, pins, settings)
+    printer = Printer(settings["line_buffer_bytes"], machine.idle, RAW_COMMANDS)
+    planner = Planner(mem, settings, printer.idle, machine.disable_irq, machine.enable_irq)
+    motion = cmd_motion.Motion(planner, pins, settings, printer.reply)
+    # A halt stops motion before anything is reported.
+    printer.on_halt.append(planner.abort)
+    printer.on_halt.append(motion.resync)
     cmd_motion.register(printer, motion)
     cmd_mixing.register(printer, cmd_mixing.Mixing(planner, settings))
     cmd_thermal.register(printer, cmd_thermal.Thermal(settings))
@@ -42,6 +50,7 @@ def build(settings=None, pin_map=None):
     printer.mem = mem
     printer.planner = planner
     printer.pins = pins
+    printer.motion = motion
     printer.irq = st.make_irq(mem, pins.out, pins.endstops)
     return printer
 
@@ -58,14 +67,17 @@ def start_timer(printer, tick_us):
                              callback=printer.irq)
 
 
-def run(console=None):
-    printer = build()
+def run(consoles=None, listeners=(), printer=None):
+    printer = printer or build()
     timer = start_timer(printer, board.SETTINGS["tick_us"])
-    if console is None:
-        console = StreamConsole(sys.stdin.buffer, sys.stdout.buffer)
-    console.write("start\n")
+    if consoles is None:
+        consoles = [StreamConsole(sys.stdin.buffer, sys.stdout.buffer)]
+    for console in consoles:
+        printer.add_channel(console)
+        console.write("start\n")
+    printer.listeners.extend(listeners)
     try:
-        printer.serve(console)
+        printer.serve()
     finally:
         timer.deinit()
     return printer

@@ -34,7 +34,7 @@ def session(tmp_path):
 
 
 def test_every_line_gets_one_ok_and_bad_lines_an_error_first(session):
-    lines = ["G21", "; comment only", "", "G1 X1.2.3", "M999", "G20", "G1 X" + "1" * 120,
+    lines = ["G21", "; comment only", "", "G1 X1.2.3", "M9999", "G20", "G1 X" + "1" * 120,
              "G1 X\x01", "M163 S9 P1", "T16", "G4 P-1", "G1 F0", "M106 S300", "M104 S900",
              "G1 X5 F3000"]
     session.send(*lines)
@@ -44,7 +44,7 @@ def test_every_line_gets_one_ok_and_bad_lines_an_error_first(session):
     got = {lines[i]: r[:-1] for i, r in enumerate(session.replies)}
     assert got["G21"] == [] and got["; comment only"] == [] and got[""] == []
     assert got["G1 X1.2.3"] == ["Error:malformed number after X"]
-    assert got["M999"] == ['echo:Unknown command: "M999"']
+    assert got["M9999"] == ['echo:Unknown command: "M9999"']
     assert got["G20"] == ["Error:G20 (inch units) is not supported; use G21 (mm)"]
     assert got["G1 X" + "1" * 120] == ["Error:line longer than 96 bytes"]
     assert got["G1 X\x01"] == ["Error:byte 0x01 is not printable ASCII"]

@@ -1,28 +1,34 @@
-# Runs the firmware on the unix port against the simulated chip, taking G-code on
-# stdin and answering on stdout like a serial printer. Usage:
+# Runs the firmware on the unix port against the simulated chip. Usage:
 #   micropython sim_main.py [--edges FILE] [--heap-lock] [--quantum-us N]
-# When stdin ends, the queue drains and one `//sim {json}` line reports the run.
+#                           [--tcp HOST:PORT] [--no-stdio] [--realtime FACTOR]
+# By default it takes G-code on stdin and answers on stdout like a serial printer, in
+# lockstep (virtual time passes only when the firmware waits). With --tcp it also
+# serves TCP connections; --realtime paces virtual time against the wall clock (0:
+# as fast as possible). When every console has closed, the queue drains and one
+# `//sim {json}` line reports the run.
 import sys
 import gc
 import json
 import simmachine
+import simtime
 
 sys.modules["machine"] = simmachine
+sys.modules["time"] = simtime
 
 
 def _args(argv):
-    opts = {"edges": None, "heap_lock": False, "quantum_us": 1000}
+    opts = {"edges": None, "heap_lock": False, "quantum_us": 1000, "tcp": None,
+            "stdio": True, "realtime": None}
     i = 1
     while i < len(argv):
         a = argv[i]
-        if a == "--edges":
+        if a in ("--edges", "--quantum-us", "--tcp", "--realtime"):
             i += 1
-            opts["edges"] = argv[i]
+            opts[a[2:].replace("-", "_")] = argv[i]
         elif a == "--heap-lock":
             opts["heap_lock"] = True
-        elif a == "--quantum-us":
-            i += 1
-            opts["quantum_us"] = int(argv[i])
+        elif a == "--no-stdio":
+            opts["stdio"] = False
         else:
             raise SystemExit("sim_main: unknown argument " + a)
         i += 1
@@ -34,15 +40,27 @@ def main():
     import board
     names = ["x", "y", "z"] + ["e%d" % i for i in range(board.SETTINGS["drives"])]
     simmachine.attach_world(board.PINS, names)
-    simmachine.quantum_us = opts["quantum_us"]
+    simmachine.quantum_us = int(opts["quantum_us"])
     if opts["edges"]:
         simmachine.record_to(opts["edges"])
     import main as firmware
     from mixfw.console import StreamConsole
-    console = StreamConsole(sys.stdin.buffer, sys.stdout.buffer, blocking=True)
+    interactive = opts["tcp"] is not None or opts["realtime"] is not None
+    consoles = []
+    if opts["stdio"]:
+        consoles.append(StreamConsole(sys.stdin.buffer, sys.stdout.buffer,
+                                      blocking=not interactive))
+    listeners = []
+    if opts["tcp"]:
+        from mixfw.netconsole import TcpListener
+        host, port = opts["tcp"].rsplit(":", 1)
+        listeners.append(TcpListener(host, int(port)))
+    if interactive:
+        simmachine.pace(float(opts["realtime"] or 0))
+    printer = firmware.build()
     gc.collect()
     simmachine.heap_lock_ticks = opts["heap_lock"]
-    printer = firmware.run(console)
+    firmware.run(consoles, listeners, printer)
     simmachine.close()
     gc.collect()
     pos = simmachine.positions

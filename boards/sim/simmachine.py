@@ -11,8 +11,9 @@
 from array import array
 import gc
 import micropython
+import time as walltime  # the real clock; firmware sees simtime instead
 
-GPIO_COUNT = 30
+GPIO_COUNT = 40  # 0..29 like an RP2040 for the step path, more for heaters and fans
 _CAPACITY = 8192
 _FLUSH_AT = _CAPACITY - 256  # one tick writes far fewer edges than this
 
@@ -29,6 +30,25 @@ _timers = []
 _HEAP_EVERY = 500
 _idle_calls = 0
 heap_peak_bytes = 0
+# Models of the world around the chip (thermal, ...), called once per idle quantum.
+_world_hooks = []
+# Virtual seconds allowed per wall second; 0 runs as fast as it can. Interactive
+# consoles (TCP, PTY) pace the simulation so hosts see a printer in real time.
+realtime_factor = 0
+_wall_start_us = walltime.ticks_us()
+_virtual_start_us = 0
+
+
+def add_world_hook(fn):
+    """fn(now_us) runs after every idle quantum, outside the step loop."""
+    _world_hooks.append(fn)
+
+
+def pace(factor):
+    global realtime_factor, _wall_start_us, _virtual_start_us
+    realtime_factor = factor
+    _wall_start_us = walltime.ticks_us()
+    _virtual_start_us = now_us
 # Printer model: what each pin is to the mechanics.
 _role = bytearray(GPIO_COUNT)  # 1 + index for STEP pins, 0 otherwise
 _dir_of = bytearray(GPIO_COUNT)  # STEP pin -> its DIR pin
@@ -184,6 +204,13 @@ def idle():
                     flush()
         t._next = nxt
     now_us = end
+    for hook in _world_hooks:
+        hook(end)
+    if realtime_factor:
+        ahead_us = (end - _virtual_start_us) / realtime_factor - walltime.ticks_diff(
+            walltime.ticks_us(), _wall_start_us)
+        if ahead_us > 2000:
+            walltime.sleep_us(int(ahead_us))
 
 
 def disable_irq():
@@ -196,3 +223,9 @@ def enable_irq(state=0):
 
 def unique_id():
     return b"mixstep-sim"
+
+
+try:  # heaters, fans and thermistors of the simulated board
+    from simanalog import ADC, PWM  # noqa: F401
+except ImportError:
+    pass

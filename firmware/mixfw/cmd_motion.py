@@ -10,7 +10,8 @@ AXIS_LETTERS = "XYZE"
 class Motion:
     """Modal state owned by the command side: logical position, G92 offsets, modes."""
 
-    def __init__(self, planner, pins, settings):
+    def __init__(self, planner, pins, settings, reply):
+        self.reply = reply
         self.planner = planner
         self.pins = pins
         self.pos_mm = [0.0, 0.0, 0.0, 0.0]  # logical, as G-code sees it
@@ -23,6 +24,17 @@ class Motion:
         self.drives = settings["drives"]
         self.dir_masks = pins.axis_dir_masks()
         self.enabled = 0  # bit per driver: X Y Z then drives
+        self.soft_limits = settings.get("soft_limits", True)
+        # Called before a move that extrudes; each raises GcodeError to refuse it
+        # (cold extrusion, ...).
+        self.extrusion_guards = []
+
+    def resync(self):
+        """After the queue was dropped: the logical position is where the axes are."""
+        steps = self.planner.position_steps
+        spm = self.planner.steps_per_mm
+        for i in range(4):
+            self.pos_mm[i] = steps[i] / spm[i] - self.offset_mm[i]
 
     def machine_steps(self):
         spm = self.planner.steps_per_mm
@@ -65,6 +77,12 @@ class Motion:
                 moved |= 1 << i
         if not moved:
             return None
+        if self.soft_limits:
+            for i in range(3):
+                mm = target[i] + self.offset_mm[i]
+                if (moved >> i) & 1 and not -1e-6 <= mm <= self.travel_mm[i] + 1e-6:
+                    raise GcodeError("move to %s%.3f is outside the soft limits 0..%g mm"
+                                     % (AXIS_LETTERS[i], target[i], self.travel_mm[i]))
         spm = self.planner.steps_per_mm
         steps = [steps_from_mm(target[i] + self.offset_mm[i], spm[i]) for i in range(4)]
         delta = [steps[i] - self.planner.position_steps[i] for i in range(4)]
@@ -73,6 +91,9 @@ class Motion:
             if delta[i]:
                 axes |= 1 << i
         if axes:
+            if axes & 8 and delta[3] > 0:
+                for guard in self.extrusion_guards:
+                    guard()
             self.enable_for(axes)
             self.planner.add_move(steps, self.feed_mm_s, dir_masks=self.dir_masks)
         self.pos_mm = target
@@ -84,7 +105,9 @@ class Motion:
         if seconds < 0:
             raise GcodeError("dwell time must be >= 0")
         if seconds > 0:
+            # Queued, so the dwell is exact in time; then waited for, as in Marlin.
             self.planner.add_dwell(seconds)
+            self.planner.synchronize()
         return None
 
     # G28 [X] [Y] [Z]: home the named axes, or all, to their min endstops. Example: G28 X Y
@@ -163,6 +186,20 @@ class Motion:
         self.disable(self._axes_named(line))
 
 
+    # M119: endstop states, in Marlin's form.
+    def m119(self, line):
+        hit = self.pins.endstops()
+        self.reply("Reporting endstop status")
+        for i in range(3):
+            self.reply("%s_min: %s" % ("xyz"[i], "TRIGGERED" if (hit >> i) & 1 else "open"))
+
+    # M211 [S0|S1]: soft limits off/on; no S reports.
+    def m211(self, line):
+        if line.has("S"):
+            self.soft_limits = bool(line.int("S", lo=0, hi=1))
+        self.reply("echo:Soft endstops: %s" % ("On" if self.soft_limits else "Off"))
+
+
 def register(printer, motion):
     m = motion
     for name, fn, text in (
@@ -182,4 +219,6 @@ def register(printer, motion):
         ("M18", m.m18, "disable drivers"),
         ("M84", m.m18, "disable drivers"),
     ):
-        printer.register(name, fn, text)
+        printer.register(name, fn, text, guarded=name in ("G0", "G1", "G4", "G28", "M17"))
+    printer.register("M119", m.m119, "endstop states")
+    printer.register("M211", m.m211, "soft limits S0/S1")

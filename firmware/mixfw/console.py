@@ -7,9 +7,10 @@ class StreamConsole:
 
     blocking=False: readinto() returns at once with what has arrived (0 if nothing),
     so the main loop can idle while the step loop runs.
-    blocking=True: readinto() waits for the next byte. The simulation uses this so its
-    virtual time advances only when the firmware itself waits, which makes a trace
-    independent of how fast the host happens to be."""
+    blocking=True (lockstep): when the printer has nothing else to do it waits for the
+    next byte instead of letting time pass. The simulation uses this so its virtual
+    time advances only when the firmware itself waits, which makes a trace independent
+    of how fast the host happens to be."""
 
     def __init__(self, rx, tx, blocking=False):
         self.rx = rx
@@ -20,13 +21,14 @@ class StreamConsole:
         self.poller = select.poll()
         self.poller.register(rx, select.POLLIN)
 
-    def readinto(self, mv):
-        """Bytes read into mv, 0 if none are waiting, -1 at end of stream."""
+    def readinto(self, mv, block=False):
+        """Bytes read into mv, 0 if none are waiting, -1 at end of stream. block: wait
+        for the first byte."""
         n = 0
         limit = len(mv)
         one = self.one_mv
         while n < limit:
-            if not (self.blocking and n == 0):
+            if not (block and n == 0):
                 ready = False
                 for _obj, ev in self.poller.ipoll(0):
                     ready = ev & (select.POLLIN | select.POLLHUP | select.POLLERR)

@@ -27,6 +27,8 @@ class Line:
         self.valued = 0  # bit per letter that carried a number
         self.letter = ""  # command letter G, M or T; "" for a blank line
         self.number = 0
+        self.line_number = -1  # the leading N word, -1 if none
+        self.args_text = ""  # for raw-argument commands: the text after the command
 
     def has(self, ch):
         return (self.present >> letter_index(ch)) & 1
@@ -62,8 +64,12 @@ class Line:
 
 
 class Parser:
-    def __init__(self):
+    def __init__(self, raw_commands=()):
+        """raw_commands: (letter, number) pairs whose arguments are text, such as file
+        names (M23 name.gcode) or option names (M926 Isteps_per_mm_x V80); for those
+        the words after the command are not parsed and line.args_text holds them."""
         self.line = Line()
+        self.raw = set(ord(l) * 10000 + n for l, n in raw_commands)
 
     def parse(self, buf, n):
         """Parse buf[:n] into self.line. Raises GcodeError naming the problem."""
@@ -72,6 +78,8 @@ class Parser:
         ln.valued = 0
         ln.letter = ""
         ln.number = 0
+        ln.line_number = -1
+        ln.args_text = ""
         mant = ln.mant
         decimals = ln.decimals
         first = True
@@ -134,16 +142,26 @@ class Parser:
                 raise GcodeError("malformed number after %s" % chr(letter))
             if first:
                 first = False
-                if letter == 78:  # N line number comes before the command
+                if letter == 78 and ln.line_number < 0:  # N line number before the command
+                    if not has_number or neg or d:
+                        raise GcodeError("malformed line number")
+                    ln.line_number = m
                     first = True
+                    continue
                 elif letter in (71, 77, 84):  # G M T
                     if not has_number:
                         raise GcodeError("%s needs a number" % chr(letter))
                     if d or neg:
                         raise GcodeError("unsupported command %s%s%s" % (
                             chr(letter), "-" if neg else "", m / _POW10[d] if d else m))
-                    ln.letter = chr(letter)
+                    ln.letter = "G" if letter == 71 else ("M" if letter == 77 else "T")
                     ln.number = m
+                    if letter * 10000 + m in self.raw:
+                        end = i
+                        while end < n and buf[end] != 59 and buf[end] != 42:
+                            end += 1
+                        ln.args_text = bytes(buf[i:end]).decode().strip()
+                        return ln
                     continue
                 else:
                     raise GcodeError("line must start with G, M or T, not %s" % chr(letter))

@@ -72,6 +72,18 @@ class Planner:
         self.prev_unit = None
         self.prev_nominal = 0.0
 
+    def abort(self):
+        """Drop every queued block at once (M112, faults). The step loop's counters
+        then hold where the axes really are."""
+        state = self._irq_off()
+        m = self.mem
+        m[st.S_TAIL] = m[st.S_HEAD]
+        m[st.S_ACTIVE] = 0
+        self._irq_on(state)
+        self.position_steps = [m[st.S_POS + i] for i in range(4)]
+        self.prev_unit = None
+        self.prev_nominal = 0.0
+
     def _wait_for_slot(self):
         while self._count() >= self.queue - 1:
             self.idle()

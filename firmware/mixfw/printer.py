@@ -1,79 +1,353 @@
-# The printer core: takes lines from the intake, parses them, runs the handler the
-# command table names, and answers each line exactly once. Handlers come from the
-# cmd_* modules, each of which registers its own commands.
+# The printer core: serves G-code channels (serial, TCP, simulation stdio), checks the
+# host protocol (line numbers, checksums, resend), runs each line's handler and
+# answers every line exactly once. Handlers come from the cmd_* modules, each of
+# which registers its own commands.
+#
+# While a command waits (queue full, M400, M109...), the channels are still read into
+# their ring buffers, so M112 is seen at once; other lines wait their turn there. A
+# full ring stops reading its channel: the host's transport holds the rest, and no
+# `ok` goes out until there is room, so nothing is ever dropped.
+import time
 from mixfw.gcode import Parser, GcodeError
 from mixfw.intake import Intake, LINE_OK
+
+BUSY_EVERY_MS = 2000
+RX_BYTES = 256
+
+
+class Halted(Exception):
+    """Raised out of a wait when the printer halted meanwhile (M112, heater fault)."""
+
+
+class Resend(Exception):
+    """A transmission error: the host must send the line again."""
 
 
 def command_key(letter, number):
     return ord(letter) * 10000 + number
 
 
-class Printer:
-    def __init__(self, line_bytes, idle):
-        self.intake = Intake(line_bytes)
-        self.parser = Parser()
-        self.commands = {}
-        self.helps = {}
-        self.idle = idle
-        self.console = None
-        self.finish = []  # called when a console stream ends (simulation)
+def _is_m112(scan, n):
+    """Does this line start (after an optional N<number>) with M112?"""
+    i = 0
+    while i < n and scan[i] == 32:
+        i += 1
+    if i < n and scan[i] in (78, 110):  # N
+        i += 1
+        while i < n and (48 <= scan[i] <= 57 or scan[i] == 32):
+            i += 1
+    if n - i < 4 or scan[i] not in (77, 109) or scan[i + 1:i + 4] != b"112":
+        return False
+    return n == i + 4 or not 48 <= scan[i + 4] <= 57
 
-    def register(self, name, handler, help_text):
-        """name like "G1" or "M163"; "T" takes every tool number."""
+
+class Channel:
+    """One console, its receive ring and its protocol state."""
+
+    def __init__(self, console, line_bytes):
+        self.console = console
+        self.intake = Intake(line_bytes)
+        self.rx = bytearray(RX_BYTES)
+        self.chunk = bytearray(64)
+        self.chunk_mv = memoryview(self.chunk)
+        self.head = 0
+        self.count = 0
+        self.last_n = 0  # last line number accepted
+        self.open = True
+        self.lockstep = getattr(console, "blocking", False)
+        self.scan = bytearray(16)  # start of the line being received, for M112
+        self.scan_n = 0
+
+    def pump(self, printer, block=False):
+        """Move waiting bytes into the ring. Returns the count read."""
+        free = RX_BYTES - self.count
+        if free <= 0 or not self.open:
+            return 0
+        mv = self.chunk_mv if free >= 64 else self.chunk_mv[:free]
+        n = self.console.readinto(mv, block)
+        if n < 0:
+            self.open = False
+            return 0
+        rx = self.rx
+        for i in range(n):
+            c = self.chunk[i]
+            rx[(self.head + self.count) % RX_BYTES] = c
+            self.count += 1
+            if c == 10:
+                if _is_m112(self.scan, self.scan_n):
+                    printer.emergency_stop()
+                self.scan_n = 0
+            elif self.scan_n < 16:
+                self.scan[self.scan_n] = c
+                self.scan_n += 1
+        return n
+
+    def next_line(self):
+        """Feed ring bytes to the intake until a line ends: its status, or 0."""
+        feed = self.intake.feed
+        while self.count:
+            c = self.rx[self.head]
+            self.head = (self.head + 1) % RX_BYTES
+            self.count -= 1
+            status = feed(c)
+            if status:
+                return status
+        return 0
+
+    def write(self, text):
+        self.console.write(text)
+
+
+class Printer:
+    def __init__(self, line_bytes, machine_idle, raw_commands=()):
+        self.line_bytes = line_bytes
+        self.parser = Parser(raw_commands)
+        self.commands = {}
+        self.guarded = set()  # commands refused while halted
+        self.helps = {}
+        self.machine_idle = machine_idle
+        self.channels = []
+        self.listeners = []  # objects with accept() -> console or None
+        self.max_channels = 8
+        self.current = None  # channel whose command is running
+        self.background = []  # fn(now_ms), run from the main loop and every wait
+        self.on_halt = []  # run first when the printer halts: heaters off, motion stop
+        self.finish = []  # run when the last channel closes (simulation)
+        self.halted = None  # reason, while halted
+        self.halt_count = 0
+        self._cmd_halt_count = 0
+        self._busy_at_ms = 0
+        self.refuse_after_error = False
+        self.failed = False
+        for name, fn, text in (
+            ("M110", self.m110, "set the line number: M110 N<n>"),
+            ("M112", self.m112, "emergency stop"),
+            ("M999", self.m999, "clear a halt and resume"),
+            ("M932", self.m932, "refuse commands after the first error"),
+            ("M933", self.m933, "leave refuse-after-error mode"),
+        ):
+            self.register(name, fn, text)
+
+    # --- registration and replies ---
+    def register(self, name, handler, help_text, guarded=False):
+        """name like "G1" or "M163"; "T" takes every tool number. guarded: refused
+        while the printer is halted (moves, heating)."""
         letter = name[0]
         number = int(name[1:]) if len(name) > 1 else -1
-        self.commands[command_key(letter, number)] = handler
+        key = command_key(letter, number)
+        self.commands[key] = handler
+        if guarded:
+            self.guarded.add(key)
         self.helps[name] = help_text
 
-    def reply(self, text):
-        self.console.write(text)
-        self.console.write("\n")
+    def add_channel(self, console):
+        ch = Channel(console, self.line_bytes)
+        self.channels.append(ch)
+        return ch
 
-    def run_line(self, buf, n):
-        """Parse and run one line; returns text to follow `ok` or None. Raises on bad input."""
-        line = self.parser.parse(buf, n)
+    def reply(self, text):
+        """A line to the host whose command is running (all hosts if none)."""
+        if self.current is None:
+            self.broadcast(text)
+        else:
+            self.current.write(text + "\n")
+
+    def broadcast(self, text):
+        for ch in self.channels:
+            ch.write(text + "\n")
+
+    # --- time passing ---
+    def add_background(self, fn):
+        self.background.append(fn)
+
+    def _run_background(self):
+        if self.background:
+            now = time.ticks_ms()
+            for fn in self.background:
+                fn(now)
+
+    def pump_all(self):
+        for lst in self.listeners:
+            if len(self.channels) < self.max_channels:
+                console = lst.accept()
+                if console is not None:
+                    self.add_channel(console)
+        for ch in self.channels:
+            ch.pump(self)
+
+    def idle(self):
+        """Let time pass inside a command: the step loop runs, background tasks run,
+        input is read (M112 acts at once), and the host hears `busy:` every 2 s.
+        Raises Halted if the printer halted since the command started."""
+        self.machine_idle()
+        self._run_background()
+        self.pump_all()
+        if self.current is not None:
+            now = time.ticks_ms()
+            if time.ticks_diff(now, self._busy_at_ms) >= BUSY_EVERY_MS:
+                self._busy_at_ms = now
+                self.current.write("busy: processing\n")
+        if self.halt_count != self._cmd_halt_count:
+            raise Halted(self.halted)
+
+    def wait_until(self, done):
+        """Wait until done() is true. Returns False if the printer halted meanwhile."""
+        try:
+            while not done():
+                self.idle()
+        except Halted:
+            return False
+        return True
+
+    # --- halting ---
+    def halt(self, reason):
+        """Stop heaters and motion first, then tell every host."""
+        for fn in self.on_halt:
+            fn()
+        self.halted = reason
+        self.halt_count += 1
+        self.broadcast("Error:%s" % reason)
+
+    def emergency_stop(self):
+        if not self.halted or "M112" not in self.halted:
+            self.halt("emergency stop (M112)")
+
+    def clear_halt(self):
+        self.halted = None
+
+    # --- one line ---
+    def _check_protocol(self, ch, buf, n):
+        """Verify an N...*checksum line. Returns the length to parse, or -1 for a
+        repeated line that was already executed."""
+        star = -1
+        for i in range(n):
+            if buf[i] == 42:
+                star = i
+                break
+        if star >= 0:
+            cs = 0
+            for i in range(star):
+                cs ^= buf[i]
+            digits = bytes(buf[star + 1:n]).strip()
+            if not digits or not digits.isdigit() or int(digits) != cs:
+                raise Resend("checksum mismatch, Last Line: %d" % ch.last_n)
+        try:
+            line = self.parser.parse(buf, star if star >= 0 else n)
+        except GcodeError:
+            # A line that arrived intact but is bad G-code still uses up its number.
+            if star >= 0 and self.parser.line.line_number == ch.last_n + 1:
+                ch.last_n += 1
+            raise
+        number = line.line_number
+        if number < 0:
+            if star >= 0:
+                raise Resend("No Line Number with checksum, Last Line: %d" % ch.last_n)
+            return line
+        if star < 0:
+            raise Resend("No Checksum with line number, Last Line: %d" % ch.last_n)
+        if line.letter == "M" and line.number == 110:
+            return line
+        if number == ch.last_n + 1:
+            ch.last_n = number
+            return line
+        if number <= ch.last_n:
+            return None
+        raise Resend("Line Number is not Last Line Number+1, Last Line: %d" % ch.last_n)
+
+    def run_line(self, line):
+        """Run a parsed line; returns text to follow `ok` or None."""
         if not line.letter:
             return None
-        handler = self.commands.get(command_key(line.letter, line.number))
+        key = command_key(line.letter, line.number)
+        handler = self.commands.get(key)
         if handler is None and line.letter == "T":
-            handler = self.commands.get(command_key("T", -1))
+            key = command_key("T", -1)
+            handler = self.commands.get(key)
         if handler is None:
             self.reply('echo:Unknown command: "%s%d"' % (line.letter, line.number))
             return None
+        if self.refuse_after_error and self.failed and key not in self._always:
+            raise GcodeError("refused: an earlier command failed (M933 leaves this mode)")
+        if self.halted and key in self.guarded:
+            raise GcodeError("printer halted (%s); M999 resumes" % self.halted)
         return handler(line)
 
-    def answer(self, status):
-        intake = self.intake
+    _always = (command_key("M", 932), command_key("M", 933), command_key("M", 112),
+               command_key("M", 999), command_key("M", 110), command_key("M", 105),
+               command_key("M", 114), command_key("M", 115), command_key("M", 27))
+
+    def answer(self, ch, status):
+        intake = ch.intake
+        self.current = ch
+        self._cmd_halt_count = self.halt_count
+        self._busy_at_ms = time.ticks_ms()
         suffix = None
         try:
             if status != LINE_OK:
                 raise GcodeError(intake.error_text(status))
-            suffix = self.run_line(intake.buf, intake.n)
+            line = self._check_protocol(ch, intake.buf, intake.n)
+            if line is not None:
+                suffix = self.run_line(line)
+        except Resend as e:
+            self.reply("Error:%s" % e)
+            self.reply("Resend: %d" % (ch.last_n + 1))
+        except Halted as e:
+            self.reply("Error:command stopped: %s" % e)
         except ValueError as e:  # GcodeError, MixError, PlanError: bad input
             self.reply("Error:%s" % e)
+            self.failed = True
         intake.take()
         if suffix:
-            self.reply("ok " + suffix)
+            ch.write("ok " + suffix + "\n")
         else:
-            self.console.write("ok\n")
+            ch.write("ok\n")
+        self.current = None
 
-    def serve(self, console):
-        """Answer lines from the console until its stream ends."""
-        self.console = console
-        rx = bytearray(64)
-        mv = memoryview(rx)
-        feed = self.intake.feed
-        while True:
-            n = console.readinto(mv)
-            if n < 0:
-                break
-            if n == 0:
-                self.idle()
-                continue
-            for i in range(n):
-                status = feed(rx[i])
+    # --- the main loop ---
+    def serve(self):
+        """Answer lines from every channel until all have closed and no listener is
+        left."""
+        while self.channels or self.listeners:
+            self.pump_all()
+            did = False
+            for ch in self.channels:
+                status = ch.next_line()
                 if status:
-                    self.answer(status)
-        for f in self.finish:
-            f()
+                    self.answer(ch, status)
+                    did = True
+            if did:
+                continue
+            closed = [ch for ch in self.channels if not ch.open and not ch.count]
+            for ch in closed:
+                self.channels.remove(ch)
+            if self.channels and not self.listeners and all(ch.lockstep for ch in self.channels):
+                # Simulation in lockstep: time only passes when the firmware waits.
+                self.channels[0].pump(self, block=True)
+                continue
+            self.machine_idle()
+            self._run_background()
+        for fn in self.finish:
+            fn()
+
+    # --- protocol commands ---
+    # M110 N<n>: the next line number expected is n+1. Example: N0 M110 N0*125
+    def m110(self, line):
+        self.current.last_n = line.int("N", max(line.line_number, 0), lo=0)
+
+    # M112: emergency stop. The receive path acts on it before it is queued.
+    def m112(self, line):
+        self.emergency_stop()
+
+    # M999: clear a halt; moves and heating are accepted again.
+    def m999(self, line):
+        self.clear_halt()
+
+    # M932: clear the error state and refuse every command after the next failure.
+    def m932(self, line):
+        self.refuse_after_error = True
+        self.failed = False
+
+    # M933: leave refuse-after-error mode.
+    def m933(self, line):
+        self.refuse_after_error = False
+        self.failed = False
