@@ -6,7 +6,7 @@ GCODE ?= testdata/part_3tool_prusaslicer_rel.gcode
 TRACE ?= out/trace.vcd
 REPORT ?= out/report.json
 
-.PHONY: all setup test sim clean
+.PHONY: all setup test sim serve clean
 
 all: setup
 
@@ -16,6 +16,10 @@ $(STAMP): pyproject.toml
 	python3 -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[test]'
+	# printcore, the host client of Printrun, is all the tests use: its GUI
+	# dependencies (wxPython, ...) are left out.
+	$(PY) -m pip install --quiet --no-deps Printrun==2.2.0
+	$(PY) -m pip install --quiet pyserial==3.5
 	touch $(STAMP)
 
 test: setup
@@ -24,6 +28,10 @@ test: setup
 sim: setup
 	@mkdir -p $(dir $(TRACE)) $(dir $(REPORT))
 	$(VENV)/bin/mixstep sim $(GCODE) --trace $(TRACE) --report $(REPORT)
+
+# make serve TCP=127.0.0.1:8888, or make serve PTY=1 (prints the device path)
+serve: setup
+	$(VENV)/bin/mixstep serve $(if $(TCP),--tcp $(TCP)) $(if $(PTY),--pty)
 
 clean:
 	rm -rf $(VENV) out build *.egg-info

@@ -11,18 +11,29 @@ from mixfw.pins import Pins
 from mixfw.planner import Planner
 from mixfw.printer import Printer
 from mixfw.console import StreamConsole
-from mixfw import cmd_motion, cmd_mixing, cmd_thermal, cmd_report
+from mixfw.config import Config
+from mixfw import cmd_motion, cmd_mixing, cmd_thermal, cmd_report, cmd_config
 
 # Commands whose arguments are text, not numbers.
-RAW_COMMANDS = ()
+RAW_COMMANDS = cmd_config.RAW_COMMANDS
+# Where the configuration lives on the board's flash filesystem.
+CONFIG_PATH = "/mixstep.cfg"
 
 
 def _ticks(us, tick_us):
     return max(1, -(-us // tick_us))
 
 
-def build(settings=None, pin_map=None):
-    settings = settings or board.SETTINGS
+def load_config(path=CONFIG_PATH, warn=print):
+    """The board's defaults, overridden by the saved configuration if it is sound."""
+    config = Config(board.SETTINGS, path, warn=warn)
+    config.boot()
+    return config
+
+
+def build(config=None, pin_map=None):
+    config = config or Config(board.SETTINGS, None)
+    settings = config.settings
     pin_map = pin_map or board.PINS
     tick_us = settings["tick_us"]
     # Step-loop memory: one array for state, mixer, pin masks and the block ring.
@@ -46,6 +57,8 @@ def build(settings=None, pin_map=None):
     cmd_mixing.register(printer, cmd_mixing.Mixing(planner, settings))
     cmd_thermal.register(printer, cmd_thermal.Thermal(settings))
     cmd_report.register(printer, cmd_report.Reports(printer, motion, planner, board.NAME))
+    cmd_config.register(printer, config)
+    config.appliers.append(motion.apply)
     printer.finish.append(planner.synchronize)
     printer.mem = mem
     printer.planner = planner
@@ -67,14 +80,18 @@ def start_timer(printer, tick_us):
                              callback=printer.irq)
 
 
-def run(consoles=None, listeners=(), printer=None):
-    printer = printer or build()
+def run(consoles=None, listeners=(), printer=None, warnings=None):
+    if printer is None:
+        warnings = []
+        printer = build(load_config(warn=warnings.append))
     timer = start_timer(printer, board.SETTINGS["tick_us"])
     if consoles is None:
         consoles = [StreamConsole(sys.stdin.buffer, sys.stdout.buffer)]
     for console in consoles:
         printer.add_channel(console)
         console.write("start\n")
+        for text in warnings or ():
+            console.write(text + "\n")
     printer.listeners.extend(listeners)
     try:
         printer.serve()

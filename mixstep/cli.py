@@ -18,6 +18,11 @@ def _sim(args):
     return 1 if report["errors"] else 0
 
 
+def _serve(args):
+    from mixstep import serve
+    return serve.main(tcp=args.tcp, pty=args.pty, realtime=args.realtime)
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(prog="mixstep", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -28,6 +33,12 @@ def main(argv=None):
     p.add_argument("--heap-lock", action="store_true",
                    help="lock the MicroPython heap around every step-loop call")
     p.set_defaults(run=_sim)
+    p = sub.add_parser("serve", help="run the simulated printer for host software (TCP or PTY)")
+    p.add_argument("--tcp", metavar="HOST:PORT", help="serve the TCP G-code console here")
+    p.add_argument("--pty", action="store_true", help="serve a pseudo-terminal; prints its path")
+    p.add_argument("--realtime", type=float, default=1.0,
+                   help="simulated seconds per wall second (0: as fast as possible)")
+    p.set_defaults(run=_serve)
     args = parser.parse_args(argv)
     return args.run(args)
 

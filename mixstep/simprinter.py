@@ -9,8 +9,11 @@ SIM_MAIN = paths.BOARDS / "sim" / "sim_main.py"
 
 
 class SimPrinter:
-    def __init__(self, edges_path=None, heap_lock=False, heap_size="2M", board="sim"):
+    def __init__(self, edges_path=None, heap_lock=False, heap_size="2M", board="sim",
+                 config_path=None):
         cmd = [paths.micropython(), "-X", "heapsize=" + heap_size, str(SIM_MAIN)]
+        if config_path:
+            cmd += ["--config", str(config_path)]
         if edges_path:
             cmd += ["--edges", str(edges_path)]
         if heap_lock:
@@ -22,6 +25,7 @@ class SimPrinter:
         banner = self._readline()
         if banner != "start":
             raise RuntimeError("firmware did not start: %r" % banner)
+        self.boot_lines = []  # warnings the firmware printed at start
 
     def _readline(self):
         raw = self.out.readline()

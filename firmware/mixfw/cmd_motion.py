@@ -29,6 +29,22 @@ class Motion:
         # (cold extrusion, ...).
         self.extrusion_guards = []
 
+    def apply(self, settings):
+        """Take changed settings (M930, M92, M201...): the queue drains first, and the
+        axes stay where they are in millimetres."""
+        p = self.planner
+        p.synchronize()
+        p.steps_per_mm[:] = list(settings["steps_per_mm"])
+        p.max_feed_mm_s = settings["max_feed_mm_s"]
+        p.max_accel_mm_s2 = settings["max_accel_mm_s2"]
+        p.acceleration_mm_s2 = settings["acceleration_mm_s2"]
+        p.retract_acceleration_mm_s2 = settings["retract_acceleration_mm_s2"]
+        p.junction_deviation_mm = settings["junction_deviation_mm"]
+        p.set_position_steps(self.machine_steps())
+        self.travel_mm = settings["travel_mm"]
+        self.homing_feed_mm_s = settings["homing_feed_mm_s"]
+        self.soft_limits = settings.get("soft_limits", True)
+
     def resync(self):
         """After the queue was dropped: the logical position is where the axes are."""
         steps = self.planner.position_steps

@@ -27,7 +27,8 @@ class Line:
         self.valued = 0  # bit per letter that carried a number
         self.letter = ""  # command letter G, M or T; "" for a blank line
         self.number = 0
-        self.line_number = -1  # the leading N word, -1 if none
+        self.has_line_number = False
+        self.line_number = 0  # the leading N word (hosts send N-1 with M110)
         self.args_text = ""  # for raw-argument commands: the text after the command
 
     def has(self, ch):
@@ -78,7 +79,8 @@ class Parser:
         ln.valued = 0
         ln.letter = ""
         ln.number = 0
-        ln.line_number = -1
+        ln.has_line_number = False
+        ln.line_number = 0
         ln.args_text = ""
         mant = ln.mant
         decimals = ln.decimals
@@ -142,10 +144,11 @@ class Parser:
                 raise GcodeError("malformed number after %s" % chr(letter))
             if first:
                 first = False
-                if letter == 78 and ln.line_number < 0:  # N line number before the command
-                    if not has_number or neg or d:
+                if letter == 78 and not ln.has_line_number:  # N line number first
+                    if not has_number or d:
                         raise GcodeError("malformed line number")
-                    ln.line_number = m
+                    ln.has_line_number = True
+                    ln.line_number = -m if neg else m
                     first = True
                     continue
                 elif letter in (71, 77, 84):  # G M T

@@ -235,11 +235,12 @@ class Printer:
             line = self.parser.parse(buf, star if star >= 0 else n)
         except GcodeError:
             # A line that arrived intact but is bad G-code still uses up its number.
-            if star >= 0 and self.parser.line.line_number == ch.last_n + 1:
+            ln = self.parser.line
+            if star >= 0 and ln.has_line_number and ln.line_number == ch.last_n + 1:
                 ch.last_n += 1
             raise
         number = line.line_number
-        if number < 0:
+        if not line.has_line_number:
             if star >= 0:
                 raise Resend("No Line Number with checksum, Last Line: %d" % ch.last_n)
             return line
@@ -296,6 +297,9 @@ class Printer:
         except ValueError as e:  # GcodeError, MixError, PlanError: bad input
             self.reply("Error:%s" % e)
             self.failed = True
+        except Exception as e:  # a bug must not take the printer down with it
+            self.reply("Error:internal error in this command: %r" % e)
+            self.failed = True
         intake.take()
         if suffix:
             ch.write("ok " + suffix + "\n")
@@ -332,7 +336,7 @@ class Printer:
     # --- protocol commands ---
     # M110 N<n>: the next line number expected is n+1. Example: N0 M110 N0*125
     def m110(self, line):
-        self.current.last_n = line.int("N", max(line.line_number, 0), lo=0)
+        self.current.last_n = line.int("N", line.line_number, lo=-1)
 
     # M112: emergency stop. The receive path acts on it before it is queued.
     def m112(self, line):

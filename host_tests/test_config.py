@@ -1,0 +1,664 @@
+"""Runtime configuration: APrinter's M503 M925 M926 M502 M501 M500 M930, Marlin's M92
+M201 M203 M204 M205, and the configuration file on flash, on the firmware running on
+the MicroPython unix port."""
+import json
+import zlib
+
+from hypothesis import given, settings, strategies as st, HealthCheck
+
+from mixstep import paths
+
+# The whole simulated printer, assembled by main.py, with the configuration loaded at
+# boot from CFG_PATH. A counting applier shows when settings are applied.
+MACHINE = r"""
+import sys, json, simmachine, simtime
+sys.modules["machine"] = simmachine
+sys.modules["time"] = simtime
+import board
+simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(6)])
+import main as firmware
+from mixfw.console import StreamConsole
+
+console = StreamConsole(sys.stdin.buffer, sys.stdout.buffer, blocking=True)
+warnings = []
+config = firmware.Config(board.SETTINGS, CFG_PATH, warn=warnings.append)
+config.boot()
+printer = firmware.build(config)
+applied = [0]
+
+def count_applies(settings):
+    applied[0] += 1
+
+config.appliers.append(count_applies)
+firmware.run([console], printer=printer, warnings=warnings)
+pos = simmachine.positions
+print("//end " + json.dumps({"applied": applied[0],
+      "steps": {n: pos[i] for i, n in enumerate(simmachine.step_names)}}))
+"""
+
+
+class Session:
+    """One boot of the simulated printer: the warnings it printed right after `start`,
+    the replies to each command (the `ok` dropped), and what it reported at the end."""
+
+    def __init__(self, mp, cfg_path, commands):
+        code = MACHINE.replace("CFG_PATH", repr(str(cfg_path)))
+        out = mp.run(code, stdin=("\n".join(commands) + "\n").encode()).splitlines()
+        start = out.index("start") + 1
+        self.boot = []
+        while out[start].startswith("echo:config"):
+            self.boot.append(out[start])
+            start += 1
+        self.end = json.loads(out[-1][len("//end "):])
+        self.replies = []
+        reply = []
+        for text in out[start:-1]:
+            if text == "ok" or text.startswith("ok "):
+                self.replies.append(reply)
+                reply = []
+            else:
+                reply.append(text)
+        assert len(self.replies) == len(commands)
+
+    def of(self, i):
+        return self.replies[i]
+
+
+def m503_lines(replies):
+    return [r[len("echo:"):] for r in replies]
+
+
+def value_of(line):
+    """'echo:M926 Idrives V6 ; ...' -> '6'"""
+    return line.split(";")[0].split()[2][1:]
+
+
+# --- configuration inside one MicroPython process: a test double for the printer
+# that dispatches through the real parser, and a flash that can lose power. ---
+UNIT = r"""
+import sys, json, board
+from mixfw.config import Config, ConfigError, crc32
+from mixfw.gcode import Parser
+from mixfw import cmd_config
+
+class Commands:
+    def __init__(self, config):
+        self.handlers = {}
+        self.lines = []
+        self.parser = Parser(cmd_config.RAW_COMMANDS)
+        cmd_config.register(self, config)
+
+    def register(self, name, fn, help_text):
+        self.handlers[name] = fn
+
+    def reply(self, text):
+        self.lines.append(text)
+
+    def send(self, text):
+        b = text.encode()
+        line = self.parser.parse(b, len(b))
+        self.handlers["%s%d" % (line.letter, line.number)](line)
+
+
+class PowerLoss(Exception):
+    pass
+
+
+class Flash:
+    # Loses power before step number `budget`: each open-for-write, close, rename,
+    # remove and each byte written is one step, and what reached flash stays there.
+    # fat=True renames as MicroPython's FAT driver does: remove the target, then rename.
+    def __init__(self, files=None, fat=False):
+        self.files = dict(files or {})
+        self.fat = fat
+        self.budget = -1
+        self.steps = 0
+
+    def step(self, n=1):
+        room = n if self.budget < 0 else min(n, self.budget - self.steps)
+        self.steps += room
+        return room
+
+    def lose_power_unless(self, n=1):
+        if self.step(n) < n:
+            raise PowerLoss()
+
+    def stat(self, path):
+        if path not in self.files:
+            raise OSError(2)
+        return (0x8000, 0, 0, 0, 0, 0, len(self.files[path]), 0, 0, 0)
+
+    def open(self, path, mode):
+        if "w" in mode:
+            self.lose_power_unless()
+            self.files[path] = b""
+            return Writer(self, path)
+        if path not in self.files:
+            raise OSError(2)
+        return Reader(self.files[path])
+
+    def rename(self, old, new):
+        if self.fat and new in self.files:
+            self.remove(new)
+        self.lose_power_unless()
+        self.files[new] = self.files.pop(old)
+
+    def remove(self, path):
+        self.lose_power_unless()
+        del self.files[path]
+
+
+class Writer:
+    def __init__(self, fs, path):
+        self.fs = fs
+        self.path = path
+
+    def write(self, data):
+        room = self.fs.step(len(data))
+        self.fs.files[self.path] += bytes(data[:room])
+        if room < len(data):
+            raise PowerLoss()
+        return room
+
+    def close(self):
+        self.fs.lose_power_unless()
+
+
+class Reader:
+    def __init__(self, data):
+        self.data = data
+
+    def read(self):
+        return self.data
+
+    def close(self):
+        pass
+
+
+PATH = "/mixstep.cfg"
+"""
+
+
+def run_unit(mp, body, data=None, heap="8M", lines=False):
+    """Run body after UNIT; data, if given, arrives as DATA (JSON on stdin). Returns
+    its last output line decoded from JSON, or with lines=True every line."""
+    if data is not None:
+        body = "DATA = json.loads(sys.stdin.read())\n" + body
+    out = mp.run(UNIT + body, stdin=json.dumps(data).encode(), heap=heap).splitlines()
+    return [json.loads(line) for line in out] if lines else json.loads(out[-1])
+
+
+def test_crc32_is_zlibs(mp):
+    payloads = [b"", b"a", b"123456789", bytes(range(256)) * 3]
+    got = run_unit(mp, "print(json.dumps([crc32(bytes.fromhex(h)) for h in %r]))"
+                   % [p.hex() for p in payloads])
+    assert got == [zlib.crc32(p) for p in payloads]
+
+
+def test_options_are_the_boards_settings_one_per_axis(mp, board):
+    got = run_unit(mp, """
+c = Config(board.SETTINGS, PATH, Flash())
+no_bed = {k: v for k, v in board.SETTINGS.items() if not k.startswith("bed_")}
+d = Config(no_bed, PATH, Flash())
+try:
+    Config(dict(board.SETTINGS, drives=9), PATH, Flash())
+    bad = None
+except ConfigError as e:
+    bad = str(e)
+print(json.dumps({"names": [o.name for o in c.options],
+                  "restart": [o.name for o in c.options if o.restart],
+                  "no_bed": [o.name for o in d.options],
+                  "soft_limits": c.settings["soft_limits"], "bad": bad}))
+""")
+    names = got["names"]
+    axes = {"steps_per_mm": "xyze", "max_feed_mm_s": "xyze", "max_accel_mm_s2": "xyze",
+            "travel_mm": "xyz", "homing_feed_mm_s": "xyz"}
+    expected = [k + "_" + a for k, ax in axes.items() for a in ax] + [
+        "acceleration_mm_s2", "retract_acceleration_mm_s2", "junction_deviation_mm",
+        "default_feed_mm_s", "soft_limits", "drives", "virtual_tools", "queue_blocks",
+        "line_buffer_bytes", "tick_us", "step_pulse_us", "dir_setup_us",
+        "enable_active_low", "endstop_active_high"]
+    heater = ["beta", "r25_ohm", "pullup_ohm", "sh_a", "sh_b", "sh_c", "kp", "ki", "kd",
+              "pwm_hz", "min_c", "max_c", "watch_s", "watch_rise_c", "runaway_c",
+              "runaway_s"]
+    optional = ["%s_%s" % (h, k) for h in ("hotend", "bed") for k in heater] + [
+        "min_extrude_c", "fan_pwm_hz", "thermal_period_ms", "console_baud", "tcp_port",
+        "tcp_max_clients"]
+    expected += [n for n in optional if n in board["SETTINGS"]]
+    assert sorted(names) == sorted(expected)
+    assert len(names) == len(set(names))
+    assert got["soft_limits"] is True  # the firmware's default; the board names none
+    assert {"drives", "queue_blocks", "tick_us"} <= set(got["restart"])
+    assert "steps_per_mm_x" not in got["restart"]
+    assert got["no_bed"] == [n for n in names if not n.startswith("bed_")]
+    assert got["bad"] == "board default drives = 9 is above the maximum 6"
+
+
+def test_m503_pasted_back_gives_the_same_configuration(mp, tmp_path):
+    changes = ["M926 Isteps_per_mm_e V93.3", "M926 Ijunction_deviation_mm V0.30000000000000004",
+               "M926 Isoft_limits V0", "M926 Iqueue_blocks V32", "M926 ITRAVEL_MM_Z V180.5"]
+    first = Session(mp, tmp_path / "a.cfg", changes + ["M503"])
+    printed = first.of(len(changes))
+    assert all(r.startswith("echo:M926 I") for r in printed)
+    by_name = {line.split()[1][1:]: value_of(line) for line in printed}
+    assert by_name["steps_per_mm_e"] == "93.3"
+    assert by_name["junction_deviation_mm"] == "0.30000000000000004"
+    assert by_name["soft_limits"] == "0"
+    assert by_name["queue_blocks"] == "32"
+    assert by_name["travel_mm_z"] == "180.5"
+    assert by_name["steps_per_mm_x"] == "80.0"
+
+    pasted = m503_lines(printed)
+    second = Session(mp, tmp_path / "b.cfg", ["M503"] + pasted + ["M503"])
+    assert second.of(0) != printed  # a fresh printer starts from the defaults
+    assert all(r == [] for r in second.replies[1:-1])
+    assert second.of(len(pasted) + 1) == printed
+
+
+_UNIT_SCHEMA = None
+
+
+def schema(mp):
+    """(name, kind, lo, hi) of every option, as the firmware on the unix port has them."""
+    global _UNIT_SCHEMA
+    if _UNIT_SCHEMA is None:
+        _UNIT_SCHEMA = run_unit(mp, """
+c = Config(board.SETTINGS, PATH, Flash())
+print(json.dumps([(o.name, o.kind, o.lo, o.hi) for o in c.options]))
+""")
+    return _UNIT_SCHEMA
+
+
+@st.composite
+def configurations(draw, options):
+    """Some options set to valid values, as (name, value text) pairs."""
+    chosen = draw(st.lists(st.sampled_from(options), unique_by=lambda o: o[0], max_size=12))
+    pairs = []
+    for name, kind, lo, hi in chosen:
+        if kind == "float":
+            v = repr(draw(st.floats(lo, hi, allow_nan=False)))
+        elif kind == "int":
+            v = str(draw(st.integers(lo, hi)))
+        else:
+            v = str(draw(st.integers(0, 1)))
+        pairs.append((name, v))
+    return pairs
+
+
+def test_random_configurations_round_trip_through_m926_and_m503(mp):
+    options = schema(mp)
+
+    @settings(max_examples=5, deadline=None,
+              suppress_health_check=[HealthCheck.function_scoped_fixture])
+    @given(st.lists(configurations(options), min_size=20, max_size=20))
+    def check(batch):
+        got = run_unit(mp, """
+out = []
+for pairs in DATA:
+    a = Commands(Config(board.SETTINGS, PATH, Flash()))
+    for name, text in pairs:
+        a.send("M926 I%s V%s" % (name, text))
+    a.send("M503")
+    b = Commands(Config(board.SETTINGS, PATH, Flash()))
+    for line in a.lines:
+        b.send(line[len("echo:"):])
+    b.send("M503")
+    out.append((a.lines, b.lines))
+print(json.dumps(out))
+""", batch)
+        for pairs, (printed, printed_again) in zip(batch, got):
+            assert printed == printed_again
+            shown = {line.split()[1][1:]: value_of(line) for line in printed}
+            for name, text in pairs:
+                assert float(shown[name]) == float(text), name
+
+    check()
+
+
+def test_bad_values_are_refused_naming_option_value_and_limit(mp, tmp_path):
+    bad = {
+        "M926 Isteps_per_mm_x V-5": "Error:steps_per_mm_x = -5.0 is below the minimum 0.001",
+        "M926 Idrives V7": "Error:drives = 7 is above the maximum 6",
+        "M926 Idrives V2.5": "Error:drives: '2.5' is not a whole number",
+        "M926 Isoft_limits V2": "Error:soft_limits: 2 is not 0 or 1",
+        "M926 Ihotend_kp Vfast": "Error:hotend_kp: 'fast' is not a number",
+        "M926 Ijunction_deviation_mm Vnan": "Error:junction_deviation_mm = nan is below "
+                                            "the minimum 0.001",
+        "M926 Ibogus V1": "Error:unknown option 'bogus' (M503 lists them)",
+        "M925 Ibogus": "Error:unknown option 'bogus' (M503 lists them)",
+        "M926 V1": "Error:missing option name: I<option>, M503 lists them",
+        "M926 Idrives X3": "Error:unexpected 'X3': expected I<option> V<value>",
+        "M926 Idrives V3 V4": "Error:parameter V given twice",
+        "M92 X0": "Error:steps_per_mm_x = 0.0 is below the minimum 0.001",
+        "M92 X100 Y-1": "Error:steps_per_mm_y = -1.0 is below the minimum 0.001",
+        "M203 Z": "Error:parameter Z needs a number",
+        "M204 R0": "Error:retract_acceleration_mm_s2 = 0.0 is below the minimum 0.1",
+        "M205 J20": "Error:junction_deviation_mm = 20.0 is above the maximum 10.0",
+    }
+    s = Session(mp, tmp_path / "c.cfg", ["M503"] + list(bad) + ["M503", "M501"])
+    for i, (command, error) in enumerate(bad.items()):
+        assert s.of(i + 1) == [error], command
+    # Nothing was changed, not even X of "M92 X100 Y-1": a command sets all or nothing.
+    assert s.of(len(bad) + 1) == s.of(0)
+    assert s.of(len(bad) + 2) == ["Error:no saved configuration in %s" % (tmp_path / "c.cfg")]
+
+
+def test_a_failed_save_is_an_error_and_the_printer_goes_on(mp, tmp_path):
+    cfg = tmp_path / "missing-dir" / "mixstep.cfg"
+    s = Session(mp, cfg, ["M926 Idrives V2", "M500", "M925 Idrives"])
+    assert len(s.of(1)) == 1
+    assert s.of(1)[0].startswith("Error:could not save %s: " % cfg)
+    assert value_of(s.of(2)[0]) == "2"
+
+
+def test_saved_configuration_is_loaded_and_used_after_a_reboot(mp, tmp_path):
+    cfg = tmp_path / "mixstep.cfg"
+    s = Session(mp, cfg, [
+        "M926 Isteps_per_mm_x V100", "M926 Idrives V3", "M926 Itravel_mm_x V5",
+        "M500",
+        "M926 Isteps_per_mm_x V50", "M925 Isteps_per_mm_x",
+        "M501", "M925 Isteps_per_mm_x",
+        "M502", "M925 Isteps_per_mm_x",
+        "M501", "M925 Isteps_per_mm_x", "M930"])
+    assert s.boot == []  # no file yet: a first boot, defaults without a warning
+    shown = [value_of(s.of(i)[0]) for i in (5, 7, 9, 11)]
+    assert shown == ["50.0", "100.0", "80.0", "100.0"]
+    assert s.of(12) == ["echo:takes effect after a restart (M500 saves it): drives"]
+
+    data = cfg.read_bytes()
+    cut = data.rindex(b"\n", 0, -1) + 1
+    body, crc_line = data[:cut], data[cut:]
+    assert body.startswith(b"# mixstep configuration, version 1\n")
+    assert crc_line == b"crc32 = %08x\n" % zlib.crc32(body)
+    assert b"\nsteps_per_mm_x = 100.0\n" in body and b"\ndrives = 3\n" in body
+    assert not (tmp_path / "mixstep.cfg.tmp").exists()
+
+    # The next boot assembles the machine from the saved values.
+    s = Session(mp, cfg, ["M925 Isteps_per_mm_x", "M163 S3 P1", "M930",
+                          "G1 X2 F600", "G1 X6", "M400"])
+    assert s.boot == []
+    assert value_of(s.of(0)[0]) == "100.0"
+    assert s.of(1) == ["Error:S3 out of range 0..2"]  # three drives
+    assert s.of(2) == []  # built with drives 3: nothing waits for a restart
+    assert s.of(4)[0].startswith("Error:") and "X6" in s.of(4)[0]  # beyond 5 mm travel
+    assert s.end["steps"]["x"] == 2 * 100
+
+
+def test_marlin_aliases_set_options_and_apply_at_once(mp, tmp_path):
+    s = Session(mp, tmp_path / "d.cfg", [
+        "M92", "M83", "M92 X100 E100", "G1 X1 F600", "T0", "G1 E1", "T1", "G1 E1",
+        "M92", "M201 X1000 E2000", "M925 Imax_accel_mm_s2_x", "M203 Z5",
+        "M925 Imax_feed_mm_s_z", "M204 P1200 R2500", "M204", "M204 T900", "M204",
+        "M205 X10 J0.02", "M205", "M926 Itick_us V25", "M930", "M926 Itick_us", "M930"])
+    assert s.of(0) == ["echo:M92 X80.0 Y80.0 Z400.0 E415.0"]
+    assert s.of(8) == ["echo:M92 X100.0 Y80.0 Z400.0 E100.0"]
+    assert value_of(s.of(10)[0]) == "1000.0"
+    assert value_of(s.of(12)[0]) == "5.0"
+    assert s.of(14) == ["echo:M204 P1200.0 R2500.0"]
+    assert s.of(16) == ["echo:M204 P900.0 R2500.0"]
+    assert s.of(17) == ["echo:M205 ignored X: mixstep uses junction deviation J"]
+    assert s.of(18) == ["echo:M205 J0.02"]
+    assert s.of(20) == ["echo:takes effect after a restart (M500 saves it): tick_us"]
+    assert s.of(22) == []
+    # M92, M201, M203, M204 (twice), M205 and two M930 each applied once.
+    assert s.end["applied"] == 8
+    steps = s.end["steps"]
+    assert steps["x"] == 100  # the new steps per mm, for the move queued after M92
+    assert steps["e0"] == 100 and steps["e1"] == 100  # M92 E is every drive's
+
+
+GOOD_CHANGES = (("steps_per_mm_x", "100.0"), ("drives", "3"), ("soft_limits", "0"))
+
+
+def good_file(mp):
+    return bytes.fromhex(run_unit(mp, """
+c = Config(board.SETTINGS, PATH, Flash())
+c.update(%r)
+print(json.dumps(c.text().hex()))
+""" % (GOOD_CHANGES,)))
+
+
+def with_crc(body):
+    return body + b"crc32 = %08x\n" % zlib.crc32(body)
+
+
+def damaged_files(good):
+    body = good[:good.rindex(b"\n", 0, -1) + 1]
+    flipped = bytearray(good)
+    flipped[60] ^= 0x04
+    return {
+        "empty": (b"", "truncated (no final newline)"),
+        "truncated mid-line": (good[:good.index(b"\n", 700) - 2], "truncated (no final newline)"),
+        "cut at a line end": (good[:good.index(b"\n", 700) + 1], "truncated (no checksum line)"),
+        "flipped bit": (bytes(flipped), "checksum mismatch (file corrupt)"),
+        "other version": (with_crc(body.replace(b"version 1", b"version 2")),
+                          "unsupported header '# mixstep configuration, version 2'"),
+        "unknown option": (with_crc(body + b"warp_drive = 1\n"),
+                           "line %d: unknown option 'warp_drive' (M503 lists them)"
+                           % (body.count(b"\n") + 1)),
+        "out of range": (with_crc(body.replace(b"drives = 3", b"drives = 8")),
+                         "line %d: drives = 8 is above the maximum 6"
+                         % (body[:body.index(b"drives = 3")].count(b"\n") + 1)),
+        "no separator": (with_crc(body + b"drives 3\n"),
+                         "line %d: expected name = value" % (body.count(b"\n") + 1)),
+        "too large": (b"#" * 20000 + b"\n", "20001 bytes is too large for a configuration"),
+        # Same number, other text: only the exact line counts.
+        "checksum in capitals": (body + b"crc32 = %08X\n" % zlib.crc32(body),
+                                 "checksum mismatch (file corrupt)"),
+        "checksum with a leading zero": (body + b"crc32 = 0%08x\n" % zlib.crc32(body),
+                                         "checksum mismatch (file corrupt)"),
+    }
+
+
+def test_damaged_file_gives_defaults_and_a_warning_at_boot(mp, tmp_path):
+    good = good_file(mp)
+    cfg = tmp_path / "mixstep.cfg"
+    cases = damaged_files(good)
+    for label, (data, problem) in cases.items():
+        cfg.write_bytes(data)
+        s = Session(mp, cfg, ["M925 Isteps_per_mm_x", "M925 Idrives", "M501"])
+        assert s.boot == ["echo:config %s: %s; using defaults" % (cfg, problem)], label
+        assert [value_of(s.of(i)[0]) for i in (0, 1)] == ["80.0", "6"], label
+        assert s.of(2) == ["Error:%s: %s" % (cfg, problem)], label
+    cfg.write_bytes(good)
+    s = Session(mp, cfg, ["M925 Isteps_per_mm_x"])
+    assert s.boot == [] and value_of(s.of(0)[0]) == "100.0"
+
+
+BOOT_EACH = """
+defaults = Config(board.SETTINGS, PATH, Flash()).settings
+for data in files:
+    warnings = []
+    c = Config(board.SETTINGS, PATH, Flash({PATH: data}), warnings.append)
+    c.boot()
+    print(json.dumps((c.settings == defaults, warnings)))
+"""
+
+
+def assert_defaults_and_one_warning(results, count):
+    assert len(results) == count
+    for i, (is_default, warnings) in enumerate(results):
+        assert is_default, i
+        assert len(warnings) == 1 and warnings[0].startswith("echo:config /mixstep.cfg: ")
+        assert warnings[0].endswith("; using defaults")
+
+
+def test_corrupt_file_with_a_complete_tmp_from_an_interrupted_save_takes_the_tmp(mp):
+    got = run_unit(mp, """
+new = Config(board.SETTINGS, PATH, Flash())
+new.update((("steps_per_mm_x", 90.0), ("drives", 2)))
+flash = Flash({PATH: b"garbage\\n", PATH + ".tmp": new.text()})
+warnings = []
+c = Config(board.SETTINGS, PATH, flash, warnings.append)
+c.boot()
+print(json.dumps({"same": c.settings == new.settings, "warnings": warnings,
+                  "files": sorted(flash.files), "moved": flash.files[PATH] == new.text()}))
+""")
+    assert got["same"]
+    assert got["warnings"] == ["echo:config /mixstep.cfg: truncated (no checksum line); "
+                               "took the complete /mixstep.cfg.tmp"]
+    assert got["files"] == ["/mixstep.cfg"] and got["moved"]  # the save was finished
+
+
+def test_the_file_is_the_same_written_on_cpython(mp, board):
+    """Pure logic: host tools import the same module and write the same file."""
+    import sys
+    sys.path.insert(0, str(paths.FIRMWARE))
+    try:
+        from mixfw.config import Config
+    finally:
+        sys.path.remove(str(paths.FIRMWARE))
+    host = Config(board["SETTINGS"], "/unused")
+    host.update(GOOD_CHANGES)
+    assert host.text() == good_file(mp)
+
+
+def test_every_truncation_is_detected(mp):
+    good = good_file(mp)
+    got = run_unit(mp, """
+good = bytes.fromhex(DATA)
+files = (good[:n] for n in range(len(good)))
+""" + BOOT_EACH, good.hex(), lines=True)
+    assert_defaults_and_one_warning(got, len(good))
+
+
+def test_random_damage_is_detected(mp):
+    good = good_file(mp)
+
+    @settings(max_examples=5, deadline=None,
+              suppress_health_check=[HealthCheck.function_scoped_fixture])
+    @given(st.lists(st.tuples(st.integers(0, len(good) - 1), st.integers(1, 255),
+                              st.sampled_from(["xor", "insert", "delete"])),
+                    min_size=200, max_size=200))
+    def check(edits):
+        damaged = []
+        for at, byte, how in edits:
+            d = bytearray(good)
+            if how == "xor":
+                d[at] ^= byte
+            elif how == "insert":
+                d[at:at] = bytes([byte])
+            else:
+                del d[at]
+            damaged.append(bytes(d).hex())
+        got = run_unit(mp, """
+files = (bytes.fromhex(h) for h in DATA)
+""" + BOOT_EACH, damaged, lines=True)
+        assert_defaults_and_one_warning(got, len(edits))
+
+    check()
+
+
+# A save interrupted after every step: each file-system operation and each byte.
+SWEEP = r"""
+def sweep(old_pairs, new_pairs, fat, start, every_byte=True):
+    # every_byte=False: only around the file-system operations (open, first byte, last
+    # bytes, close, remove, rename), where a stale .tmp can make a difference.
+    old = Config(board.SETTINGS, PATH, Flash())
+    old.update(old_pairs)
+    new = Config(board.SETTINGS, PATH, Flash())
+    new.update(new_pairs)
+    files = {}
+    if start == "no file":
+        old = Config(board.SETTINGS, PATH, Flash())  # nothing saved: the defaults
+    else:
+        files[PATH] = old.text()
+    if start == "stale partial tmp":
+        files[PATH + ".tmp"] = new.text()[:100]
+    if start == "stale complete tmp":
+        files[PATH + ".tmp"] = Config(board.SETTINGS, PATH, Flash()).text()
+    # A complete save, to count its steps.
+    flash = Flash(files, fat)
+    new.storage = flash
+    new.save()
+    total = flash.steps
+    tried = 0
+    got = {"old": 0, "new": 0}
+    budgets = range(total + 1) if every_byte else sorted(set(
+        b for b in (0, 1, 2, total - 3, total - 2, total - 1, total) if b >= 0))
+    for budget in budgets:
+        flash = Flash(files, fat)
+        flash.budget = budget
+        new.storage = flash
+        try:
+            new.save()
+            assert budget == total
+        except PowerLoss:
+            pass
+        after_loss = flash.files
+        # The boot after the loss may itself lose power (it finishes an interrupted
+        # FAT save by a rename): try that at each of its steps, then boot for good.
+        boot_budget = 0
+        while True:
+            flash = Flash(after_loss, fat)
+            flash.budget = boot_budget
+            c = Config(board.SETTINGS, PATH, flash)
+            try:
+                c.boot()
+                break
+            except PowerLoss:
+                boot_budget += 1
+                flash.budget = -1
+                c = Config(board.SETTINGS, PATH, flash)
+                c.boot()
+            tried += 1
+            assert c.settings == new.settings or c.settings == old.settings
+        tried += 1
+        if c.settings == new.settings:
+            got["new"] += 1
+        elif c.settings == old.settings:
+            got["old"] += 1
+        else:
+            raise AssertionError("power lost at step %d: neither old nor new" % budget)
+        # The next save after the interrupted one completes and loads.
+        flash.budget = -1
+        c.update(new_pairs)
+        c.update((("steps_per_mm_z", 123.0),))
+        c.save()
+        d = Config(board.SETTINGS, PATH, flash)
+        d.boot()
+        assert d.settings == c.settings, "save after one interrupted at step %d" % budget
+    return {"save_steps": total, "file_bytes": len(new.text()), "tried": tried,
+            "old": got["old"], "new": got["new"]}
+"""
+
+# (fat, start, every byte): each start from both kinds of rename at every byte; a stale
+# .tmp left by an earlier interrupted save only matters around the operations.
+SWEEPS = [(fat, start, True) for fat in (False, True) for start in ("old file", "no file")] + [
+    (fat, start, False) for fat in (False, True)
+    for start in ("stale partial tmp", "stale complete tmp")]
+
+
+def test_save_interrupted_at_every_point_loads_old_or_new(mp):
+    old = [("steps_per_mm_x", 100.0), ("drives", 3), ("hotend_kp", 0.07)]
+    new = [("steps_per_mm_x", 90.0), ("soft_limits", False), ("tick_us", 25)]
+    got = run_unit(mp, SWEEP + """
+print(json.dumps([sweep(%r, %r, fat, start, every) for fat, start, every in %r]))
+""" % (old, new, SWEEPS))
+    total = 0
+    for (fat, start, every), r in zip(SWEEPS, got):
+        # open + every byte + close + rename (FAT: + the remove inside rename)
+        assert r["save_steps"] == r["file_bytes"] + 3 + (fat and start != "no file"), start
+        if every:
+            assert r["tried"] >= r["save_steps"] + 1
+            assert r["old"] > r["file_bytes"] and r["new"] >= 1
+        else:
+            assert r["tried"] >= 7 and r["old"] >= 4 and r["new"] >= 1
+        total += r["tried"]
+    print("interruption points tried:", total, got)
+    assert total > 4 * 1400
+
+
+def test_random_configurations_survive_interrupted_saves(mp):
+    options = schema(mp)
+
+    @settings(max_examples=2, deadline=None,
+              suppress_health_check=[HealthCheck.function_scoped_fixture])
+    @given(configurations(options), configurations(options), st.booleans())
+    def check(old, new, fat):
+        got = run_unit(mp, SWEEP + """
+print(json.dumps(sweep(%r, %r, %r, "old file")))
+""" % (old, new, fat))
+        assert got["tried"] >= got["save_steps"] + 1
+
+    check()

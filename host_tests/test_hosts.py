@@ -1,0 +1,110 @@
+"""Real host software against the simulated printer: Printrun's printcore streams a
+real slicer file over the TCP console and over a pseudo-terminal."""
+import socket
+import threading
+import time
+
+import pytest
+from printrun import gcoder
+from printrun.printcore import printcore
+
+from mixstep import paths, serve
+from gcode_model import expected_steps
+
+GCODE = paths.ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_for_port(address, timeout_s=20):
+    host, port = address.rsplit(":", 1)
+    deadline = time.time() + timeout_s
+    while True:
+        try:
+            socket.create_connection((host, int(port)), timeout=1).close()
+            return
+        except OSError:
+            assert time.time() < deadline, "simulated printer did not listen on " + address
+            time.sleep(0.1)
+
+
+class Host:
+    """printcore with every received line kept."""
+
+    def __init__(self, port):
+        self.lines = []
+        self.core = printcore()
+        self.core.recvcb = self.lines.append
+        self.core.connect(port, 115200)
+        deadline = time.time() + 20
+        while not self.core.online:
+            assert time.time() < deadline, "printer never came online"
+            time.sleep(0.05)
+
+    def print_file(self, path, timeout_s=600):
+        with open(path) as f:
+            gcode = gcoder.LightGCode([l.rstrip("\r\n") for l in f])
+        assert self.core.startprint(gcode)
+        deadline = time.time() + timeout_s
+        while self.core.printing:
+            assert time.time() < deadline, "print did not finish"
+            time.sleep(0.05)
+        return gcode
+
+    def ask(self, command, timeout_s=60):
+        start = len(self.lines)
+        self.core.send_now(command)
+        deadline = time.time() + timeout_s
+        while not any(l.startswith("ok") for l in self.lines[start:]):
+            assert time.time() < deadline, "no ok for " + command
+            time.sleep(0.02)
+        return self.lines[start:]
+
+    def close(self):
+        self.core.disconnect()
+
+
+def check_print(host, board):
+    sent_before = len(host.core.sent)
+    host.print_file(GCODE)
+    sent = host.core.sent[sent_before:]
+    time.sleep(0.2)
+    oks = [l for l in host.lines if l.startswith("ok")]
+    assert not [l for l in host.lines if l.startswith("Error")]
+    # Every line printcore sent during the print (and the M110s around it) got its ok.
+    assert len(oks) >= len(sent)
+    host.ask("M400")
+    reply = host.ask("M114")
+    spm = board["SETTINGS"]["steps_per_mm"]
+    want = expected_steps(GCODE, spm)
+    position = [l for l in reply if l.startswith("X:")][0]
+    assert position.endswith("Count X:%d Y:%d Z:%d" % (want["x"], want["y"], want["z"]))
+
+
+def test_printcore_prints_a_real_file_over_tcp(board):
+    address = "127.0.0.1:%d" % free_port()
+    proc = serve.serve_tcp(address, realtime=0, announce=lambda s: None)
+    try:
+        wait_for_port(address)
+        host = Host(address)
+        check_print(host, board)
+        host.close()
+    finally:
+        proc.terminate()
+        proc.wait()
+
+
+def test_printcore_prints_a_real_file_over_the_pty(board):
+    bridge = serve.PtyBridge(realtime=0)
+    thread = threading.Thread(target=bridge.run, daemon=True)
+    thread.start()
+    try:
+        host = Host(bridge.path)
+        check_print(host, board)
+        host.close()
+    finally:
+        bridge.close()

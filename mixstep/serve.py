@@ -1,0 +1,102 @@
+"""`mixstep serve`: the simulated printer as a network or serial printer, for hosts
+such as Pronterface/printcore and OctoPrint.
+
+--tcp HOST:PORT  the firmware's own TCP console (several connections at once);
+--pty            a pseudo-terminal, bridged to the firmware's serial console; the
+                 device path is printed, and hosts open it like a USB printer."""
+import os
+import selectors
+import subprocess
+import sys
+import tty
+
+from mixstep import paths
+from mixstep.simprinter import SIM_MAIN
+
+
+def _command(tcp, realtime, stdio, edges=None):
+    cmd = [paths.micropython(), "-X", "heapsize=2M", str(SIM_MAIN),
+           "--realtime", str(realtime)]
+    if tcp:
+        cmd += ["--tcp", tcp]
+    if not stdio:
+        cmd.append("--no-stdio")
+    if edges:
+        cmd += ["--edges", str(edges)]
+    return cmd
+
+
+def serve_tcp(address, realtime=1.0, announce=print):
+    proc = subprocess.Popen(_command(address, realtime, stdio=False),
+                            stdin=subprocess.DEVNULL, env=paths.micropython_env())
+    announce("mixstep: simulated printer on tcp %s" % address)
+    return proc
+
+
+class PtyBridge:
+    """A pseudo-terminal whose far end is the firmware's stdio console."""
+
+    def __init__(self, realtime=1.0):
+        self.master, self.slave = os.openpty()
+        tty.setraw(self.slave)  # a serial line: no echo, no line editing
+        self.path = os.ttyname(self.slave)
+        self.proc = subprocess.Popen(_command(None, realtime, stdio=True),
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     env=paths.micropython_env(), bufsize=0)
+
+    def run(self):
+        """Copy bytes both ways until the firmware exits."""
+        sel = selectors.DefaultSelector()
+        sel.register(self.master, selectors.EVENT_READ, "host")
+        sel.register(self.proc.stdout, selectors.EVENT_READ, "firmware")
+        try:
+            while self.proc.poll() is None:
+                for key, _ in sel.select(timeout=0.5):
+                    if key.data == "host":
+                        try:
+                            data = os.read(self.master, 4096)
+                        except OSError:  # no host has the device open just now
+                            data = b""
+                        if data:
+                            self.proc.stdin.write(data)
+                    else:
+                        data = self.proc.stdout.read1(4096) if hasattr(
+                            self.proc.stdout, "read1") else os.read(self.proc.stdout.fileno(), 4096)
+                        if not data:
+                            return
+                        os.write(self.master, data)
+        finally:
+            self.close()
+
+    def close(self):
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            self.proc.wait()
+        for fd in (self.master, self.slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+
+def main(tcp=None, pty=False, realtime=1.0):
+    if bool(tcp) == bool(pty):
+        raise SystemExit("mixstep serve: give either --tcp HOST:PORT or --pty")
+    if tcp:
+        proc = serve_tcp(tcp, realtime, announce=lambda s: print(s, flush=True))
+        try:
+            return proc.wait()
+        except KeyboardInterrupt:
+            proc.terminate()
+            return 0
+    bridge = PtyBridge(realtime)
+    print("mixstep: simulated printer on serial device %s" % bridge.path, flush=True)
+    try:
+        bridge.run()
+    except KeyboardInterrupt:
+        bridge.close()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
