@@ -12,10 +12,14 @@ from mixfw.planner import Planner
 from mixfw.printer import Printer
 from mixfw.console import StreamConsole
 from mixfw.config import Config
-from mixfw import cmd_motion, cmd_mixing, cmd_thermal, cmd_report, cmd_config
+from mixfw.files import Files
+from mixfw.thermal import Thermal
+from mixfw import cmd_motion, cmd_mixing, cmd_thermal, cmd_report, cmd_config, cmd_files
 
 # Commands whose arguments are text, not numbers.
-RAW_COMMANDS = cmd_config.RAW_COMMANDS
+RAW_COMMANDS = cmd_config.RAW_COMMANDS + cmd_files.RAW_COMMANDS
+# Where G-code files for printing from flash live.
+FILES_ROOT = "/"
 # Where the configuration lives on the board's flash filesystem.
 CONFIG_PATH = "/mixstep.cfg"
 
@@ -31,7 +35,7 @@ def load_config(path=CONFIG_PATH, warn=print):
     return config
 
 
-def build(config=None, pin_map=None):
+def build(config=None, pin_map=None, files_root=FILES_ROOT):
     config = config or Config(board.SETTINGS, None)
     settings = config.settings
     pin_map = pin_map or board.PINS
@@ -55,15 +59,20 @@ def build(config=None, pin_map=None):
     printer.on_halt.append(motion.resync)
     cmd_motion.register(printer, motion)
     cmd_mixing.register(printer, cmd_mixing.Mixing(planner, settings))
-    cmd_thermal.register(printer, cmd_thermal.Thermal(settings))
+    thermal = Thermal(machine, pin_map, settings, printer)
+    cmd_thermal.register(printer, thermal, motion)
     cmd_report.register(printer, cmd_report.Reports(printer, motion, planner, board.NAME))
     cmd_config.register(printer, config)
     config.appliers.append(motion.apply)
+    config.appliers.append(thermal.apply)
+    if files_root:
+        cmd_files.register(printer, Files(files_root, printer))
     printer.finish.append(planner.synchronize)
     printer.mem = mem
     printer.planner = planner
     printer.pins = pins
     printer.motion = motion
+    printer.thermal = thermal
     printer.irq = st.make_irq(mem, pins.out, pins.endstops)
     return printer
 

@@ -38,7 +38,7 @@ class Host:
     def __init__(self, port):
         self.lines = []
         self.core = printcore()
-        self.core.recvcb = self.lines.append
+        self.core.recvcb = lambda line: self.lines.append(line.strip())
         self.core.connect(port, 115200)
         deadline = time.time() + 20
         while not self.core.online:
@@ -81,7 +81,7 @@ def check_print(host, board):
     reply = host.ask("M114")
     spm = board["SETTINGS"]["steps_per_mm"]
     want = expected_steps(GCODE, spm)
-    position = [l for l in reply if l.startswith("X:")][0]
+    position = [l.strip() for l in reply if l.startswith("X:")][0]
     assert position.endswith("Count X:%d Y:%d Z:%d" % (want["x"], want["y"], want["z"]))
 
 

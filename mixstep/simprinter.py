@@ -10,10 +10,12 @@ SIM_MAIN = paths.BOARDS / "sim" / "sim_main.py"
 
 class SimPrinter:
     def __init__(self, edges_path=None, heap_lock=False, heap_size="2M", board="sim",
-                 config_path=None):
+                 config_path=None, files_dir=None):
         cmd = [paths.micropython(), "-X", "heapsize=" + heap_size, str(SIM_MAIN)]
         if config_path:
             cmd += ["--config", str(config_path)]
+        if files_dir:
+            cmd += ["--files", str(files_dir)]
         if edges_path:
             cmd += ["--edges", str(edges_path)]
         if heap_lock:

@@ -17,6 +17,8 @@ PINS = {
     "e0_enable": 21, "e1_enable": 22, "e2_enable": 23,
     "e3_enable": 24, "e4_enable": 25, "e5_enable": 26,
     "x_min": 27, "y_min": 28, "z_min": 29,
+    "hotend_heater": 30, "bed_heater": 31, "part_fan": 32,
+    "hotend_thermistor": 33, "bed_thermistor": 34,
 }
 
 SETTINGS = {
@@ -39,6 +41,24 @@ SETTINGS = {
     "homing_feed_mm_s": (50.0, 50.0, 5.0),
     "enable_active_low": True,
     "endstop_active_high": True,
-    "max_hotend_c": 285.0,
-    "max_bed_c": 120.0,
+    # Heaters: 100k NTC (Beta 3950) with a 4.7k pull-up. Steinhart-Hart replaces the
+    # Beta model when any of *_sh_a/_sh_b/_sh_c is non-zero. PID gains act on a duty
+    # of 0..1: kp per C of error, ki per C*s, kd per C/s of change.
+    "hotend_beta": 3950.0, "hotend_r25_ohm": 100000.0, "hotend_pullup_ohm": 4700.0,
+    "hotend_sh_a": 0.0, "hotend_sh_b": 0.0, "hotend_sh_c": 0.0,
+    "hotend_kp": 0.15, "hotend_ki": 0.003, "hotend_kd": 0.5, "hotend_pwm_hz": 10,
+    "hotend_min_c": 5.0, "hotend_max_c": 285.0,
+    # Protection: after a target is set it must rise watch_rise_c within watch_s;
+    # once reached, more than runaway_c below it for over runaway_s is a runaway.
+    "hotend_watch_s": 20.0, "hotend_watch_rise_c": 2.0,
+    "hotend_runaway_c": 10.0, "hotend_runaway_s": 20.0,
+    "bed_beta": 3950.0, "bed_r25_ohm": 100000.0, "bed_pullup_ohm": 4700.0,
+    "bed_sh_a": 0.0, "bed_sh_b": 0.0, "bed_sh_c": 0.0,
+    "bed_kp": 0.6, "bed_ki": 0.006, "bed_kd": 3.0, "bed_pwm_hz": 10,
+    "bed_min_c": 5.0, "bed_max_c": 120.0,
+    "bed_watch_s": 60.0, "bed_watch_rise_c": 2.0,
+    "bed_runaway_c": 5.0, "bed_runaway_s": 30.0,
+    "min_extrude_c": 170.0,  # E moves are refused below this hot end temperature
+    "fan_pwm_hz": 1000,
+    "thermal_period_ms": 100,
 }

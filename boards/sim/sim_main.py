@@ -1,18 +1,20 @@
 # Runs the firmware on the unix port against the simulated chip. Usage:
 #   micropython sim_main.py [--edges FILE] [--heap-lock] [--quantum-us N]
 #                           [--tcp HOST:PORT] [--no-stdio] [--realtime FACTOR]
-#                           [--config FILE]
+#                           [--config FILE] [--files DIR]
 # By default it takes G-code on stdin and answers on stdout like a serial printer, in
 # lockstep (virtual time passes only when the firmware waits). With --tcp it also
 # serves TCP connections; --realtime paces virtual time against the wall clock (0:
 # as fast as possible). When every console has closed, the queue drains and one
 # `//sim {json}` line reports the run. --config is the simulated flash file of the
 # configuration (M500/M501); without it the printer has no configuration storage.
+# --files is the simulated flash folder for printing from flash (M20-M32).
 import sys
 import gc
 import json
 import simmachine
 import simtime
+import simthermal
 
 sys.modules["machine"] = simmachine
 sys.modules["time"] = simtime
@@ -20,11 +22,11 @@ sys.modules["time"] = simtime
 
 def _args(argv):
     opts = {"edges": None, "heap_lock": False, "quantum_us": 1000, "tcp": None,
-            "stdio": True, "realtime": None, "config": None}
+            "stdio": True, "realtime": None, "config": None, "files": None}
     i = 1
     while i < len(argv):
         a = argv[i]
-        if a in ("--edges", "--quantum-us", "--tcp", "--realtime", "--config"):
+        if a in ("--edges", "--quantum-us", "--tcp", "--realtime", "--config", "--files"):
             i += 1
             opts[a[2:].replace("-", "_")] = argv[i]
         elif a == "--heap-lock":
@@ -62,7 +64,8 @@ def main():
     warnings = []
     config = firmware.Config(board.SETTINGS, opts["config"], warn=warnings.append)
     config.boot()
-    printer = firmware.build(config)
+    printer = firmware.build(config, files_root=opts["files"])
+    simthermal.install(simmachine, board, printer)
     gc.collect()
     simmachine.heap_lock_ticks = opts["heap_lock"]
     firmware.run(consoles, listeners, printer, warnings)

@@ -25,6 +25,8 @@ class Motion:
         self.dir_masks = pins.axis_dir_masks()
         self.enabled = 0  # bit per driver: X Y Z then drives
         self.soft_limits = settings.get("soft_limits", True)
+        # Longest E move accepted, as Marlin's PREVENT_LENGTHY_EXTRUDE.
+        self.max_extrude_mm = settings.get("max_extrude_mm", 200.0)
         # Called before a move that extrudes; each raises GcodeError to refuse it
         # (cold extrusion, ...).
         self.extrusion_guards = []
@@ -44,6 +46,7 @@ class Motion:
         self.travel_mm = settings["travel_mm"]
         self.homing_feed_mm_s = settings["homing_feed_mm_s"]
         self.soft_limits = settings.get("soft_limits", True)
+        self.max_extrude_mm = settings.get("max_extrude_mm", 200.0)
 
     def resync(self):
         """After the queue was dropped: the logical position is where the axes are."""
@@ -107,7 +110,11 @@ class Motion:
             if delta[i]:
                 axes |= 1 << i
         if axes:
-            if axes & 8 and delta[3] > 0:
+            if axes & 8:
+                e_mm = abs(delta[3]) / spm[3]
+                if e_mm > self.max_extrude_mm:
+                    raise GcodeError("extrusion of %.1f mm in one move is over max_extrude_mm %g"
+                                     % (e_mm, self.max_extrude_mm))
                 for guard in self.extrusion_guards:
                     guard()
             self.enable_for(axes)

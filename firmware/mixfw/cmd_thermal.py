@@ -1,52 +1,150 @@
-# Temperature and fan commands. There are no heaters yet: targets are kept and
-# reported as reached, so hosts and slicer start G-code run unchanged.
+# Temperature and fan commands: M104/M109, M140/M190, M116, M105, M106/M107, M302,
+# M922. Handlers parse and check; mixfw.thermal does the heating and the protection.
 from mixfw.gcode import GcodeError
+from mixfw.thermal import REACHED_C
 
 
-class Thermal:
-    def __init__(self, settings):
-        self.max_hotend_c = settings["max_hotend_c"]
-        self.max_bed_c = settings["max_bed_c"]
-        self.hotend_c = 0.0
-        self.bed_c = 0.0
-        self.fan = 0
+class ThermalCommands:
+    def __init__(self, printer, thermal):
+        self.printer = printer
+        self.thermal = thermal
+        self.cold_extrusion_allowed = False
 
-    def _temp(self, line, limit):
-        line.require("S")
-        t = line.float("S")
-        if not 0 <= t <= limit:
-            raise GcodeError("temperature S%s out of range 0..%s" % (t, limit))
-        return t
+    def _heater(self, name):
+        h = getattr(self.thermal, name)
+        if h is None:
+            raise GcodeError("this board has no %s heater" % name)
+        return h
 
-    # M104/M109 S<celsius>: hot end target (M109 also waits). Example: M104 S200
+    def _target(self, line, heater):
+        letter = "R" if line.has("R") and not line.has("S") else "S"
+        line.require(letter)
+        t = line.float(letter)
+        if not 0 <= t <= heater.max_c:
+            raise GcodeError("temperature %s%s out of range 0..%s (%s_max_c)"
+                             % (letter, t, heater.max_c, heater.name))
+        self.thermal.set_target(heater, t)
+        return letter
+
+    def _wait(self, heater, both_ways):
+        """Wait for a heater to come within REACHED_C of its target: from below only
+        (S), or from either side (R, cooling too)."""
+        if both_ways:
+            done = lambda: heater.fault or abs(heater.temp_c - heater.target_c) <= REACHED_C
+        else:
+            done = lambda: heater.fault or heater.reached()
+        self.printer.wait_until(done)
+
+    # M104 S<celsius>: hot end target, no wait. Example: M104 S210
     def m104(self, line):
-        self.hotend_c = self._temp(line, self.max_hotend_c)
+        self._target(line, self._heater("hotend"))
 
-    # M140/M190 S<celsius>: bed target (M190 also waits). Example: M140 S60
+    # M109 S<celsius> | R<celsius>: hot end target, then wait until it is reached
+    # (S: while heating only; R: cooling too). Example: M109 S210
+    def m109(self, line):
+        h = self._heater("hotend")
+        self._wait(h, self._target(line, h) == "R")
+
+    # M140 S<celsius>: bed target, no wait. Example: M140 S60
     def m140(self, line):
-        self.bed_c = self._temp(line, self.max_bed_c)
+        self._target(line, self._heater("bed"))
 
-    # M105: report temperatures in Marlin's form.
+    # M190 S<celsius> | R<celsius>: bed target, then wait as M109. Example: M190 S60
+    def m190(self, line):
+        h = self._heater("bed")
+        self._wait(h, self._target(line, h) == "R")
+
+    # M116: wait until every heater with a target has reached it. Example: M116
+    def m116(self, line):
+        heaters = self.thermal.heaters
+        self.printer.wait_until(
+            lambda: all(h.fault or h.reached() for h in heaters))
+
+    # M105: temperatures in Marlin's form, heater power as 0..127.
+    # Example reply: ok T:210.0 /210.0 B:60.0 /60.0 @:45 B@:30
     def m105(self, line):
-        return "T:%.1f /%.1f B:%.1f /%.1f @:0 B@:0" % (
-            self.hotend_c, self.hotend_c, self.bed_c, self.bed_c)
+        self.thermal.refresh()
+        text = ""
+        for h, label in ((self.thermal.hotend, "T"), (self.thermal.bed, "B")):
+            if h is not None:
+                text += "%s:%.1f /%.1f " % (label, h.temp_c, h.target_c)
+        for h, label in ((self.thermal.hotend, "@"), (self.thermal.bed, "B@")):
+            if h is not None:
+                text += "%s:%d " % (label, int(h.duty * 127 + 0.5))
+        return text.rstrip()
 
-    # M106 [S<0-255>]: fan speed. M107: fan off.
+    # M106 [P0] [S<0-255>]: part fan speed, full without S. Example: M106 S128
     def m106(self, line):
+        line.int("P", 0, lo=0, hi=0)
         s = line.float("S", 255.0)
         if not 0 <= s <= 255:
             raise GcodeError("fan speed S%s out of range 0..255" % s)
-        self.fan = int(s + 0.5)
+        self.thermal.set_fan(s / 255.0)
 
+    # M107: part fan off.
     def m107(self, line):
-        self.fan = 0
+        self.thermal.set_fan(0.0)
+
+    # M302 [P<0|1>] [S<celsius>]: allow (P1) or refuse (P0) cold extrusion, or set the
+    # minimum temperature; alone, report. Example: M302 P1
+    def m302(self, line):
+        if line.has("S"):
+            s = line.float("S")
+            if s < 0:
+                raise GcodeError("min_extrude_c S%s must be >= 0" % s)
+            self.thermal.min_extrude_c = s
+        if line.has("P"):
+            self.cold_extrusion_allowed = line.int("P", lo=0, hi=1) == 1
+        if not line.has("S") and not line.has("P"):
+            self.printer.reply("echo:Cold extrudes are %s (min temp %.0fC)" % (
+                "enabled" if self.cold_extrusion_allowed else "disabled",
+                self.thermal.min_extrude_c))
+
+    # M922: re-arm the heaters after a thermal fault and clear the halt. Targets stay
+    # 0 until set again. Example: M922
+    def m922(self, line):
+        self.thermal.rearm()
+        self.printer.clear_halt()
+
+    def check_extrusion(self):
+        if not self.cold_extrusion_allowed:
+            self.thermal.check_extrusion()
 
 
-def register(printer, thermal):
-    printer.register("M104", thermal.m104, "set hot end temperature")
-    printer.register("M109", thermal.m104, "set hot end temperature and wait")
-    printer.register("M140", thermal.m140, "set bed temperature")
-    printer.register("M190", thermal.m140, "set bed temperature and wait")
-    printer.register("M105", thermal.m105, "report temperatures")
-    printer.register("M106", thermal.m106, "fan on S<0-255>")
-    printer.register("M107", thermal.m107, "fan off")
+def register(printer, thermal, motion=None):
+    if motion is None:  # TRANSITIONAL, see below
+        return _register_old(printer, thermal)
+    c = ThermalCommands(printer, thermal)
+    for name, fn, text, guarded in (
+        ("M104", c.m104, "set hot end temperature S<C>", True),
+        ("M109", c.m109, "set hot end temperature S<C> and wait", True),
+        ("M140", c.m140, "set bed temperature S<C>", True),
+        ("M190", c.m190, "set bed temperature S<C> and wait", True),
+        ("M116", c.m116, "wait for every heater to reach its target", True),
+        ("M105", c.m105, "report temperatures", False),
+        ("M106", c.m106, "part fan on S<0-255>", False),
+        ("M107", c.m107, "part fan off", False),
+        ("M302", c.m302, "cold extrusion: P1 allow, P0 refuse, S<C> minimum", False),
+        ("M922", c.m922, "re-arm heaters after a thermal fault", False),
+    ):
+        printer.register(name, fn, text, guarded)
+    motion.extrusion_guards.append(c.check_extrusion)
+    return c
+
+
+# TRANSITIONAL, remove once main.py builds mixfw.thermal.Thermal and calls
+# register(printer, thermal, motion): keeps the old call in main.py,
+# register(printer, Thermal(settings)), working meanwhile (without the cold
+# extrusion guard, which needs motion).
+def Thermal(settings):
+    return settings
+
+
+def _register_old(printer, settings):
+    import machine
+    import board
+    from mixfw import thermal as th
+
+    class _NoMotion:
+        extrusion_guards = []
+    return register(printer, th.Thermal(machine, board.PINS, settings, printer), _NoMotion())

@@ -7,6 +7,7 @@
 LINE_OK = 1
 LINE_TOO_LONG = 2
 LINE_BAD_BYTE = 3
+LINE_CUT = 4  # the stream ended inside a line
 
 
 class Intake:
@@ -45,6 +46,8 @@ class Intake:
         self.in_comment = False
 
     def error_text(self, status):
+        if status == LINE_CUT:
+            return "line cut off by the end of the stream (no newline); not run"
         if status == LINE_TOO_LONG:
             return "line longer than %d bytes" % self.size
         return "byte 0x%02x is not printable ASCII" % self.bad_byte

@@ -17,6 +17,7 @@ RESTART = True  # takes effect after a restart
 # Settings the firmware owns a default for, so a board needn't name them.
 FIRMWARE_DEFAULTS = {
     "soft_limits": True,
+    "max_extrude_mm": 200.0,
 }
 
 
@@ -79,6 +80,8 @@ SCHEMA = (
      "axis length; soft limits are 0..travel"),
     ("soft_limits",                "",     BOOL,  0,       1,           LIVE,
      "refuse moves outside 0..travel"),
+    ("max_extrude_mm",             "",     FLOAT, 0.1,     100000.0,    LIVE,
+     "longest E move accepted in one line"),
     ("homing_feed_mm_s",           "xyz",  FLOAT, 0.01,    1000.0,      LIVE,
      "homing speed"),
     ("drives",                     "",     INT,   1,       6,           RESTART,

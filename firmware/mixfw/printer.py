@@ -9,7 +9,7 @@
 # `ok` goes out until there is room, so nothing is ever dropped.
 import time
 from mixfw.gcode import Parser, GcodeError
-from mixfw.intake import Intake, LINE_OK
+from mixfw.intake import Intake, LINE_OK, LINE_CUT
 
 BUSY_EVERY_MS = 2000
 RX_BYTES = 256
@@ -27,18 +27,37 @@ def command_key(letter, number):
     return ord(letter) * 10000 + number
 
 
+def _skip_blanks(buf, i, n):
+    while i < n and buf[i] in (32, 9):
+        i += 1
+    return i
+
+
+def _after_line_number(buf, i, n):
+    """Index after an optional leading N<number> (and blanks)."""
+    i = _skip_blanks(buf, i, n)
+    if i < n and buf[i] in (78, 110):
+        i = _skip_blanks(buf, i + 1, n)
+        if i < n and buf[i] == 45:
+            i += 1
+        while i < n and 48 <= buf[i] <= 57:
+            i += 1
+    return _skip_blanks(buf, i, n)
+
+
+def _is_command(buf, i, n, number):
+    """Is there an M<number> word at i (blanks allowed after M, as the parser does)?"""
+    if i >= n or buf[i] not in (77, 109):
+        return False
+    i = _skip_blanks(buf, i + 1, n)
+    digits = b"%d" % number
+    end = i + len(digits)
+    return buf[i:end] == digits and (end >= n or not 48 <= buf[end] <= 57)
+
+
 def _is_m112(scan, n):
     """Does this line start (after an optional N<number>) with M112?"""
-    i = 0
-    while i < n and scan[i] == 32:
-        i += 1
-    if i < n and scan[i] in (78, 110):  # N
-        i += 1
-        while i < n and (48 <= scan[i] <= 57 or scan[i] == 32):
-            i += 1
-    if n - i < 4 or scan[i] not in (77, 109) or scan[i + 1:i + 4] != b"112":
-        return False
-    return n == i + 4 or not 48 <= scan[i + 4] <= 57
+    return _is_command(scan, _after_line_number(scan, 0, n), n, 112)
 
 
 class Channel:
@@ -119,6 +138,8 @@ class Printer:
         self._busy_at_ms = 0
         self.refuse_after_error = False
         self.failed = False
+        self.sink = None  # M28 upload: takes each received line's text instead of running it
+        self.job = None  # a file being printed: next_line() -> bytes or None, .paused
         for name, fn, text in (
             ("M110", self.m110, "set the line number: M110 N<n>"),
             ("M112", self.m112, "emergency stop"),
@@ -217,8 +238,8 @@ class Printer:
 
     # --- one line ---
     def _check_protocol(self, ch, buf, n):
-        """Verify an N...*checksum line. Returns the length to parse, or -1 for a
-        repeated line that was already executed."""
+        """Check a line's number and checksum before anything else looks at it.
+        Returns the parsed line, or None for a repeat of a line already executed."""
         star = -1
         for i in range(n):
             if buf[i] == 42:
@@ -231,29 +252,33 @@ class Printer:
             digits = bytes(buf[star + 1:n]).strip()
             if not digits or not digits.isdigit() or int(digits) != cs:
                 raise Resend("checksum mismatch, Last Line: %d" % ch.last_n)
-        try:
-            line = self.parser.parse(buf, star if star >= 0 else n)
-        except GcodeError:
-            # A line that arrived intact but is bad G-code still uses up its number.
-            ln = self.parser.line
-            if star >= 0 and ln.has_line_number and ln.line_number == ch.last_n + 1:
-                ch.last_n += 1
-            raise
-        number = line.line_number
-        if not line.has_line_number:
-            if star >= 0:
-                raise Resend("No Line Number with checksum, Last Line: %d" % ch.last_n)
-            return line
-        if star < 0:
-            raise Resend("No Checksum with line number, Last Line: %d" % ch.last_n)
-        if line.letter == "M" and line.number == 110:
-            return line
-        if number == ch.last_n + 1:
+        end = star if star >= 0 else n
+        i = _skip_blanks(buf, 0, end)
+        numbered = i < end and buf[i] in (78, 110)
+        if numbered and not _is_command(buf, _after_line_number(buf, 0, end), end, 110):
+            if star < 0:
+                raise Resend("No Checksum with line number, Last Line: %d" % ch.last_n)
+            number = self._line_number(buf, i + 1, end)
+            if number <= ch.last_n:
+                return None
+            if number != ch.last_n + 1:
+                raise Resend("Line Number is not Last Line Number+1, Last Line: %d"
+                             % ch.last_n)
+            # Taken now: a line that arrived intact uses up its number even if it is bad
+            # G-code, so the host does not send it again.
             ch.last_n = number
-            return line
-        if number <= ch.last_n:
-            return None
-        raise Resend("Line Number is not Last Line Number+1, Last Line: %d" % ch.last_n)
+        elif star >= 0 and not numbered:
+            raise Resend("No Line Number with checksum, Last Line: %d" % ch.last_n)
+        return self.parser.parse(buf, end)
+
+    def _line_number(self, buf, i, end):
+        i = _skip_blanks(buf, i, end)
+        j = i + 1 if i < end and buf[i] == 45 else i
+        while j < end and 48 <= buf[j] <= 57:
+            j += 1
+        if j == i or (j == i + 1 and buf[i] == 45):
+            raise Resend("malformed line number, Last Line: %d" % self.current.last_n)
+        return int(bytes(buf[i:j]))
 
     def run_line(self, line):
         """Run a parsed line; returns text to follow `ok` or None."""
@@ -286,9 +311,12 @@ class Printer:
         try:
             if status != LINE_OK:
                 raise GcodeError(intake.error_text(status))
-            line = self._check_protocol(ch, intake.buf, intake.n)
-            if line is not None:
-                suffix = self.run_line(line)
+            if self.sink is not None:
+                suffix = self._to_sink(ch, intake.buf, intake.n)
+            else:
+                line = self._check_protocol(ch, intake.buf, intake.n)
+                if line is not None:
+                    suffix = self.run_line(line)
         except Resend as e:
             self.reply("Error:%s" % e)
             self.reply("Resend: %d" % (ch.last_n + 1))
@@ -307,6 +335,45 @@ class Printer:
             ch.write("ok\n")
         self.current = None
 
+    def _to_sink(self, ch, buf, n):
+        """While uploading (M28): store the line's text; only M29 runs."""
+        try:
+            line = self._check_protocol(ch, buf, n)
+        except GcodeError:
+            line = False  # arrived intact but is no G-code we know: store it anyway
+        if line is None:
+            return None  # a repeat of a stored line
+        if line and line.letter == "M" and line.number == 29:
+            return self.run_line(line)
+        start = 0
+        if buf[0] in (78, 110):  # drop the N word, as the line is stored unnumbered
+            while start < n and buf[start] != 32:
+                start += 1
+        end = start
+        while end < n and buf[end] != 42:
+            end += 1
+        self.sink(bytes(buf[start:end]).decode().strip())
+        return None
+
+    def run_job_line(self):
+        """Run the next line of the file being printed. Its replies go to every host;
+        an error pauses the print (M24 resumes after the failed line)."""
+        job = self.job
+        data = job.next_line()
+        if data is None:
+            self.job = None
+            job.done()
+            return
+        self._cmd_halt_count = self.halt_count
+        try:
+            line = self.parser.parse(data, len(data))
+            self.run_line(line)
+        except Halted:
+            pass
+        except Exception as e:
+            self.broadcast("Error:%s (file %s, line %d)" % (e, job.name, job.line))
+            job.paused = True
+
     # --- the main loop ---
     def serve(self):
         """Answer lines from every channel until all have closed and no listener is
@@ -321,8 +388,13 @@ class Printer:
                     did = True
             if did:
                 continue
+            if self.job is not None and not self.job.paused:
+                self.run_job_line()
+                continue
             closed = [ch for ch in self.channels if not ch.open and not ch.count]
             for ch in closed:
+                if ch.intake.n or ch.intake.fault:  # a last line with no newline
+                    self.answer(ch, LINE_CUT)
                 self.channels.remove(ch)
             if self.channels and not self.listeners and all(ch.lockstep for ch in self.channels):
                 # Simulation in lockstep: time only passes when the firmware waits.
@@ -336,7 +408,8 @@ class Printer:
     # --- protocol commands ---
     # M110 N<n>: the next line number expected is n+1. Example: N0 M110 N0*125
     def m110(self, line):
-        self.current.last_n = line.int("N", line.line_number, lo=-1)
+        default = line.line_number if line.has_line_number else self.current.last_n
+        self.current.last_n = line.int("N", default, lo=-1)
 
     # M112: emergency stop. The receive path acts on it before it is queued.
     def m112(self, line):

@@ -1,0 +1,87 @@
+# Printing from flash, with Marlin's SD commands: M20 list, M23 select, M24 start or
+# resume, M25 pause, M26 rewind or set position, M27 status, M32 select and start,
+# M28/M29 upload, M30 delete. File names are text, so these take raw arguments.
+from mixfw.gcode import GcodeError
+
+RAW_COMMANDS = (("M", 23), ("M", 28), ("M", 30), ("M", 32))
+
+
+class FileCommands:
+    def __init__(self, printer, files):
+        self.printer = printer
+        self.files = files
+
+    # M20: list the G-code files with their sizes.
+    def m20(self, line):
+        self.printer.reply("Begin file list")
+        for name, size in self.files.listing():
+            self.printer.reply("%s %d" % (name, size))
+        self.printer.reply("End file list")
+
+    # M23 <name>: select a file for printing. Example: M23 part.gcode
+    def m23(self, line):
+        job = self.files.select(line.args_text)
+        self.printer.reply("File opened: %s Size: %d" % (job.name, job.size))
+        self.printer.reply("File selected")
+
+    # M24: start or resume printing the selected file.
+    def m24(self, line):
+        self.files.start()
+
+    # M25: pause the file print; queued moves finish and the position is kept.
+    def m25(self, line):
+        self.files.pause()
+
+    # M26 [S<byte>]: set the read position, or rewind without S. Example: M26 S0
+    def m26(self, line):
+        job = self.files.selected
+        if job is None:
+            raise GcodeError("no file selected (M23 <name>)")
+        job.seek(line.int("S", 0, lo=0, hi=job.size))
+
+    # M27: print progress.
+    def m27(self, line):
+        job = self.files.selected
+        if job is None or job.paused and job.pos == 0:
+            self.printer.reply("Not SD printing")
+        else:
+            self.printer.reply("SD printing byte %d/%d" % (job.pos, job.size))
+
+    # M32 <name>: select a file and start printing it. Example: M32 part.gcode
+    def m32(self, line):
+        self.m23(line)
+        self.files.start()
+
+    # M28 <name>: write the following lines to a file until M29. Example: M28 part.gcode
+    def m28(self, line):
+        self.files.begin_upload(line.args_text)
+        self.printer.reply("Writing to file: %s" % line.args_text)
+
+    # M29: finish the upload.
+    def m29(self, line):
+        self.files.end_upload()
+        self.printer.reply("Done saving file.")
+
+    # M30 <name>: delete a file. Example: M30 part.gcode
+    def m30(self, line):
+        self.files.delete(line.args_text)
+        self.printer.reply("File deleted:%s" % line.args_text)
+
+
+def register(printer, files):
+    c = FileCommands(printer, files)
+    for name, fn, text in (
+        ("M20", c.m20, "list files"),
+        ("M23", c.m23, "select a file"),
+        ("M25", c.m25, "pause the file print"),
+        ("M26", c.m26, "file position S<byte> (rewind without S)"),
+        ("M27", c.m27, "file print progress"),
+        ("M28", c.m28, "write lines to a file until M29"),
+        ("M29", c.m29, "end of upload"),
+        ("M30", c.m30, "delete a file"),
+    ):
+        printer.register(name, fn, text)
+    printer.register("M24", c.m24, "start or resume the file print", guarded=True)
+    printer.register("M32", c.m32, "select a file and print it", guarded=True)
+    printer.on_halt.append(files.pause)
+    return c

@@ -1,0 +1,76 @@
+"""Printing from flash (M20-M32) and uploading (M28/M29), on the unix port."""
+import time
+
+from mixstep.simprinter import SimPrinter
+from mixstep import paths
+from gcode_model import expected_steps
+
+
+def send_all(printer, lines):
+    return [printer.send(l) for l in lines]
+
+
+def test_upload_list_select_print_and_delete(tmp_path, board):
+    files = tmp_path / "flash"
+    files.mkdir()
+    p = SimPrinter(files_dir=files)
+    body = ["G28", "G1 X10 Y10 F3000 ; go", "M109 S200", "M83", "G1 E2 F600", "T1", "G1 X20 E1"]
+    assert p.send("M28 job.gcode")[0] == "Writing to file: job.gcode"
+    for text in body:
+        assert p.send(text) == ["ok"]  # stored, not run
+    assert p.send("M29") == ["Done saving file.", "ok"]
+    # Stored as the firmware received it: comments are not kept.
+    assert (files / "job.gcode").read_text().splitlines() == [l.split(";")[0].strip() for l in body]
+    assert p.send("M114")[0].startswith("X:0.00 Y:0.00")  # nothing ran
+    assert p.send("M20") == ["Begin file list", "job.gcode %d" % (files / "job.gcode").stat().st_size,
+                             "End file list", "ok"]
+    assert p.send("M32 job.gcode")[:2] == ["File opened: job.gcode Size: %d"
+                                           % (files / "job.gcode").stat().st_size, "File selected"]
+    # The console stays answered while the file prints.
+    status = p.send("M27")
+    assert status[0].startswith(("SD printing byte", "Done printing file")), status
+    replies = send_all(p, ["M400"] * 3 + ["M27", "M114"])
+    position = [l for l in replies[-1] if l.startswith("X:")]
+    assert position[0].startswith("X:20.00 Y:10.00")
+    assert p.send("M30 job.gcode") == ["File deleted:job.gcode", "ok"]
+    assert not (files / "job.gcode").exists()
+    assert p.send("M23 job.gcode")[0] == "Error:open failed, File: job.gcode."
+    steps = p.finish()["steps"]
+    assert (steps["x"], steps["y"], steps["e0"], steps["e1"]) == (1600, 800, 830, 415)
+
+
+def test_a_real_slicer_file_prints_from_flash_with_pause_and_resume(tmp_path, board):
+    files = tmp_path / "flash"
+    files.mkdir()
+    gcode = paths.ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
+    (files / "part.gcode").write_bytes(gcode.read_bytes())
+    p = SimPrinter(files_dir=files)
+    p.send("M23 part.gcode")
+    p.send("M24")
+    p.send("M25")
+    paused_at = p.send("M27")[0]
+    assert paused_at.startswith("SD printing byte")
+    before = p.send("M114")
+    p.send("M400")
+    assert p.send("M27")[0] == paused_at  # paused: no more of the file is read
+    assert p.send("M114") == before  # and the position is kept
+    p.send("M24")
+    while True:
+        replies = p.send("M27")
+        if any("Done printing file" in r for r in replies) or replies[0] == "Not SD printing":
+            break
+        assert not [r for r in replies if r.startswith("Error")], replies
+    p.send("M400")
+    steps = p.finish()["steps"]
+    assert steps == expected_steps(gcode, board["SETTINGS"]["steps_per_mm"])
+
+
+def test_bad_file_commands_get_errors(tmp_path):
+    files = tmp_path / "flash"
+    files.mkdir()
+    p = SimPrinter(files_dir=files)
+    assert p.send("M24")[0] == "Error:no file selected (M23 <name>)"
+    assert p.send("M23 ../etc/passwd")[0].startswith("Error:bad file name")
+    assert p.send("M29")[0].startswith("Error:not writing a file")
+    assert p.send("M30 nothing.gcode")[0] == "Error:Deletion failed, File: nothing.gcode."
+    p.finish()

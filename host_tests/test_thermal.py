@@ -1,0 +1,400 @@
+"""Heaters, fans and thermal protection, on the firmware running on the unix port.
+
+The simulated printer has a first-order thermal model of the hot end and bed
+(boards/sim/simthermal.py); M7100 H<n> F<code> injects faults into it and M7100 H<n>
+reports it, including how long after a fault the heater's PWM went to 0."""
+import math
+import re
+
+import pytest
+
+from mixstep.simprinter import SimPrinter
+
+AMBIENT_C = 22.0
+
+
+def beta_raw(temp_c, r25_ohm=100000.0, beta=3950.0, pullup_ohm=4700.0):
+    """What the ADC reads at temp_c, from the Beta equation (independent of the firmware)."""
+    r = r25_ohm * math.exp(beta * (1 / (temp_c + 273.15) - 1 / 298.15))
+    return round(65535 * r / (r + pullup_ohm))
+
+
+# A 10 kOhm NTC with its published Steinhart-Hart coefficients.
+SH = (1.009249522e-03, 2.378405444e-04, 2.019202697e-07)
+
+
+def sh_celsius(raw, pullup_ohm=10000.0):
+    ln_r = math.log(pullup_ohm * raw / (65535 - raw))
+    return 1 / (SH[0] + SH[1] * ln_r + SH[2] * ln_r ** 3) - 273.15
+
+
+def test_thermistor_conversion_beta_and_steinhart_hart(mp):
+    beta_points = [0.0, 25.0, 100.0, 150.0, 200.0, 250.0, 285.0]
+    sh_raws = [60000, 45000, 32768, 20000, 8000, 2000]
+    got = mp.json("""
+        import json
+        from mixfw.thermal import Thermistor, OPEN_C, SHORT_C
+        beta = Thermistor(4700.0, 100000.0, 3950.0)
+        sh = Thermistor(10000.0, 10000.0, 3950.0, %r, %r, %r)
+        print(json.dumps({
+            "beta": [beta.celsius(r) for r in %r],
+            "sh": [sh.celsius(r) for r in %r],
+            "open": beta.celsius(65535), "short": beta.celsius(0),
+            "open_c": OPEN_C, "short_c": SHORT_C}))
+    """ % (SH + ([beta_raw(t) for t in beta_points], sh_raws)))
+    for t, c in zip(beta_points, got["beta"]):
+        # One ADC count is at most 0.1 C over this range.
+        assert c == pytest.approx(t, abs=0.1), (t, c)
+    assert got["beta"][1] == pytest.approx(25.0, abs=0.02)  # R25 is the Beta model's anchor
+    for raw, c in zip(sh_raws, got["sh"]):
+        assert c == pytest.approx(sh_celsius(raw), abs=1e-6)
+    assert got["sh"][2] == pytest.approx(24.7, abs=0.1)  # 10 kOhm at mid-scale: ~25 C
+    assert got["open"] == got["open_c"] < -200
+    assert got["short"] == got["short_c"] > 1000
+
+
+def test_sim_thermistor_reads_back_what_the_firmware_converts(mp):
+    """The model's inverse curves (Beta and Cardano's for Steinhart-Hart) agree with
+    the firmware, so simulated temperatures are what the firmware reports."""
+    got = mp.json("""
+        import json
+        from mixfw.thermal import Thermistor
+        import simthermal
+        base = {"hotend_pullup_ohm": 4700.0, "hotend_r25_ohm": 100000.0,
+                "hotend_beta": 3950.0, "hotend_sh_a": 0.0, "hotend_sh_b": 0.0,
+                "hotend_sh_c": 0.0}
+        sh = dict(base, hotend_pullup_ohm=10000.0, hotend_r25_ohm=10000.0,
+                  hotend_sh_a=%r, hotend_sh_b=%r, hotend_sh_c=%r)
+        out = []
+        for s in (base, sh):
+            body = simthermal.Body("hotend", 30, 33, s, 10.0, 40.0, 0.1)
+            th = Thermistor(s["hotend_pullup_ohm"], s["hotend_r25_ohm"], s["hotend_beta"],
+                            s["hotend_sh_a"], s["hotend_sh_b"], s["hotend_sh_c"])
+            row = []
+            for t in (20.0, 60.0, 120.0, 200.0):
+                body.temp_c = t
+                row.append(th.celsius(body.read_u16()))
+            out.append(row)
+        print(json.dumps(out))
+    """ % SH)
+    for row in got:
+        for want, c in zip((20.0, 60.0, 120.0, 200.0), row):
+            assert c == pytest.approx(want, abs=0.5), (want, c)  # ADC noise
+
+
+def test_pid_anti_windup(mp):
+    got = mp.json("""
+        import json
+        from mixfw.thermal import Pid
+        pid = Pid()
+        pid.kp, pid.ki, pid.kd = 0.05, 0.01, 0.0
+        # A long heat-up far below the target: saturated at full power.
+        outs = [pid.update(200.0, 25.0, 0.1) for _ in range(5000)]
+        i_saturated = pid.i_term
+        # Just past the target: without windup the output drops at once.
+        past = pid.update(200.0, 201.0, 0.1)
+        # Far above the target: saturated at 0, integral does not go below 0.
+        for _ in range(5000):
+            low = pid.update(100.0, 200.0, 0.1)
+        print(json.dumps([max(outs), min(outs), i_saturated, past, low, pid.i_term]))
+    """)
+    max_out, min_out, i_saturated, past, low, i_low = got
+    assert max_out == min_out == 1.0
+    assert i_saturated == 0.0  # no integral growth while saturated
+    assert past == 0.0
+    assert low == 0.0 and i_low == 0.0
+
+
+def test_protection_state_machine_times(mp):
+    """Each rule fires within its configured time, measured on a heater driven by hand
+    every control period (100 ms): readings come from a fake ADC."""
+    got = mp.json("""
+        import json, math
+        from mixfw.thermal import Heater
+        class Adc:
+            temp_c = 22.0
+            def read_u16(self):
+                if self.temp_c is None:
+                    return 65535
+                r = 100000.0 * math.exp(3950.0 * (1 / (self.temp_c + 273.15) - 1 / 298.15))
+                return int(65535 * r / (r + 4700.0) + 0.5)
+        class Pwm:
+            def freq(self, hz): pass
+            def duty_u16(self, d): self.d = d
+        settings = {}
+        for k, v in (("beta", 3950.0), ("r25_ohm", 100000.0), ("pullup_ohm", 4700.0),
+                     ("sh_a", 0.0), ("sh_b", 0.0), ("sh_c", 0.0), ("kp", 0.1), ("ki", 0.0),
+                     ("kd", 0.0), ("pwm_hz", 10), ("min_c", 5.0), ("max_c", 285.0),
+                     ("watch_s", 20.0), ("watch_rise_c", 2.0), ("runaway_c", 10.0),
+                     ("runaway_s", 20.0)):
+            settings["hotend_" + k] = v
+        def run(profile, target_c=200.0, until_ms=150000):
+            adc, pwm = Adc(), Pwm()
+            h = Heater("hotend", adc, pwm)
+            h.configure(settings)
+            h.set_target(target_c, 0)
+            now = 0
+            while now < until_ms:
+                now += 100
+                adc.temp_c = profile(now)
+                reason = h.control(now, 0.1)
+                if reason:
+                    return [now, reason, pwm.d]
+            return [None, None, pwm.d]
+        # Heats 3 C/s to 200 C (at 59.3 s) and holds; faults begin at 70 s.
+        def heat(now):
+            return min(22.0 + 3.0 * now / 1000, 200.0)
+        out = {
+            "ok": run(heat),
+            "open": run(lambda now: None if now >= 70000 else heat(now)),
+            "short": run(lambda now: 400.0 if now >= 70000 else heat(now)),
+            # stalls at 30 s, half way to the target
+            "stall": run(lambda now: heat(min(now, 30000))),
+            # drops 11 C below the target at 70 s and stays there
+            "runaway": run(lambda now: 189.0 if now >= 70000 else heat(now)),
+            # drops 9 C: inside runaway_c, not a fault
+            "dip": run(lambda now: 191.0 if now >= 70000 else heat(now)),
+            # slow, but just over 2 C every 19.9 s is enough
+            "slow": run(lambda now: 22.0 + 2.05 * (now // 19900), until_ms=200000),
+        }
+        print(json.dumps(out))
+    """)
+    assert got["ok"][0] is None and got["dip"][0] is None and got["slow"][0] is None
+    assert got["open"][:1] == [70000] and "below hotend_min_c" in got["open"][1]
+    assert got["short"][:1] == [70000] and "above hotend_max_c" in got["short"][1]
+    # Watched from the last 2 C of progress (0.7 s before the stall at 3 C/s).
+    assert 30000 + 20000 - 700 <= got["stall"][0] <= 30000 + 20000 + 100
+    assert "heating failed" in got["stall"][1]
+    assert 70000 + 20000 < got["runaway"][0] <= 70000 + 20000 + 200
+    assert "thermal runaway" in got["runaway"][1]
+    for case in ("open", "short", "stall", "runaway"):
+        assert got[case][2] == 0, case  # the heater is off when the fault is reported
+
+
+class Printer:
+    """The simulated printer with its thermal model, as a host sees it."""
+
+    def __init__(self):
+        self.sim = SimPrinter()
+        self.report = None
+
+    def send(self, *lines):
+        out = []
+        for line in lines:
+            out = self.sim.send(line)
+        return out
+
+    def temps(self):
+        m = re.match(r"ok T:(-?[\d.]+) /([\d.]+) B:(-?[\d.]+) /([\d.]+) @:(\d+) B@:(\d+)$",
+                     self.send("M105")[-1])
+        assert m, "M105 reply not in Marlin's form"
+        return [float(v) for v in m.groups()]
+
+    def model(self, heater):
+        reply = self.send("M7100 H%d" % heater)[-1]
+        return {k: float(v) for k, v in re.findall(r"(\w+):(-?[\d.]+)", reply)}
+
+    def x_mm(self):
+        return float(re.match(r"X:(-?[\d.]+)", self.send("M114")[0]).group(1))
+
+    def close(self):
+        if self.report is None:
+            self.report = self.sim.finish()
+        return self.report
+
+
+@pytest.fixture
+def printer():
+    p = Printer()
+    yield p
+    p.close()
+
+
+def test_m105_reports_cold_printer_in_marlin_form(printer):
+    t, t_target, b, b_target, power, b_power = printer.temps()
+    assert t == pytest.approx(AMBIENT_C, abs=0.5) and b == pytest.approx(AMBIENT_C, abs=0.5)
+    assert t_target == b_target == power == b_power == 0
+
+
+def test_m109_waits_with_busy_then_pid_holds_the_target(printer):
+    replies = printer.send("M109 S200")
+    busy = [r for r in replies if r == "busy: processing"]
+    assert replies[-1] == "ok"
+    t = printer.temps()
+    assert t[0] >= 199.0 and t[1] == 200.0
+    # About 45 s from cold at full power: a busy line every 2 s meanwhile.
+    assert len(busy) >= 15
+    samples = []
+    for _ in range(30):
+        printer.send("G4 S2")
+        samples.append(printer.temps()[0])
+    assert all(197.0 <= s <= 203.0 for s in samples), samples
+    assert abs(samples[-1] - 200.0) <= 0.5
+    # The part fan at full is a disturbance the PID rides out.
+    printer.send("M106 S255")
+    for _ in range(30):
+        printer.send("G4 S2")
+        samples.append(printer.temps()[0])
+    assert all(196.0 <= s <= 203.0 for s in samples[30:]), samples[30:]
+    assert printer.model(0)["duty"] > 0.5  # working harder against the fan
+
+
+def test_m190_bed_and_m116_wait_for_every_heater(printer):
+    printer.send("M140 S60", "M104 S180")
+    assert printer.temps()[3] == 60.0
+    assert printer.send("M116")[-1] == "ok"
+    t = printer.temps()
+    assert t[0] >= 179.0 and t[2] >= 59.0
+    assert printer.send("M190 S70")[-1] == "ok"
+    assert printer.temps()[2] >= 69.0
+    for _ in range(10):
+        printer.send("G4 S3")
+        assert abs(printer.temps()[2] - 70.0) <= 1.5
+
+
+def test_out_of_range_values_are_refused(printer):
+    assert printer.send("M104 S300")[0].startswith(
+        "Error:temperature S300.0 out of range 0..285.0")
+    assert printer.send("M140 S121")[0].startswith("Error:temperature S121.0 out of range")
+    assert printer.send("M104 S-5")[0].startswith("Error:temperature")
+    assert printer.send("M109")[0] == "Error:missing parameter S"
+    assert printer.send("M106 S256")[0].startswith("Error:fan speed")
+    assert printer.send("M106 P1 S10")[0].startswith("Error:P1 out of range")
+    assert printer.temps()[1] == 0 and printer.temps()[3] == 0  # nothing was set
+
+
+def test_fan_drives_its_pwm(mp):
+    got = mp.json("""
+        import json, sys, simmachine, simtime
+        sys.modules["machine"] = simmachine
+        sys.modules["time"] = simtime
+        import simanalog, board, main
+        p = main.build()
+        out = []
+        for line in (b"M106 S128", b"M106", b"M107"):
+            p.parser.parse(line, len(line))
+            p.run_line(p.parser.line)
+            out.append(simanalog.duty_of(board.PINS["part_fan"]))
+        print(json.dumps(out))
+    """)
+    assert got[0] == pytest.approx(128 / 255, abs=1e-4)
+    assert got[1:] == [1.0, 0.0]
+
+
+def test_cold_extrusion_is_refused(printer):
+    reply = printer.send("G1 E5 F600")
+    assert re.match(r"Error:cold extrusion prevented: hot end 2\d\.\dC below min_extrude_c "
+                    r"170\.0C$", reply[0]), reply
+    assert printer.send("G1 X5 E-1 F600")[-1] == "ok"  # travel and retraction are fine
+    assert printer.send("M302")[0] == "echo:Cold extrudes are disabled (min temp 170C)"
+    printer.send("M109 S175")
+    assert printer.send("G1 E5 F600") == ["ok"]
+    report = printer.close()
+    assert report["steps"]["e0"] == 5 * 415
+
+
+def test_m302_p1_allows_cold_extrusion(printer):
+    printer.send("M302 P1")
+    assert printer.send("G1 E2 F600") == ["ok"]
+    printer.send("M302 P0")
+    assert printer.send("G1 E3")[0].startswith("Error:cold extrusion prevented")
+
+
+# --- fault injection -----------------------------------------------------------
+
+# (name, heater, fault code, how it is caught, expected words in the halt message)
+FAULTS = {
+    "hotend thermistor open": (0, 1, "temperature", "below hotend_min_c"),
+    "hotend thermistor short": (0, 2, "temperature", "above hotend_max_c"),
+    "hotend cartridge out while heating": (0, 3, "watch", "heating failed"),
+    "hotend cartridge out at target": (0, 3, "runaway", "thermal runaway"),
+    "hotend fan stuck at target": (0, 4, "runaway", "thermal runaway"),
+    "bed thermistor open": (1, 1, "temperature", "below bed_min_c"),
+    "bed thermistor short": (1, 2, "temperature", "above bed_max_c"),
+    "bed cartridge out while heating": (1, 3, "watch", "heating failed"),
+}
+# Several injection moments per fault, spread over the control period and the heating.
+PHASES_MS = (0, 1, 37, 99, 2513)
+WORST_MS = {}
+
+
+def _inject_and_measure(p, board, heater, code, kind, words, phase_ms):
+    name = ("hotend", "bed")[heater]
+    s = board["SETTINGS"]
+    target = (200, 60)[heater]
+    p.send("G90", "G1 X0 F6000", "M400")
+    if kind == "watch":
+        # Part way up from wherever the last round left it.
+        p.send("M%d S%d" % ((104, 140)[heater], target), "G4 P%d" % (3000 + phase_ms))
+    else:
+        p.send("M%d S%d" % ((109, 190)[heater], target), "G4 P%d" % (2000 + phase_ms))
+    # Long moves in the queue: a fault must drop them.
+    p.send("G1 X200 F150", "G1 X0")
+    assert p.send("M7100 H%d F%d" % (heater, code)) == ["ok"]
+    replies = p.send("M400")
+    halt = [r for r in replies if r.startswith("Error:%s: " % name)]
+    assert len(halt) == 1 and words in halt[0], replies
+    assert replies[-2].startswith("Error:command stopped: %s: " % name)
+    model = p.model(heater)
+    off_ms = model["off_after_ms"]
+    assert model["duty"] == 0 and off_ms >= 0
+    period_ms = s["thermal_period_ms"]
+    if kind == "temperature":
+        assert off_ms <= period_ms + 1
+    elif kind == "watch":
+        assert off_ms <= s[name + "_watch_s"] * 1000 + period_ms + 1
+    else:
+        # Not before runaway_s, and no later than the fall to runaway_c below plus it.
+        runaway_ms = s[name + "_runaway_s"] * 1000
+        assert runaway_ms < off_ms <= runaway_ms + 10000
+    # Motion stopped: the queued moves were dropped, the printer still answers.
+    x = p.x_mm()
+    assert 0 <= x < 200
+    t = p.temps()
+    assert t[4 + heater] == 0 and t[1 + 2 * heater] == 0
+    assert p.send("M104 S200")[0].startswith("Error:printer halted (%s: " % name)
+    assert p.send("G1 X10")[0].startswith("Error:printer halted")
+    # Repair, re-arm, and the heater works again.
+    p.send("M7100 H%d F0" % heater)
+    assert p.send("M922") == ["ok"]
+    p.send("G4 S1")
+    assert p.x_mm() == x  # dropped, not paused
+    return off_ms
+
+
+@pytest.mark.parametrize("fault", list(FAULTS))
+def test_fault_turns_heater_off_and_stops_motion(fault, board):
+    heater, code, kind, words = FAULTS[fault]
+    p = Printer()
+    times = [_inject_and_measure(p, board, heater, code, kind, words, ph) for ph in PHASES_MS]
+    # After the last repair and M922 it heats and holds again.
+    target = (200, 60)[heater]
+    assert p.send("M%d S%d" % ((109, 190)[heater], target))[-1] == "ok"
+    assert p.temps()[2 * heater] >= target - 1
+    p.close()
+    WORST_MS[fault] = max(times)
+    print("%s: fault to heater off %s ms" % (fault, times))
+
+
+def test_fault_at_idle_is_found_without_a_target(printer):
+    printer.send("M7100 H0 F1")
+    replies = printer.send("G4 P300")
+    assert replies[0].startswith("Error:hotend: temperature -273.")
+    assert "below hotend_min_c 5.0C (thermistor open?)" in replies[0]
+    assert printer.model(0)["duty"] == 0
+    # A fault that persists is found again right after M922.
+    printer.send("M922")
+    assert printer.send("G4 P300")[0].startswith("Error:hotend: temperature")
+    printer.send("M7100 H0 F0", "M922")
+    assert printer.send("G4 P300") == ["ok"]
+
+
+def test_report_worst_fault_to_off_times(capsys):
+    if len(WORST_MS) < len(FAULTS):
+        pytest.skip("run with the fault tests")
+    with capsys.disabled():
+        print("\nworst time from fault to heater off (virtual ms, %d injection moments each):"
+              % len(PHASES_MS))
+        for fault in FAULTS:
+            print("  %-36s %6d ms" % (fault, WORST_MS[fault]))
+    assert all(v >= 0 for v in WORST_MS.values())
