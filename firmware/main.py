@@ -69,6 +69,7 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
         cmd_files.register(printer, Files(files_root, printer))
     printer.finish.append(planner.synchronize)
     printer.mem = mem
+    printer.settings = settings
     printer.planner = planner
     printer.pins = pins
     printer.motion = motion
@@ -89,13 +90,32 @@ def start_timer(printer, tick_us):
                              callback=printer.irq)
 
 
+def board_consoles(settings):
+    """USB serial, a UART if configured, and TCP if the board is on a network."""
+    consoles = [StreamConsole(sys.stdin.buffer, sys.stdout.buffer)]
+    if settings.get("console_uart", -1) >= 0:
+        uart = machine.UART(settings["console_uart"], settings["console_baud"])
+        consoles.append(StreamConsole(uart, uart))
+    listeners = []
+    try:
+        import network
+        wlan = network.WLAN(network.STA_IF)
+        if wlan.isconnected() and settings.get("tcp_port"):
+            from mixfw.netconsole import TcpListener
+            listeners.append(TcpListener("0.0.0.0", settings["tcp_port"]))
+    except ImportError:
+        pass  # no network on this board
+    return consoles, listeners
+
+
 def run(consoles=None, listeners=(), printer=None, warnings=None):
     if printer is None:
         warnings = []
         printer = build(load_config(warn=warnings.append))
-    timer = start_timer(printer, board.SETTINGS["tick_us"])
+    timer = start_timer(printer, printer.settings["tick_us"])
     if consoles is None:
-        consoles = [StreamConsole(sys.stdin.buffer, sys.stdout.buffer)]
+        consoles, listeners = board_consoles(printer.settings)
+        printer.max_channels = len(consoles) + printer.settings.get("tcp_max_clients", 4)
     for console in consoles:
         printer.add_channel(console)
         console.write("start\n")

@@ -155,3 +155,15 @@ def test_look_ahead_keeps_speed_through_collinear_segments(session, board):
     assert 0.15 < seconds < 0.19
     cruise_us = np.median(np.diff(rises))
     assert cruise_us == pytest.approx(1e6 / (100 * 80), abs=board["SETTINGS"]["tick_us"])
+
+
+def test_m119_reports_endstops_and_soft_limits_guard_moves(session):
+    assert session.send("M119") == ["Reporting endstop status", "x_min: TRIGGERED",
+                                    "y_min: TRIGGERED", "z_min: TRIGGERED", "ok"]
+    session.send("G1 X5 F3000", "M400")
+    assert session.send("M119")[1] == "x_min: open"
+    assert session.send("G1 X251")[0] == "Error:move to X251.000 is outside the soft limits 0..250 mm"
+    assert session.send("G1 Z-1")[0].startswith("Error:move to Z-1.000 is outside the soft limits")
+    session.send("M211 S0")
+    assert session.send("G1 X251") == ["ok"]
+    assert session.finish()["x"] == 251 * 80

@@ -61,4 +61,10 @@ SETTINGS = {
     "min_extrude_c": 170.0,  # E moves are refused below this hot end temperature
     "fan_pwm_hz": 1000,
     "thermal_period_ms": 100,
+    # Consoles: USB serial always; a UART (console_uart: its id, -1 for none) and, on
+    # boards with a network, a TCP console. The simulation takes its own from sim_main.
+    "console_uart": -1,
+    "console_baud": 115200,
+    "tcp_port": 8888,
+    "tcp_max_clients": 4,
 }

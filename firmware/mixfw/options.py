@@ -109,6 +109,8 @@ SCHEMA = (
      "part fan PWM frequency"),
     ("thermal_period_ms",          "",     INT,   10,      10000,       RESTART,
      "heater control period"),
+    ("console_uart",               "",     INT,   -1,      4,           RESTART,
+     "UART id of a serial console besides USB, -1 for none"),
     ("console_baud",               "",     INT,   300,     4000000,     RESTART,
      "serial console baud rate"),
     ("tcp_port",                   "",     INT,   1,       65535,       RESTART,
