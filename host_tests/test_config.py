@@ -220,14 +220,14 @@ print(json.dumps({"names": [o.name for o in c.options],
             "travel_mm": "xyz", "homing_feed_mm_s": "xyz"}
     expected = [k + "_" + a for k, ax in axes.items() for a in ax] + [
         "acceleration_mm_s2", "retract_acceleration_mm_s2", "junction_deviation_mm",
-        "default_feed_mm_s", "soft_limits", "drives", "virtual_tools", "queue_blocks",
+        "default_feed_mm_s", "soft_limits", "max_extrude_mm", "drives", "virtual_tools", "queue_blocks",
         "line_buffer_bytes", "tick_us", "step_pulse_us", "dir_setup_us",
         "enable_active_low", "endstop_active_high"]
     heater = ["beta", "r25_ohm", "pullup_ohm", "sh_a", "sh_b", "sh_c", "kp", "ki", "kd",
               "pwm_hz", "min_c", "max_c", "watch_s", "watch_rise_c", "runaway_c",
               "runaway_s"]
     optional = ["%s_%s" % (h, k) for h in ("hotend", "bed") for k in heater] + [
-        "min_extrude_c", "fan_pwm_hz", "thermal_period_ms", "console_baud", "tcp_port",
+        "min_extrude_c", "fan_pwm_hz", "thermal_period_ms", "console_uart", "console_baud", "tcp_port",
         "tcp_max_clients"]
     expected += [n for n in optional if n in board["SETTINGS"]]
     assert sorted(names) == sorted(expected)

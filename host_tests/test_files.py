@@ -27,10 +27,13 @@ def test_upload_list_select_print_and_delete(tmp_path, board):
     assert p.send("M32 job.gcode")[:2] == ["File opened: job.gcode Size: %d"
                                            % (files / "job.gcode").stat().st_size, "File selected"]
     # The console stays answered while the file prints.
-    status = p.send("M27")
-    assert status[0].startswith(("SD printing byte", "Done printing file")), status
-    replies = send_all(p, ["M400"] * 3 + ["M27", "M114"])
-    position = [l for l in replies[-1] if l.startswith("X:")]
+    size = (files / "job.gcode").stat().st_size
+    while True:
+        status = [l for l in p.send("M27") if l.startswith("SD printing byte")]
+        if status == ["SD printing byte %d/%d" % (size, size)]:
+            break
+    p.send("M400")
+    position = [l for l in p.send("M114") if l.startswith("X:")]
     assert position[0].startswith("X:20.00 Y:10.00")
     assert p.send("M30 job.gcode") == ["File deleted:job.gcode", "ok"]
     assert not (files / "job.gcode").exists()

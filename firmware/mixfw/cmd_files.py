@@ -39,10 +39,10 @@ class FileCommands:
             raise GcodeError("no file selected (M23 <name>)")
         job.seek(line.int("S", 0, lo=0, hi=job.size))
 
-    # M27: print progress.
+    # M27: print progress of the selected file, paused or not.
     def m27(self, line):
         job = self.files.selected
-        if job is None or job.paused and job.pos == 0:
+        if job is None:
             self.printer.reply("Not SD printing")
         else:
             self.printer.reply("SD printing byte %d/%d" % (job.pos, job.size))

@@ -111,9 +111,7 @@ class ThermalCommands:
             self.thermal.check_extrusion()
 
 
-def register(printer, thermal, motion=None):
-    if motion is None:  # TRANSITIONAL, see below
-        return _register_old(printer, thermal)
+def register(printer, thermal, motion):
     c = ThermalCommands(printer, thermal)
     for name, fn, text, guarded in (
         ("M104", c.m104, "set hot end temperature S<C>", True),
@@ -131,20 +129,3 @@ def register(printer, thermal, motion=None):
     motion.extrusion_guards.append(c.check_extrusion)
     return c
 
-
-# TRANSITIONAL, remove once main.py builds mixfw.thermal.Thermal and calls
-# register(printer, thermal, motion): keeps the old call in main.py,
-# register(printer, Thermal(settings)), working meanwhile (without the cold
-# extrusion guard, which needs motion).
-def Thermal(settings):
-    return settings
-
-
-def _register_old(printer, settings):
-    import machine
-    import board
-    from mixfw import thermal as th
-
-    class _NoMotion:
-        extrusion_guards = []
-    return register(printer, th.Thermal(machine, board.PINS, settings, printer), _NoMotion())
