@@ -237,6 +237,9 @@ def test_m109_waits_with_busy_then_pid_holds_the_target(printer):
         samples.append(printer.temps()[0])
     assert all(196.0 <= s <= 203.0 for s in samples[30:]), samples[30:]
     assert printer.model(0)["duty"] > 0.5  # working harder against the fan
+    # M922 with no fault leaves a working heater alone.
+    printer.send("M922")
+    assert printer.temps()[1] == 200.0 and printer.model(0)["duty"] > 0
 
 
 def test_m190_bed_and_m116_wait_for_every_heater(printer):
@@ -261,6 +264,13 @@ def test_out_of_range_values_are_refused(printer):
     assert printer.send("M106 S256")[0].startswith("Error:fan speed")
     assert printer.send("M106 P1 S10")[0].startswith("Error:P1 out of range")
     assert printer.temps()[1] == 0 and printer.temps()[3] == 0  # nothing was set
+
+
+def test_settings_changes_apply_with_m930(printer):
+    printer.send("M926 Ihotend_max_c V250", "M926 Imin_extrude_c V10", "M930")
+    assert printer.send("M104 S260")[0] == (
+        "Error:temperature S260.0 out of range 0..250.0 (hotend_max_c)")
+    assert printer.send("G1 E1 F600") == ["ok"]  # 22 C is above the new minimum
 
 
 def test_fan_drives_its_pwm(mp):

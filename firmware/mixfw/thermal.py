@@ -252,14 +252,16 @@ class Thermal:
             if name + "_heater" not in pin_map or name + "_thermistor" not in pin_map:
                 continue  # the bed is optional
             adc = machine.ADC(machine.Pin(pin_map[name + "_thermistor"]))
-            pwm = machine.PWM(machine.Pin(pin_map[name + "_heater"]), freq=10, duty_u16=0)
+            pwm = machine.PWM(machine.Pin(pin_map[name + "_heater"]),
+                              freq=int(settings[name + "_pwm_hz"]), duty_u16=0)
             heater = Heater(name, adc, pwm)
             self.heaters.append(heater)
             setattr(self, name, heater)
         self.fan = None
         self.fan_duty = 0.0
         if "part_fan" in pin_map:
-            self.fan = machine.PWM(machine.Pin(pin_map["part_fan"]), freq=1000, duty_u16=0)
+            self.fan = machine.PWM(machine.Pin(pin_map["part_fan"]),
+                                   freq=int(settings["fan_pwm_hz"]), duty_u16=0)
         self.apply(settings)
         now = time.ticks_ms()
         for h in self.heaters:
@@ -303,10 +305,12 @@ class Thermal:
         heater.set_target(target_c, time.ticks_ms())
 
     def rearm(self):
-        """M922: forget heater faults. A fault that persists is found again at once."""
+        """M922: forget heater faults. A fault that persists is found again at once.
+        Faulted heaters stay off until given a target; the others carry on."""
         for h in self.heaters:
-            h.fault = None
-            h.off()
+            if h.fault:
+                h.fault = None
+                h.off()
 
     def set_fan(self, fraction):
         self.fan_duty = fraction
