@@ -46,7 +46,7 @@ def time_calls(fn, mem, out, endstops):
 
 
 def stepping_printer(settings):
-    printer = main.build(settings)
+    printer = main.build()
     mem = printer.mem
     mem[st.S_PULSE_TICKS] = 0  # STEP stays high: every call is a full stepping tick
     b = st.BLOCK_BASE

@@ -43,6 +43,7 @@ def run(gcode_path, trace_path=None, report_path=None, heap_lock=False, edges_pa
         "firmware_wall_seconds": round(sim_wall, 3),
         "heap_at_rest_bytes": fw["heap_at_rest_bytes"],
         "heap_peak_bytes": fw["heap_peak_bytes"],
+        "sim_buffer_bytes": fw["sim_buffer_bytes"],
         "heap_locked_step_loop": fw["heap_locked"],
         "trace": str(trace_path) if trace_path else None,
     }
