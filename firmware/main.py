@@ -17,7 +17,7 @@ from mixfw.thermal import Thermal
 from mixfw import cmd_motion, cmd_mixing, cmd_thermal, cmd_report, cmd_config, cmd_files
 
 # Commands whose arguments are text, not numbers.
-RAW_COMMANDS = cmd_config.RAW_COMMANDS + cmd_files.RAW_COMMANDS
+RAW_COMMANDS = cmd_config.RAW_COMMANDS + cmd_files.RAW_COMMANDS + cmd_mixing.RAW_COMMANDS
 # Where G-code files for printing from flash live.
 FILES_ROOT = "/"
 # Where the configuration lives on the board's flash filesystem.
@@ -58,13 +58,15 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     printer.on_halt.append(planner.abort)
     printer.on_halt.append(motion.resync)
     cmd_motion.register(printer, motion)
-    cmd_mixing.register(printer, cmd_mixing.Mixing(planner, settings))
+    mixing = cmd_mixing.Mixing(planner, settings, config, printer.reply)
+    cmd_mixing.register(printer, mixing)
     thermal = Thermal(machine, pin_map, settings, printer)
     cmd_thermal.register(printer, thermal, motion)
     cmd_report.register(printer, cmd_report.Reports(printer, motion, planner, board.NAME))
     cmd_config.register(printer, config)
     config.appliers.append(motion.apply)
     config.appliers.append(thermal.apply)
+    config.appliers.append(mixing.apply)
     if files_root:
         cmd_files.register(printer, Files(files_root, printer))
     printer.finish.append(planner.synchronize)

@@ -11,7 +11,7 @@ from mixstep import paths
 class MicroPython:
     """Runs code on the unix port with the firmware and the simulated board on its path."""
 
-    def run(self, code, stdin=b"", heap="2M"):
+    def run(self, code, stdin=b"", heap="8M"):
         proc = subprocess.run(
             [paths.micropython(), "-X", "heapsize=" + heap, "-c", textwrap.dedent(code)],
             input=stdin, capture_output=True, env=paths.micropython_env("sim"), timeout=600)

@@ -184,7 +184,7 @@ PATH = "/mixstep.cfg"
 """
 
 
-def run_unit(mp, body, data=None, heap="8M", lines=False):
+def run_unit(mp, body, data=None, heap="32M", lines=False):
     """Run body after UNIT; data, if given, arrives as DATA (JSON on stdin). Returns
     its last output line decoded from JSON, or with lines=True every line."""
     if data is not None:
@@ -230,6 +230,7 @@ print(json.dumps({"names": [o.name for o in c.options],
         "min_extrude_c", "fan_pwm_hz", "thermal_period_ms", "console_uart", "console_baud", "tcp_port",
         "tcp_max_clients"]
     expected += [n for n in optional if n in board["SETTINGS"]]
+    expected += ["tool_mixes_%d" % t for t in range(board["SETTINGS"]["virtual_tools"])]
     assert sorted(names) == sorted(expected)
     assert len(names) == len(set(names))
     assert got["soft_limits"] is True  # the firmware's default; the board names none
@@ -256,7 +257,7 @@ def test_m503_pasted_back_gives_the_same_configuration(mp, tmp_path):
     pasted = m503_lines(printed)
     second = Session(mp, tmp_path / "b.cfg", ["M503"] + pasted + ["M503"])
     assert second.of(0) != printed  # a fresh printer starts from the defaults
-    assert all(r == [] for r in second.replies[1:-1])
+    assert all(r == [] for r in second.replies[1:-1]), [r for r in second.replies[1:-1] if r]
     assert second.of(len(pasted) + 1) == printed
 
 
@@ -284,6 +285,9 @@ def configurations(draw, options):
             v = repr(draw(st.floats(lo, hi, allow_nan=False)))
         elif kind == "int":
             v = str(draw(st.integers(lo, hi)))
+        elif kind == "mix":
+            weights = draw(st.lists(st.integers(0, 50), min_size=1, max_size=6).filter(any))
+            v = ":".join(str(w) for w in weights)
         else:
             v = str(draw(st.integers(0, 1)))
         pairs.append((name, v))
@@ -315,7 +319,13 @@ print(json.dumps(out))
             assert printed == printed_again
             shown = {line.split()[1][1:]: value_of(line) for line in printed}
             for name, text in pairs:
-                assert float(shown[name]) == float(text), name
+                if name.startswith("tool_mixes_"):  # shown normalised: same ratios
+                    a = [float(w) for w in text.split(":")]
+                    b = [float(w) for w in shown[name].split(":")]
+                    ratio = sum(b) / sum(a)
+                    assert all(abs(x * ratio - y) < 1e-9 for x, y in zip(a, b)), name
+                else:
+                    assert float(shown[name]) == float(text), name
 
     check()
 

@@ -1,22 +1,57 @@
-# Mixing commands: M163 (one drive's weight), M164 (store as a virtual tool), T<n>.
+# Mixing commands: M163 (one drive's weight), M164 (store as a virtual tool), M165
+# (Marlin: the whole mix at once; R reports every tool), M567 (RepRapFirmware: a tool's
+# mix), T<n>. Virtual tools live in the configuration (options tool_mixes_<n>), so
+# M500 keeps them across a reboot and M503 prints them.
 from mixfw.gcode import GcodeError
-from mixfw.mixer import Tools, normalize
+from mixfw.mixer import normalize
+
+_MARLIN_LETTERS = "ABCDHI"  # Marlin's letters for drives 0..5 in M165
 
 
 class Mixing:
-    def __init__(self, planner, settings):
+    def __init__(self, planner, settings, config, reply):
         self.planner = planner
+        self.settings = settings
+        self.config = config
+        self.reply = reply
         self.drives = settings["drives"]
-        self.tools = Tools(self.drives, settings["virtual_tools"])
+        self.count = len(settings["tool_mixes"])
         self.collector = [0.0] * self.drives  # weights set by M163, stored by M164
         self.active = 0
         self.mix_id = 1
-        planner.set_mix(self.mix_id, self.tools.mixes[0])
+        self.mix = None
+        self._activate(0)
+
+    def tool_mix(self, tool):
+        return self.settings["tool_mixes"][tool]
+
+    def _check_tool(self, tool):
+        if not 0 <= tool < self.count:
+            raise GcodeError("tool T%d out of range T0..T%d" % (tool, self.count - 1))
+        return tool
 
     def _activate(self, tool):
+        """Blocks queued from now on print with this tool's mix; queued ones keep theirs."""
         self.active = tool
-        self.mix_id += 1
-        self.planner.set_mix(self.mix_id, self.tools.mixes[tool])
+        mix = self.tool_mix(tool)
+        if mix != self.mix:
+            self.mix = mix
+            self.mix_id += 1
+            self.planner.set_mix(self.mix_id, mix)
+
+    def store(self, tool, weights, save=False):
+        """Set a virtual tool's mix (normalised; an all-zero mix is refused)."""
+        self.config.set("tool_mixes_%d" % tool, normalize(weights, self.drives))
+        if tool == self.active:
+            self._activate(tool)
+        if save:
+            self.config.save()
+        else:
+            self.reply("echo:T%d mix set; M500 keeps it after a restart" % tool)
+
+    def apply(self, settings):
+        """M930: the active tool's mix may have changed through M926."""
+        self._activate(self.active)
 
     # M163 S<drive> P<weight>: set one drive's weight in the mix being built.
     # Weights are any non-negative numbers; M164 normalises them. Example: M163 S0 P0.2
@@ -29,24 +64,65 @@ class Mixing:
             raise GcodeError("weight P must be >= 0, got %s" % weight)
         self.collector[drive] = weight
 
-    # M164 [S<tool>]: store the M163 weights as a virtual tool, by default the active
-    # one, which then prints with it. An all-zero mix is refused. Example: M164 S4
+    # M164 [S<tool>] [P1]: store the M163 weights as a virtual tool, by default the
+    # active one, which then prints with it. P1 also saves to flash at once, as in
+    # Repetier. An all-zero mix is refused. Example: M164 S4 P1
     def m164(self, line):
-        tool = self.tools.check(line.int("S", self.active))
-        self.tools.mixes[tool] = normalize(self.collector, self.drives)
-        if tool == self.active:
-            self._activate(tool)
+        tool = self._check_tool(line.int("S", self.active))
+        self.store(tool, self.collector, save=line.int("P", 0, lo=0, hi=1) == 1)
+
+    # M165 A<w> B<w> C<w> D<w> H<w> I<w>: the active tool's whole mix at once (Marlin's
+    # letters for drives 0..5). M165 R: print every tool as M567 lines that can be
+    # pasted back. Example: M165 A0.25 B0.75
+    def m165(self, line):
+        if line.has("R"):
+            for t in range(self.count):
+                self.reply("M567 P%d E%s" % (t, ":".join("%d" % w for w in self.tool_mix(t))))
+            return
+        weights = [0.0] * self.drives
+        given = False
+        for i in range(self.drives):
+            ch = _MARLIN_LETTERS[i]
+            if line.has(ch):
+                weights[i] = line.float(ch)
+                given = True
+        if not given:
+            raise GcodeError("M165 needs drive weights A B C D H I, or R to report")
+        self.store(self.active, weights)
+
+    # M567 P<tool> E<w0>:<w1>:...: a tool's mix, as RepRapFirmware writes it.
+    # Example: M567 P2 E0.2:0.3:0.5
+    def m567(self, line):
+        tool = None
+        weights = None
+        for word in line.args_text.split():
+            letter, value = word[0].upper(), word[1:]
+            try:
+                if letter == "P":
+                    tool = int(value)
+                elif letter == "E":
+                    weights = [float(w) for w in value.split(":")]
+                else:
+                    raise GcodeError("M567 takes P<tool> E<w0>:<w1>:..., not %s" % word)
+            except ValueError:
+                raise GcodeError("malformed number in %s" % word)
+        if tool is None or weights is None:
+            raise GcodeError("M567 needs P<tool> and E<w0>:<w1>:...")
+        self.store(self._check_tool(tool), weights)
 
     # T<n>: select virtual tool n. Example: T2
     def t(self, line):
-        tool = line.number
-        if not 0 <= tool < self.tools.count:
-            raise GcodeError("tool T%d out of range T0..T%d" % (tool, self.tools.count - 1))
+        tool = self._check_tool(line.number)
         if tool != self.active:
             self._activate(tool)
 
 
+RAW_COMMANDS = (("M", 567),)
+
+
 def register(printer, mixing):
     printer.register("M163", mixing.m163, "set a drive's weight: S<drive> P<weight>")
-    printer.register("M164", mixing.m164, "store the weights as virtual tool S<tool>")
+    printer.register("M164", mixing.m164, "store the weights as virtual tool S<tool> [P1 save]")
+    printer.register("M165", mixing.m165, "whole mix A B C D H I; R reports every tool")
+    printer.register("M567", mixing.m567, "a tool's mix: P<tool> E<w0>:<w1>:...")
     printer.register("T", mixing.t, "select virtual tool")

@@ -11,7 +11,8 @@
 #
 # Pure logic: no `machine`; the file system is passed in (see FileStorage).
 import os
-from mixfw.options import SCHEMA, FIRMWARE_DEFAULTS, FLOAT, INT, BOOL
+from mixfw.options import SCHEMA, FIRMWARE_DEFAULTS, FLOAT, INT, BOOL, MIX, EACH
+from mixfw.mixer import normalize, default_tool_mixes
 
 HEADER = "# mixstep configuration, version 1\n"
 _CRC_PREFIX = b"crc32 = "
@@ -70,6 +71,11 @@ class Option:
 
     def parse(self, text):
         """The typed value of text as M926 or the file gives it."""
+        if self.kind == MIX:
+            try:
+                return self.check(tuple(float(w) for w in text.split(":")))
+            except ValueError as e:
+                raise ConfigError("%s: %r is not a mix w0:w1:...: %s" % (self.name, text, e))
         try:
             v = float(text) if self.kind == FLOAT else int(text)
         except ValueError:
@@ -78,6 +84,11 @@ class Option:
         return self.check(v)
 
     def check(self, v):
+        if self.kind == MIX:
+            try:
+                return normalize(v, self.width)
+            except ValueError as e:
+                raise ConfigError("%s: %s" % (self.name, e))
         if self.kind == BOOL:
             if v not in (0, 1):
                 raise ConfigError("%s: %r is not 0 or 1" % (self.name, v))
@@ -94,6 +105,8 @@ class Option:
         return v
 
     def format(self, v):
+        if self.kind == MIX:
+            return ":".join("%d" % w for w in v)
         if self.kind == FLOAT:
             return repr(float(v))  # repr round-trips exactly through float()
         return "%d" % v
@@ -104,11 +117,16 @@ def _options(defaults):
     for key, axes, kind, lo, hi, restart, help_text in SCHEMA:
         if key not in defaults:
             continue
+        if axes == EACH:
+            axes = ["%d" % i for i in range(len(defaults[key]))]
         if not axes:
             opts.append(Option(key, key, -1, kind, lo, hi, restart, help_text))
         for i, axis in enumerate(axes):
             opts.append(Option(key + "_" + axis, key, i, kind, lo, hi, restart,
                                axis.upper() + ": " + help_text))
+        if kind == MIX:
+            for o in opts[-len(axes):]:
+                o.width = defaults["drives"]
     return opts
 
 
@@ -122,6 +140,9 @@ class Config:
         self.appliers = []  # fn(settings) each, called by apply() (M930)
         defaults = dict(FIRMWARE_DEFAULTS)
         defaults.update(board_settings)
+        if "drives" in defaults and "tool_mixes" not in defaults:
+            defaults["tool_mixes"] = default_tool_mixes(
+                defaults["drives"], defaults.get("virtual_tools", 16))
         self.options = _options(defaults)
         self.by_name = {o.name: o for o in self.options}
         self.settings = dict(defaults)  # the live dict: changed in place, never replaced
@@ -182,9 +203,9 @@ class Config:
     def describe(self, name):
         """One line M926 takes back, its help as a comment."""
         o = self.option(name)
-        return "M926 I%s V%s ; %s, %s..%s%s" % (
-            name, self.format(name), o.help, o.format(o.lo), o.format(o.hi),
-            " (restart)" if o.restart else "")
+        limits = "" if o.kind == MIX else ", %s..%s" % (o.format(o.lo), o.format(o.hi))
+        return "M926 I%s V%s ; %s%s%s" % (
+            name, self.format(name), o.help, limits, " (restart)" if o.restart else "")
 
     # --- applying ---
     def _mark_running(self):

@@ -149,6 +149,12 @@ def mix_step(mem: ptr32, base: int, reverse: int) -> int:
     return best
 
 
+def default_tool_mixes(drives, count=16):
+    """T<n> is 100 % drive n below the drive count, an equal mix of all drives above."""
+    return tuple(tuple(1 if i == t else 0 for i in range(drives)) if t < drives
+                 else (1,) * drives for t in range(count))
+
+
 class Tools:
     """Virtual tools T0..T15: each a normalised mix. Owned by the command side; a block
     copies the mix it was queued with, so changing a tool never alters queued moves."""
@@ -158,12 +164,7 @@ class Tools:
             raise MixError("drive count %d outside 1..%d" % (drives, MAX_DRIVES))
         self.drives = drives
         self.count = count
-        self.mixes = [self.default(t) for t in range(count)]
-
-    def default(self, tool):
-        if tool < self.drives:
-            return tuple(1 if i == tool else 0 for i in range(self.drives))
-        return tuple(1 for _ in range(self.drives))
+        self.mixes = list(default_tool_mixes(drives, count))
 
     def check(self, tool):
         if not 0 <= tool < self.count:

@@ -11,6 +11,8 @@
 FLOAT = "float"
 INT = "int"
 BOOL = "bool"  # written and read as 0 or 1, as in APrinter
+MIX = "mix"  # drive weights w0:w1:..., normalised to integers (mixer.normalize)
+EACH = "each"  # axes of a row whose setting is a tuple of any length: _0, _1, ...
 LIVE = False  # takes effect with M930
 RESTART = True  # takes effect after a restart
 
@@ -109,6 +111,8 @@ SCHEMA = (
      "part fan PWM frequency"),
     ("thermal_period_ms",          "",     INT,   10,      10000,       RESTART,
      "heater control period"),
+    ("tool_mixes",                 EACH,   MIX,   0,       0,           LIVE,
+     "mix of this virtual tool, drive weights w0:w1:... (M164/M165/M567 set it)"),
     ("console_uart",               "",     INT,   -1,      4,           RESTART,
      "UART id of a serial console besides USB, -1 for none"),
     ("console_baud",               "",     INT,   300,     4000000,     RESTART,

@@ -1,0 +1,57 @@
+"""Virtual tools: set with M164, M165 and M567, reported by M165 R, and kept across a
+reboot with the configuration. On the firmware running on the unix port."""
+from mixstep.simprinter import SimPrinter
+
+E_SPM = 415
+
+
+def test_tools_survive_a_reboot_and_report_in_a_pasteable_form(tmp_path):
+    cfg = tmp_path / "mixstep.cfg"
+    p = SimPrinter(config_path=cfg)
+    assert p.send("M567 P3 E1:2:3")[0] == "echo:T3 mix set; M500 keeps it after a restart"
+    p.send("T5")
+    p.send("M165 A1 B3")  # the active tool, T5
+    p.send("M163 S2 P0.5")
+    p.send("M163 S3 P0.5")
+    p.send("M164 S9 P1")  # saved at once, with everything else
+    report = [l for l in p.send("M165 R") if l.startswith("M567")]
+    p.finish()
+
+    again = SimPrinter(config_path=cfg)
+    assert [l for l in again.send("M165 R") if l.startswith("M567")] == report
+    assert report[3] == "M567 P3 E1:2:3:0:0:0"
+    assert report[5] == "M567 P5 E1:3:0:0:0:0"
+    assert report[9] == "M567 P9 E0:0:1:1:0:0"
+    assert report[0] == "M567 P0 E1:0:0:0:0:0"  # untouched tools keep their defaults
+    assert report[7] == "M567 P7 E1:1:1:1:1:1"
+    again.send("M302 P1")
+    again.send("T3")
+    again.send("G1 E6 F600")
+    steps = again.finish()["steps"]
+    assert (steps["e0"], steps["e1"], steps["e2"]) == (E_SPM, 2 * E_SPM, 3 * E_SPM)
+
+
+def test_pasting_the_report_back_restores_the_tools(tmp_path):
+    p = SimPrinter()
+    p.send("M567 P2 E5:0:1")
+    p.send("M567 P11 E0:0:0:0:2:7")
+    report = [l for l in p.send("M165 R") if l.startswith("M567")]
+    p.finish()
+    q = SimPrinter()
+    for line in report:
+        assert q.send(line)[-1] == "ok"
+    assert [l for l in q.send("M165 R") if l.startswith("M567")] == report
+    q.finish()
+
+
+def test_bad_mixes_are_refused_and_change_nothing():
+    p = SimPrinter()
+    before = p.send("M165 R")
+    assert p.send("M567 P2 E0:0:0")[0].startswith("Error:all-zero mix refused")
+    assert p.send("M567 P16 E1")[0] == "Error:tool T16 out of range T0..T15"
+    assert p.send("M567 P2 E1:x")[0].startswith("Error:malformed number")
+    assert p.send("M567 P2 E1:1:1:1:1:1:1")[0].startswith("Error:mix has 7 weights")
+    assert p.send("M165 A-1")[0].startswith("Error:weight for drive 0")
+    assert p.send("M165")[0].startswith("Error:M165 needs drive weights")
+    assert p.send("M165 R") == before
+    p.finish()
