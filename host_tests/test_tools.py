@@ -55,3 +55,24 @@ def test_bad_mixes_are_refused_and_change_nothing():
     assert p.send("M165")[0].startswith("Error:M165 needs drive weights")
     assert p.send("M165 R") == before
     p.finish()
+
+
+def test_drives_with_different_steps_per_mm_each_get_their_share_of_filament():
+    """Drive 1 geared 2:1, drive 2 at 100 steps/mm: a 1:1:2 mix over 12 mm of E gives
+    3, 3 and 6 mm of filament, each within one step, with E still in millimetres."""
+    p = SimPrinter()
+    p.send("M302 P1")
+    p.send("M926 Idrive_steps_per_mm_1 V830")
+    p.send("M926 Idrive_steps_per_mm_2 V100")
+    p.send("M930")
+    p.send("M567 P0 E1:1:2")
+    p.send("M83")
+    for _ in range(40):  # many short moves: the split must not drift
+        p.send("G1 E0.3 F1200")
+    p.send("G1 E-2")  # a retraction and back leaves every drive where it was
+    p.send("G1 E2")
+    assert p.send("M114")[0].startswith("X:0.00 Y:0.00 Z:0.00 E:12.00")
+    steps = p.finish()["steps"]
+    assert abs(steps["e0"] - 3 * E_SPM) <= 1
+    assert abs(steps["e1"] - 3 * 830) <= 1
+    assert abs(steps["e2"] - 6 * 100) <= 1

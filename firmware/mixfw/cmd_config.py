@@ -90,6 +90,11 @@ class ConfigCommands:
     # M92 [X Y Z E]: steps per mm; E is every mixing drive's. No words: report.
     # Example: M92 E415
     def m92(self, line):
+        if line.has("E"):  # every drive, then the E axis through the usual path
+            e = line.float("E")
+            self.config.update([("drive_steps_per_mm_%d" % i, e)
+                                for i in range(len(self.config.settings["drive_steps_per_mm"]))]
+                               + [("steps_per_mm_e", e)])
         self._axes(line, "M92", "steps_per_mm", "XYZE")
 
     # M201 [X Y Z E]: maximum acceleration per axis, mm/s^2. Example: M201 X3000 Y3000

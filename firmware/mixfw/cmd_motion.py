@@ -37,6 +37,7 @@ class Motion:
         p = self.planner
         p.synchronize()
         p.steps_per_mm[:] = list(settings["steps_per_mm"])
+        p.set_drive_steps(settings["drive_steps_per_mm"], self.pos_mm[3] + self.offset_mm[3])
         p.max_feed_mm_s = settings["max_feed_mm_s"]
         p.max_accel_mm_s2 = settings["max_accel_mm_s2"]
         p.acceleration_mm_s2 = settings["acceleration_mm_s2"]
@@ -50,14 +51,22 @@ class Motion:
 
     def resync(self):
         """After the queue was dropped: the logical position is where the axes are."""
-        steps = self.planner.position_steps
-        spm = self.planner.steps_per_mm
-        for i in range(4):
-            self.pos_mm[i] = steps[i] / spm[i] - self.offset_mm[i]
+        p = self.planner
+        steps = p.position_steps
+        for i in range(3):
+            self.pos_mm[i] = steps[i] / p.steps_per_mm[i] - self.offset_mm[i]
+        self.pos_mm[3] = (p._e_base_mm + (steps[3] - p._e_base_units) / p.e_units_per_mm
+                          - self.offset_mm[3])
 
     def machine_steps(self):
+        return self._steps(self.pos_mm)
+
+    def _steps(self, pos_mm):
+        """Logical position -> absolute steps (E in drive steps)."""
         spm = self.planner.steps_per_mm
-        return [steps_from_mm(self.pos_mm[i] + self.offset_mm[i], spm[i]) for i in range(4)]
+        off = self.offset_mm
+        return [steps_from_mm(pos_mm[0] + off[0], spm[0]), steps_from_mm(pos_mm[1] + off[1], spm[1]),
+                steps_from_mm(pos_mm[2] + off[2], spm[2]), self.planner.e_units(pos_mm[3] + off[3])]
 
     def enable_for(self, axes_mask):
         want = axes_mask & 7
@@ -102,8 +111,7 @@ class Motion:
                 if (moved >> i) & 1 and not -1e-6 <= mm <= self.travel_mm[i] + 1e-6:
                     raise GcodeError("move to %s%.3f is outside the soft limits 0..%g mm"
                                      % (AXIS_LETTERS[i], target[i], self.travel_mm[i]))
-        spm = self.planner.steps_per_mm
-        steps = [steps_from_mm(target[i] + self.offset_mm[i], spm[i]) for i in range(4)]
+        steps = self._steps(target)
         delta = [steps[i] - self.planner.position_steps[i] for i in range(4)]
         axes = 0
         for i in range(4):
@@ -111,7 +119,7 @@ class Motion:
                 axes |= 1 << i
         if axes:
             if axes & 8:
-                e_mm = abs(delta[3]) / spm[3]
+                e_mm = abs(delta[3]) / self.planner.e_units_per_mm
                 if e_mm > self.max_extrude_mm:
                     raise GcodeError("extrusion of %.1f mm in one move is over max_extrude_mm %g"
                                      % (e_mm, self.max_extrude_mm))

@@ -140,6 +140,8 @@ class Config:
         self.appliers = []  # fn(settings) each, called by apply() (M930)
         defaults = dict(FIRMWARE_DEFAULTS)
         defaults.update(board_settings)
+        if "drives" in defaults and "drive_steps_per_mm" not in defaults:
+            defaults["drive_steps_per_mm"] = (defaults["steps_per_mm"][3],) * defaults["drives"]
         if "drives" in defaults and "tool_mixes" not in defaults:
             defaults["tool_mixes"] = default_tool_mixes(
                 defaults["drives"], defaults.get("virtual_tools", 16))

@@ -111,6 +111,8 @@ SCHEMA = (
      "part fan PWM frequency"),
     ("thermal_period_ms",          "",     INT,   10,      10000,       RESTART,
      "heater control period"),
+    ("drive_steps_per_mm",         EACH,   FLOAT, 0.001,   100000.0,    LIVE,
+     "steps per mm of filament of this mixing drive (M92 E sets them all)"),
     ("tool_mixes",                 EACH,   MIX,   0,       0,           LIVE,
      "mix of this virtual tool, drive weights w0:w1:... (M164/M165/M567 set it)"),
     ("console_uart",               "",     INT,   -1,      4,           RESTART,

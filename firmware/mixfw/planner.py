@@ -7,15 +7,40 @@
 # passed in by main.py, so host tools can plan on CPython too.
 from math import sqrt
 from mixfw import stepper as st
-from mixfw.mixer import MAX_DRIVES
+from mixfw.mixer import MAX_DRIVES, WEIGHT_SCALE, normalize
 
 _INF = 1e30
 
 
-def steps_from_mm(mm, steps_per_mm):
-    """The one rounding rule from millimetres to absolute steps (half away from zero)."""
-    v = mm * steps_per_mm
+def round_steps(v):
+    """The one rounding rule to whole steps: half away from zero."""
     return int(v + 0.5) if v >= 0 else -int(0.5 - v)
+
+
+def steps_from_mm(mm, steps_per_mm):
+    """Absolute millimetres -> absolute steps."""
+    return round_steps(mm * steps_per_mm)
+
+
+def drive_weights(weights, drive_steps_per_mm):
+    """Mixer weights that give each drive its share of filament when drives have
+    different steps per mm: drive i needs weights[i] * steps_per_mm[i] of the E steps.
+    Exact when the steps/mm have at most 3 decimals and the reduced weights stay within
+    the mixer's range; otherwise normalised to 1/10000."""
+    scaled = [w * round_steps(spm * 1000) for w, spm in zip(weights, drive_steps_per_mm)]
+    g = 0
+    for v in scaled:
+        g = _gcd(g, v)
+    exact = tuple(v // g for v in scaled)
+    if sum(exact) <= WEIGHT_SCALE:
+        return exact
+    return normalize([w * spm for w, spm in zip(weights, drive_steps_per_mm)], len(weights))
+
+
+def _gcd(a, b):
+    while b:
+        a, b = b, a % b
+    return a
 
 
 class PlanError(ValueError):
@@ -54,7 +79,17 @@ class Planner:
         self.prev_unit = None
         self.prev_nominal = 0.0
         self.mix_id = 0
-        self.mix = (1,) + (0,) * (MAX_DRIVES - 1)
+        self.mix = (1,) + (0,) * (MAX_DRIVES - 1)  # the block's weights, per drive steps
+        self.tool_mix = self.mix  # the weights as the tool gives them
+        # E is counted in drive steps. With drives of different steps/mm the steps per
+        # mm of filament depend on the mix, so they are counted from a base that moves
+        # whenever that rate changes: units = base_units + (e_mm - base_mm) * rate.
+        self.drive_steps_per_mm = list(settings.get("drive_steps_per_mm") or
+                                       [self.steps_per_mm[3]] * settings["drives"])
+        self.e_units_per_mm = self.steps_per_mm[3]
+        self._e_base_units = 0.0
+        self._e_base_mm = 0.0
+        self._e_last_mm = 0.0
 
     # --- queue state, shared with the step loop ---
     def _count(self):
@@ -93,7 +128,31 @@ class Planner:
 
     def set_mix(self, mix_id, weights):
         self.mix_id = mix_id & 0x3FFFFFFF
-        self.mix = tuple(weights) + (0,) * (MAX_DRIVES - len(weights))
+        self.tool_mix = tuple(weights)
+        spm = self.drive_steps_per_mm
+        mix = drive_weights(weights, spm)
+        self.mix = tuple(mix) + (0,) * (MAX_DRIVES - len(mix))
+        rate = sum(w * s for w, s in zip(weights, spm)) / sum(weights)
+        if rate != self.e_units_per_mm:
+            self._e_base_units += (self._e_last_mm - self._e_base_mm) * self.e_units_per_mm
+            self._e_base_mm = self._e_last_mm
+            self.e_units_per_mm = rate
+
+    def e_units(self, e_mm):
+        """Absolute machine E in mm -> absolute E position in drive steps."""
+        self._e_last_mm = e_mm
+        return round_steps(self._e_base_units + (e_mm - self._e_base_mm) * self.e_units_per_mm)
+
+    def set_drive_steps(self, drive_steps_per_mm, e_mm):
+        """New steps/mm per drive (M92 E, M930), between moves: the E position in steps
+        is kept, counting goes on at the new rate."""
+        self.synchronize()
+        self.drive_steps_per_mm = list(drive_steps_per_mm)
+        self._e_base_units = float(self.position_steps[3])
+        self._e_base_mm = self._e_last_mm = e_mm
+        self.e_units_per_mm = -1.0  # so set_mix takes the new rate without a rebase
+        self.set_mix(self.mix_id, self.tool_mix)
+        self._e_base_units = float(self.position_steps[3])
 
     def set_position_steps(self, steps):
         """Redefine where the axes are (G92, homing) once the queue is empty."""
@@ -137,7 +196,8 @@ class Planner:
             return False
         if n >= 0x3FFFFFFF:
             raise PlanError("move too long: %d steps" % n)
-        d_mm = [delta[i] / spm[i] for i in range(4)]
+        d_mm = [delta[0] / spm[0], delta[1] / spm[1], delta[2] / spm[2],
+                delta[3] / self.e_units_per_mm]
         xyz_mm = sqrt(d_mm[0] * d_mm[0] + d_mm[1] * d_mm[1] + d_mm[2] * d_mm[2])
         dist = xyz_mm if steps[0] or steps[1] or steps[2] else abs(d_mm[3])
         inv = 1.0 / dist
