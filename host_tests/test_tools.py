@@ -76,3 +76,32 @@ def test_drives_with_different_steps_per_mm_each_get_their_share_of_filament():
     assert abs(steps["e0"] - 3 * E_SPM) <= 1
     assert abs(steps["e1"] - 3 * 830) <= 1
     assert abs(steps["e2"] - 6 * 100) <= 1
+
+
+def retract_run(policy, lines):
+    p = SimPrinter()
+    p.send("M302 P1")
+    p.send("M926 Iretract_policy V%d" % policy)
+    p.send("M930")
+    for line in lines:
+        assert p.send(line)[-1] == "ok"
+    return p.finish()["steps"]
+
+
+def test_retraction_policy_follow_the_mix_or_all_drives_equal():
+    # Slicer-style: retract on T0, change tool, unretract on T1.
+    lines = ["M83", "G1 E5 F600", "G1 E-2 F2400", "T1", "G1 E2 F2400", "G1 E1 F600"]
+    follow = retract_run(0, lines)
+    assert (follow["e0"], follow["e1"]) == (3 * E_SPM, 3 * E_SPM)
+    equal = retract_run(1, lines)
+    # Every drive pulled back equally and pushed back equally: each ends where it was.
+    assert [equal["e%d" % d] for d in range(6)] == [5 * E_SPM, E_SPM, 0, 0, 0, 0]
+
+
+def test_g10_g11_firmware_retraction_is_exact_and_keeps_the_logical_e():
+    for policy in (0, 1):
+        steps = retract_run(policy, [
+            "M567 P0 E1:2:3", "M83", "G1 E6 F600", "G10", "G1 X10 F3000", "G11", "G10", "G10",
+            "G11", "M114"])
+        assert [steps["e%d" % d] for d in range(3)] == [E_SPM, 2 * E_SPM, 3 * E_SPM], policy
+        assert steps["x"] == 800

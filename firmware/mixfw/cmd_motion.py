@@ -5,6 +5,11 @@ from mixfw.planner import steps_from_mm
 from mixfw import stepper as st
 
 AXIS_LETTERS = "XYZE"
+# retract_policy: retractions follow the mix and run it exactly backwards, or pull every
+# drive equally (and push them back equally).
+RETRACT_FOLLOW_MIX = 0
+RETRACT_EQUAL = 1
+EQUAL_MIX_ID = 0x3FFFFFF0  # never reached by tool mix ids, which count up from 1
 
 
 class Motion:
@@ -27,6 +32,9 @@ class Motion:
         self.soft_limits = settings.get("soft_limits", True)
         # Longest E move accepted, as Marlin's PREVENT_LENGTHY_EXTRUDE.
         self.max_extrude_mm = settings.get("max_extrude_mm", 200.0)
+        self.retracted_mm = 0.0  # E-only retraction not yet undone (for the equal policy)
+        self.fw_retracted = False
+        self._retraction_settings(settings)
         # Called before a move that extrudes; each raises GcodeError to refuse it
         # (cold extrusion, ...).
         self.extrusion_guards = []
@@ -48,6 +56,13 @@ class Motion:
         self.homing_feed_mm_s = settings["homing_feed_mm_s"]
         self.soft_limits = settings.get("soft_limits", True)
         self.max_extrude_mm = settings.get("max_extrude_mm", 200.0)
+        self._retraction_settings(settings)
+
+    def _retraction_settings(self, settings):
+        self.retract_policy = settings.get("retract_policy", RETRACT_FOLLOW_MIX)
+        self.retract_mm = settings.get("retract_mm", 2.0)
+        self.retract_feed_mm_s = settings.get("retract_feed_mm_s", 40.0)
+        self.unretract_feed_mm_s = settings.get("unretract_feed_mm_s", 40.0)
 
     def resync(self):
         """After the queue was dropped: the logical position is where the axes are."""
@@ -118,17 +133,60 @@ class Motion:
             if delta[i]:
                 axes |= 1 << i
         if axes:
-            if axes & 8:
-                e_mm = abs(delta[3]) / self.planner.e_units_per_mm
-                if e_mm > self.max_extrude_mm:
-                    raise GcodeError("extrusion of %.1f mm in one move is over max_extrude_mm %g"
-                                     % (e_mm, self.max_extrude_mm))
-                for guard in self.extrusion_guards:
-                    guard()
-            self.enable_for(axes)
-            self.planner.add_move(steps, self.feed_mm_s, dir_masks=self.dir_masks)
+            e_from = self.pos_mm[3] + self.offset_mm[3]
+            self._queue(steps, delta, axes, self.feed_mm_s, e_from, target[3] + self.offset_mm[3])
         self.pos_mm = target
         return None
+
+    def _queue(self, steps, delta, axes, feed_mm_s, e_from_mm, e_target_mm):
+        if axes & 8:
+            e_mm = abs(delta[3]) / self.planner.e_units_per_mm
+            if e_mm > self.max_extrude_mm:
+                raise GcodeError("extrusion of %.1f mm in one move is over max_extrude_mm %g"
+                                 % (e_mm, self.max_extrude_mm))
+            for guard in self.extrusion_guards:
+                guard()
+        self.enable_for(axes)
+        if axes == 8 and self.retract_policy == RETRACT_EQUAL and (
+                delta[3] < 0 or self.retracted_mm > 0):
+            self._queue_equal(steps, feed_mm_s, e_from_mm, e_target_mm)
+        else:
+            self.planner.add_move(steps, feed_mm_s, dir_masks=self.dir_masks)
+
+    def _queue_equal(self, steps, feed_mm_s, e_from_mm, e_target_mm):
+        """A retraction, or the unretraction after it, with every drive pulling equally.
+        One fixed mix id for both, so the mixer's schedule runs back exactly."""
+        p = self.planner
+        tool_id, tool_mix = p.mix_id, p.tool_mix
+        p.set_mix(EQUAL_MIX_ID, (1,) * self.drives)
+        steps[3] = p.e_units(e_target_mm)  # at the equal mix's rate
+        try:
+            p.add_move(steps, feed_mm_s, dir_masks=self.dir_masks)
+        finally:
+            p.set_mix(tool_id, tool_mix)
+        self.retracted_mm = max(0.0, self.retracted_mm - (e_target_mm - e_from_mm))
+
+    # G10: firmware retraction by retract_mm at retract_feed_mm_s; the logical E stays.
+    def g10(self, line):
+        if self.fw_retracted:
+            return
+        self._fw_retract(-self.retract_mm, self.retract_feed_mm_s)
+        self.fw_retracted = True
+
+    # G11: undo G10.
+    def g11(self, line):
+        if not self.fw_retracted:
+            return
+        self._fw_retract(self.retract_mm, self.unretract_feed_mm_s)
+        self.fw_retracted = False
+
+    def _fw_retract(self, e_mm, feed_mm_s):
+        self.offset_mm[3] += e_mm
+        steps = self.machine_steps()
+        delta = [steps[i] - self.planner.position_steps[i] for i in range(4)]
+        if delta[3]:
+            e_to = self.pos_mm[3] + self.offset_mm[3]
+            self._queue(steps, delta, 8, feed_mm_s, e_to - e_mm, e_to)
 
     # G4 P<ms> | S<s>: dwell after the queued moves. Example: G4 P500
     def g4(self, line):
@@ -247,9 +305,11 @@ def register(printer, motion):
         ("M83", m.m83, "relative E"),
         ("M400", m.m400, "wait for moves to finish"),
         ("M17", m.m17, "enable drivers"),
+        ("G10", m.g10, "firmware retraction"),
+        ("G11", m.g11, "firmware unretraction"),
         ("M18", m.m18, "disable drivers"),
         ("M84", m.m18, "disable drivers"),
     ):
-        printer.register(name, fn, text, guarded=name in ("G0", "G1", "G4", "G28", "M17"))
+        printer.register(name, fn, text, guarded=name in ("G0", "G1", "G4", "G10", "G11", "G28", "M17"))
     printer.register("M119", m.m119, "endstop states")
     printer.register("M211", m.m211, "soft limits S0/S1")

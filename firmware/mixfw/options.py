@@ -20,6 +20,10 @@ RESTART = True  # takes effect after a restart
 FIRMWARE_DEFAULTS = {
     "soft_limits": True,
     "max_extrude_mm": 200.0,
+    "retract_policy": 0,
+    "retract_mm": 2.0,
+    "retract_feed_mm_s": 40.0,
+    "unretract_feed_mm_s": 40.0,
 }
 
 
@@ -111,6 +115,14 @@ SCHEMA = (
      "part fan PWM frequency"),
     ("thermal_period_ms",          "",     INT,   10,      10000,       RESTART,
      "heater control period"),
+    ("retract_policy",             "",     INT,   0,       1,           LIVE,
+     "0: retractions follow the mix, exactly reversed; 1: all drives equally"),
+    ("retract_mm",                 "",     FLOAT, 0.0,     50.0,        LIVE,
+     "G10 retraction length"),
+    ("retract_feed_mm_s",          "",     FLOAT, 0.1,     500.0,       LIVE,
+     "G10 retraction speed"),
+    ("unretract_feed_mm_s",        "",     FLOAT, 0.1,     500.0,       LIVE,
+     "G11 unretraction speed"),
     ("drive_steps_per_mm",         EACH,   FLOAT, 0.001,   100000.0,    LIVE,
      "steps per mm of filament of this mixing drive (M92 E sets them all)"),
     ("tool_mixes",                 EACH,   MIX,   0,       0,           LIVE,
