@@ -58,7 +58,9 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     printer.on_halt.append(planner.abort)
     printer.on_halt.append(motion.resync)
     cmd_motion.register(printer, motion)
-    mixing = cmd_mixing.Mixing(planner, settings, config, printer.reply)
+    mixing = cmd_mixing.Mixing(planner, settings, config, printer.reply,
+                               lambda i: mem[st.S_DRIVE_POS + i])
+    config.before_save.append(mixing.filament_used_mm)
     cmd_mixing.register(printer, mixing)
     thermal = Thermal(machine, pin_map, settings, printer)
     cmd_thermal.register(printer, thermal, motion)

@@ -232,7 +232,8 @@ print(json.dumps({"names": [o.name for o in c.options],
         "tcp_max_clients"]
     expected += [n for n in optional if n in board["SETTINGS"]]
     expected += ["tool_mixes_%d" % t for t in range(board["SETTINGS"]["virtual_tools"])]
-    expected += ["drive_steps_per_mm_%d" % d for d in range(board["SETTINGS"]["drives"])]
+    expected += ["%s_%d" % (k, d) for d in range(board["SETTINGS"]["drives"])
+                 for k in ("drive_steps_per_mm", "filament_used_mm")]
     assert sorted(names) == sorted(expected)
     assert len(names) == len(set(names))
     assert got["soft_limits"] is True  # the firmware's default; the board names none

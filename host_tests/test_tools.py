@@ -1,5 +1,7 @@
 """Virtual tools: set with M164, M165 and M567, reported by M165 R, and kept across a
 reboot with the configuration. On the firmware running on the unix port."""
+import pytest
+
 from mixstep.simprinter import SimPrinter
 
 E_SPM = 415
@@ -105,3 +107,33 @@ def test_g10_g11_firmware_retraction_is_exact_and_keeps_the_logical_e():
             "G11", "M114"])
         assert [steps["e%d" % d] for d in range(3)] == [E_SPM, 2 * E_SPM, 3 * E_SPM], policy
         assert steps["x"] == 800
+
+
+def counters(reply):
+    """'echo:filament used mm e0:1.749 e1:...' -> [1.749, ...]"""
+    assert reply.startswith("echo:filament used mm ")
+    return [float(w.split(":")[1]) for w in reply.split()[3:]]
+
+
+def test_filament_counters_per_drive_are_reported_and_kept_across_a_reboot(tmp_path):
+    cfg = tmp_path / "mixstep.cfg"
+    p = SimPrinter(config_path=cfg)
+    p.send("M302 P1")
+    p.send("M567 P0 E1:3")
+    p.send("M83")
+    p.send("G1 E8 F600")
+    p.send("G1 E-1")  # net of retractions
+    used = counters(p.send("M167")[0])
+    # 7 mm net at 1:3, each drive within one step (1/415 mm) of its share.
+    assert abs(used[0] - 1.75) <= 1 / E_SPM and abs(used[1] - 5.25) <= 1 / E_SPM
+    assert used[0] + used[1] == pytest.approx(7.0, abs=1e-9) and used[2:] == [0.0] * 4
+    p.send("M500")
+    p.finish()
+    q = SimPrinter(config_path=cfg)
+    q.send("M302 P1")
+    q.send("T2")
+    q.send("G1 E2 F600")
+    assert counters(q.send("M167")[0]) == used[:2] + [2.0] + [0.0] * 3
+    assert counters(q.send("M167 R")[0]) == [0.0] * 6
+    assert counters(q.send("M167")[0]) == [0.0] * 6
+    q.finish()

@@ -9,7 +9,10 @@ _MARLIN_LETTERS = "ABCDHI"  # Marlin's letters for drives 0..5 in M165
 
 
 class Mixing:
-    def __init__(self, planner, settings, config, reply):
+    def __init__(self, planner, settings, config, reply, drive_steps):
+        """drive_steps(i): net steps drive i has made since start-up (the step loop's)."""
+        self.drive_steps = drive_steps
+        self._counted = [0] * settings["drives"]  # steps already added to the settings
         self.planner = planner
         self.settings = settings
         self.config = config
@@ -21,6 +24,28 @@ class Mixing:
         self.mix_id = 1
         self.mix = None
         self._activate(0)
+
+    def filament_used_mm(self):
+        """Per drive: the saved counter plus what the drive fed since it was updated."""
+        self.planner.synchronize()
+        spm = self.planner.drive_steps_per_mm
+        used = list(self.settings["filament_used_mm"])
+        for i in range(self.drives):
+            steps = self.drive_steps(i)
+            used[i] += (steps - self._counted[i]) / spm[i]
+            self._counted[i] = steps
+        self.config.update([("filament_used_mm_%d" % i, used[i]) for i in range(self.drives)])
+        return used
+
+    # M167 [R]: filament fed by each drive, net of retractions, kept with the
+    # configuration (M500 saves it). R clears the counters. Example: M167
+    def m167(self, line):
+        used = self.filament_used_mm()
+        if line.has("R"):
+            self.config.update([("filament_used_mm_%d" % i, 0.0) for i in range(self.drives)])
+            used = [0.0] * self.drives
+        self.reply("echo:filament used mm " + " ".join(
+            "e%d:%.3f" % (i, used[i]) for i in range(self.drives)))
 
     def tool_mix(self, tool):
         return self.settings["tool_mixes"][tool]
@@ -125,4 +150,5 @@ def register(printer, mixing):
     printer.register("M164", mixing.m164, "store the weights as virtual tool S<tool> [P1 save]")
     printer.register("M165", mixing.m165, "whole mix A B C D H I; R reports every tool")
     printer.register("M567", mixing.m567, "a tool's mix: P<tool> E<w0>:<w1>:...")
+    printer.register("M167", mixing.m167, "filament used per drive; R clears")
     printer.register("T", mixing.t, "select virtual tool")

@@ -138,10 +138,13 @@ class Config:
         self.storage = storage or FileStorage()
         self.warn = warn or (lambda text: None)
         self.appliers = []  # fn(settings) each, called by apply() (M930)
+        self.before_save = []  # fn() each: bring running state (counters) into settings
         defaults = dict(FIRMWARE_DEFAULTS)
         defaults.update(board_settings)
         if "drives" in defaults and "drive_steps_per_mm" not in defaults:
             defaults["drive_steps_per_mm"] = (defaults["steps_per_mm"][3],) * defaults["drives"]
+        if "drives" in defaults and "filament_used_mm" not in defaults:
+            defaults["filament_used_mm"] = (0.0,) * defaults["drives"]
         if "drives" in defaults and "tool_mixes" not in defaults:
             defaults["tool_mixes"] = default_tool_mixes(
                 defaults["drives"], defaults.get("virtual_tools", 16))
@@ -235,6 +238,8 @@ class Config:
         """M500. Raises ConfigError if the file system refuses."""
         if self.path is None:
             raise ConfigError("this printer has no configuration storage")
+        for fn in self.before_save:
+            fn()
         tmp = self.path + ".tmp"
         fs = self.storage
         try:

@@ -125,6 +125,8 @@ SCHEMA = (
      "G11 unretraction speed"),
     ("drive_steps_per_mm",         EACH,   FLOAT, 0.001,   100000.0,    LIVE,
      "steps per mm of filament of this mixing drive (M92 E sets them all)"),
+    ("filament_used_mm",           EACH,   FLOAT, -1e9,    1e9,         LIVE,
+     "filament this drive has fed, net of retractions (M167 reports, M167 R clears)"),
     ("tool_mixes",                 EACH,   MIX,   0,       0,           LIVE,
      "mix of this virtual tool, drive weights w0:w1:... (M164/M165/M567 set it)"),
     ("console_uart",               "",     INT,   -1,      4,           RESTART,
