@@ -39,6 +39,11 @@ def main(argv=None):
     p.add_argument("--realtime", type=float, default=1.0,
                    help="simulated seconds per wall second (0: as fast as possible)")
     p.set_defaults(run=_serve)
+    from mixstep import detool, esteps, preview  # each registers its own subcommand
+    for tool in (esteps, detool, preview):
+        tool.add_parser(sub)
+    from mixstep import advance  # `mixstep advance`: tool changes moved earlier by the purge
+    advance.add_parser(sub)
     args = parser.parse_args(argv)
     return args.run(args)
 

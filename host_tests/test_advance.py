@@ -1,0 +1,325 @@
+"""`mixstep advance` on real slicer output (PrusaSlicer relative and absolute E, Slic3r
+1.3 absolute E).
+
+The checks read the output with their own small G-code reader, not the module's: it
+counts as printing extrusion the positive E of moves that move X, Y or Z, outside
+PrusaSlicer's wipes. (The module also pays back retractions per slicer tool; on these
+files both rules give the same total, which the first test checks.)
+"""
+import difflib
+import io
+import json
+import math
+import os
+
+import pytest
+
+from mixstep import advance as adv
+from mixstep import cli
+
+TESTDATA = os.path.join(os.path.dirname(__file__), "..", "testdata")
+FILES = ["part_3tool_prusaslicer_rel.gcode", "part_3tool_prusaslicer_abs.gcode",
+         "slic3r_part_3tool_abs.gcode"]
+TOL_MM = 1e-4
+
+
+def read_lines(name):
+    with open(os.path.join(TESTDATA, name), newline="") as f:
+        return f.readlines()
+
+
+def run(lines, purge, **kw):
+    out = io.StringIO()
+    report = adv.advance(iter(lines), out.write, purge, **kw)
+    return out.getvalue().splitlines(keepends=True), report
+
+
+def walk(lines):
+    """Per line: (printing extrusion after the line, XYZ point or None, tool or None)."""
+    x = y = z = e = 0.0
+    rel_xyz = rel_e = wipe = False
+    s = 0.0
+    rows = []
+    for line in lines:
+        code = line.split(";")[0].split()
+        point = tool = None
+        if line.startswith(";WIPE_START"):
+            wipe = True
+        elif line.startswith(";WIPE_END"):
+            wipe = False
+        if code:
+            cmd, words = code[0], {w[0]: float(w[1:] or 0) for w in code[1:]}
+            if cmd in ("G0", "G1", "G2", "G3"):
+                old = (x, y, z)
+                if rel_xyz:
+                    x, y, z = x + words.get("X", 0), y + words.get("Y", 0), z + words.get("Z", 0)
+                else:
+                    x, y, z = words.get("X", x), words.get("Y", y), words.get("Z", z)
+                if "E" in words:
+                    de = words["E"] if rel_e else words["E"] - e
+                    e = e + de if rel_e else words["E"]
+                    if de > 0 and (x, y, z) != old and not wipe:
+                        s += de
+                if (x, y, z) != old:
+                    point = (x, y, z)
+            elif cmd == "G92":
+                if not words:
+                    x = y = z = e = 0.0
+                x, y, z, e = (words.get("X", x), words.get("Y", y), words.get("Z", z),
+                              words.get("E", e))
+            elif cmd == "G28":
+                x = y = z = 0.0
+            elif cmd in ("G90", "G91"):
+                rel_xyz = rel_e = cmd == "G91"
+            elif cmd in ("M82", "M83"):
+                rel_e = cmd == "M83"
+            elif cmd[0] == "T" and cmd[1:].isdigit():
+                tool = int(cmd[1:])
+        rows.append((s, point, tool))
+    return rows
+
+
+def changes_in(lines):
+    """(line number, tool, printing extrusion before it) of every T line."""
+    return [(n, tool, s) for n, (s, _, tool) in enumerate(walk(lines), 1) if tool is not None]
+
+
+def check_output(lines_in, lines_out, report):
+    """Everything that must hold for any purge; returns {input T line: mm advanced}."""
+    rows_in, rows_out = walk(lines_in), walk(lines_out)
+    # total printing extrusion preserved
+    assert abs(rows_in[-1][0] - rows_out[-1][0]) < TOL_MM
+    assert abs(rows_in[-1][0] - report["extrusion_mm"]) < TOL_MM
+    # the path preserved: the output's points, split points taken out, are the input's
+    splits = [tuple(c["split_point"]) for c in report["changes"] if "split_point" in c]
+    pts_in = [p for _, p, _ in rows_in if p is not None]
+    pts_out = [p for _, p, _ in rows_out if p is not None]
+    kept = []
+    for p in pts_out:
+        hit = next((q for q in splits if max(abs(a - b) for a, b in zip(p, q)) < 1e-9), None)
+        if hit is not None:
+            splits.remove(hit)
+        else:
+            kept.append(p)
+    assert not splits
+    assert len(kept) == len(pts_in)
+    assert max(max(abs(a - b) for a, b in zip(p, q)) for p, q in zip(kept, pts_in)) < 1e-6
+    # tool changes: same lines, same order
+    t_in, t_out = changes_in(lines_in), changes_in(lines_out)
+    assert [lines_in[n - 1] for n, _, _ in t_in] == [lines_out[n - 1] for n, _, _ in t_out]
+    # each moved change: the extrusion between its new and its original place
+    moved = {c["line"]: c for c in report["changes"]}
+    advanced = {}
+    for (n_in, _, s_in), (n_out, _, s_out) in zip(t_in, t_out):
+        if n_in not in moved:
+            assert abs(s_in - s_out) < TOL_MM      # the initial selection stays put
+            continue
+        c = moved[n_in]
+        assert c["out_line"] == n_out
+        assert abs((s_in - s_out) - c["advanced_mm"]) < TOL_MM
+        advanced[n_in] = s_in - s_out
+    # every other line byte for byte, except split moves (one line in, two or more out)
+    t_lines_in = {n for n, _, _ in t_in}
+    t_lines_out = {n for n, _, _ in t_out}
+    rest_in = [ln for n, ln in enumerate(lines_in, 1) if n not in t_lines_in]
+    rest_out = [ln for n, ln in enumerate(lines_out, 1) if n not in t_lines_out]
+    # (in absolute coordinates, a split move's second half is often the original line)
+    splits = sum(1 for c in report["changes"] if "split_line" in c)
+    added = 0
+    sm = difflib.SequenceMatcher(None, rest_in, rest_out, autojunk=False)
+    for op, i1, i2, j1, j2 in sm.get_opcodes():
+        if op == "equal":
+            continue
+        assert op in ("replace", "insert") and i2 - i1 <= 1 and j2 - j1 > i2 - i1, (
+            op, rest_in[i1:i2], rest_out[j1:j2])
+        added += (j2 - j1) - (i2 - i1)
+    assert added == splits
+    return advanced
+
+
+def test_counting_rules_agree_on_the_inputs():
+    for name in FILES:
+        lines = read_lines(name)
+        _, report = run(lines, 0.0)
+        assert abs(walk(lines)[-1][0] - report["extrusion_mm"]) < TOL_MM, name
+        assert report["changes"] and not report["warnings"]
+
+
+@pytest.mark.parametrize("name", FILES)
+@pytest.mark.parametrize("purge_mm", [2.5, 0.37, 6.0])
+def test_every_change_moves_by_the_purge(name, purge_mm):
+    lines = read_lines(name)
+    out, report = run(lines, purge_mm)
+    advanced = check_output(lines, out, report)
+    assert len(advanced) == len(changes_in(lines)) - 1
+    warned = {w["line"] for w in report["warnings"]}
+    for n, mm in advanced.items():
+        if n not in warned:
+            assert abs(mm - purge_mm) < TOL_MM, (n, mm)
+    first = changes_in(lines)[1]
+    assert warned == ({first[0]} if first[2] < purge_mm else set())
+
+
+def test_zero_purge_changes_nothing():
+    for name in FILES:
+        lines = read_lines(name)
+        out, report = run(lines, 0.0)
+        assert out == lines
+
+
+@pytest.mark.parametrize("name", FILES)
+def test_closely_spaced_changes_all_shift_by_the_same_amount(name):
+    lines = read_lines(name)
+    ts = changes_in(lines)[1:]
+    gaps = [b[2] - a[2] for a, b in zip(ts, ts[1:])]
+    i = min(range(len(gaps)), key=gaps.__getitem__)
+    purge_mm = gaps[i] * 1.25         # larger than the smallest gap between two changes
+    out, report = run(lines, purge_mm)
+    advanced = check_output(lines, out, report)
+    warned = {w["line"] for w in report["warnings"]}   # only near the start of the print
+    assert warned == {n for n, _, s in ts if s < purge_mm}
+    assert ts[i][0] not in warned and ts[i + 1][0] not in warned
+    for n, mm in advanced.items():
+        if n not in warned:
+            assert abs(mm - purge_mm) < TOL_MM
+    # the close pair: both moved by the purge, still in order, with their gap kept
+    t_out = changes_in(out)[1:]
+    a, b = t_out[i], t_out[i + 1]
+    assert a[0] < b[0] and a[1] == ts[i][1] and b[1] == ts[i + 1][1]
+    assert abs((b[2] - a[2]) - gaps[i]) < TOL_MM
+    assert b[2] < ts[i][2]           # the second change now comes before the first's old place
+
+
+def test_too_little_extrusion_at_the_start_advances_as_far_as_possible():
+    lines = read_lines(FILES[1])
+    first = changes_in(lines)[1]
+    out, report = run(lines, first[2] + 1.0)
+    advanced = check_output(lines, out, report)
+    assert abs(advanced[first[0]] - first[2]) < TOL_MM     # everything before it
+    (warning,) = [w for w in report["warnings"] if w["line"] == first[0]]
+    assert "not enough printing extrusion" in warning["message"]
+    # it went just before the first printing move after the initial T0, not into the header
+    n_out = changes_in(out)[1][0]
+    assert changes_in(out)[0][0] < n_out
+    assert walk(out)[n_out][0] > 0      # the line right after it prints
+
+
+def test_huge_purge_keeps_every_change_in_order():
+    lines = read_lines(FILES[0])
+    out, report = run(lines, 5000.0)
+    check_output(lines, out, report)
+    ts = [t for _, t, _ in changes_in(out)]
+    assert ts == [t for _, t, _ in changes_in(lines)]
+
+
+MATRIX = """\
+# from to mm
+default 2.5
+0 2 1.2
+T2 T0 4.75   ; the T is optional
+* 1 3.3
+"""
+
+
+@pytest.mark.parametrize("name", FILES)
+def test_purge_matrix(name):
+    matrix = adv.PurgeMatrix(MATRIX)
+    assert matrix.max_mm == 4.75
+    assert (matrix(0, 2), matrix(2, 0), matrix(0, 1), matrix(1, 0)) == (1.2, 4.75, 3.3, 2.5)
+    lines = read_lines(name)
+    out, report = run(lines, matrix)
+    advanced = check_output(lines, out, report)
+    ts = changes_in(lines)
+    warned = {w["line"] for w in report["warnings"]}
+    seen = set()
+    for (_, before, _), (n, after, _) in zip(ts, ts[1:]):
+        if n not in warned:
+            assert abs(advanced[n] - matrix(before, after)) < TOL_MM
+        seen.add(matrix(before, after))
+    assert len(seen) >= 3
+
+
+def test_purge_matrix_errors():
+    with pytest.raises(ValueError, match="line 2"):
+        adv.PurgeMatrix("default 1\n0 1\n")
+    with pytest.raises(ValueError, match="no rule"):
+        adv.PurgeMatrix("0 1 2")(1, 0)
+
+
+def test_pair_needing_more_than_the_gap_is_held_behind_the_previous_change():
+    lines = read_lines(FILES[1])
+    ts = changes_in(lines)
+    gaps = [(b[2] - a[2], k) for k, (a, b) in enumerate(zip(ts[1:], ts[2:]), 1)]
+    gap, k = min(gaps)
+    pair = (ts[k][1], ts[k + 1][1])
+    text = "default 0.1\n%d %d %.5f\n" % (pair[0], pair[1], gap + 0.5)
+    out, report = run(lines, adv.PurgeMatrix(text))
+    check_output(lines, out, report)
+    held = [w for w in report["warnings"] if "held behind" in w["message"]]
+    assert any(w["line"] == ts[k + 1][0] for w in held)
+    assert [t for _, t, _ in changes_in(out)] == [t for _, t, _ in ts]
+
+
+def test_memory_is_bounded_by_the_purge_not_the_file():
+    lines = read_lines(FILES[1])
+    _, small = run(lines, 2.5)
+    _, large = run(lines, 25.0)
+    assert small["max_buffered_lines"] < len(lines) / 20
+    assert small["max_buffered_lines"] < large["max_buffered_lines"]
+    out, capped = run(lines, 25.0, max_buffer_lines=50)
+    assert capped["max_buffered_lines"] <= 51
+    check_output(lines, out, capped)
+    assert any("max_buffer_lines" in w["message"] for w in capped["warnings"])
+
+
+def test_crlf_and_missing_final_newline_kept():
+    lines = [ln.replace("\n", "\r\n") for ln in read_lines(FILES[0])]
+    lines[-1] = lines[-1].rstrip("\r\n")
+    out, report = run(lines, 2.5)
+    check_output(lines, out, report)
+    assert all(ln.endswith("\r\n") for ln in out[:-1]) and out[-1] == lines[-1]
+
+
+def test_arc_split_exactly_on_the_arc():
+    # G2/G3 split: the point lies on the circle at the right angle, E splits in proportion
+    lines = ["G90\n", "M83\n", "T0\n", "G1 X10 Y0 Z0.2 F1200\n",
+             "G3 X0 Y10 I-10 J0 E4.0 F900 ; quarter circle\n",
+             "G2 X-10 Y0 R10 E2.0\n", "T1\n", "G1 X-10 Y-10 E1.0\n"]
+    out, report = run(lines, 2.5)
+    (c,) = report["changes"]
+    assert c["split_line"] == 5 and abs(c["advanced_mm"] - 2.5) < 1e-9
+    x, y, _ = c["split_point"]
+    assert abs(math.hypot(x, y) - 10) < 1e-3
+    assert abs(math.atan2(y, x) - (math.pi / 2) * (4.0 - 0.5) / 4.0) < 1e-4
+    i = out.index("T1\n")
+    assert out[i - 1].startswith("G3 X") and " E3.5 F900" in out[i - 1]
+    assert out[i + 1].startswith("G3 X0 Y10 E0.5 I")
+    assert out[i + 1].endswith(" ; quarter circle\n")
+    # the second half keeps the centre: I J from its own start
+    words = {w[0]: float(w[1:]) for w in out[i + 1].split(";")[0].split()[1:]}
+    assert abs(x + words["I"]) < 1e-3 and abs(y + words["J"]) < 1e-3
+    # an R arc (R > 0: the short way, clockwise, so about (-10, 10)) is split with I/J
+    out, report = run(lines, 1.5)
+    (c,) = report["changes"]
+    assert c["split_line"] == 6
+    x, y, _ = c["split_point"]
+    assert abs(math.hypot(x + 10, y - 10) - 10) < 1e-3
+    assert abs(math.atan2(y - 10, x + 10) - (-math.pi / 2) * 0.25) < 1e-4
+
+
+def test_cli_l1_l2_and_report(tmp_path, capsys):
+    src = os.path.join(TESTDATA, FILES[1])
+    out_path, rep_path = tmp_path / "out.gcode", tmp_path / "report.json"
+    assert cli.main(["advance", src, "-o", str(out_path), "--l1-mm", "1.5",
+                     "--l2-mm", "2.0", "--report", str(rep_path)]) == 0
+    report = json.loads(rep_path.read_text())
+    assert report["max_purge_mm"] == 2.5
+    with open(out_path, newline="") as f:
+        check_output(read_lines(FILES[1]), f.readlines(), report)
+    err = capsys.readouterr().err
+    assert "advanced 2.50000 mm" in err
+    matrix = tmp_path / "m.txt"
+    matrix.write_text(MATRIX)
+    assert cli.main(["advance", src, "-o", str(out_path), "--purge-matrix", str(matrix)]) == 0
+    with pytest.raises(SystemExit):
+        cli.main(["advance", src, "-o", str(out_path)])

@@ -1,0 +1,621 @@
+"""`mixstep advance`: move every tool change earlier by the purge amount.
+
+A mixing hot end still holds the old mix when a tool change reaches it: what comes out
+of the nozzle changes only after some millimetres of filament (seed 002's purge amount,
+or Ovenbird's L0 = L1 + L2/2 with delay L1 and transition L2, seed 003). Moving each
+`T<n>` that much extrusion earlier puts the colour boundary where the slicer drew it,
+without a wipe tower.
+
+What counts as extrusion
+    Only positive E on printing moves, in mm of filament: G0/G1/G2/G3 moves that move
+    X, Y or Z. Not counted: travel; retraction (negative E); unretraction, i.e. positive
+    E that pays back what was retracted before (kept per slicer tool, because a slicer
+    retracts the old tool at a change and unretracts it when that tool comes back);
+    E-only priming; anything between PrusaSlicer's `;WIPE_START` and `;WIPE_END`.
+
+Where a change goes
+    A change found after S mm of printing extrusion, purging P mm, goes to S - P: into
+    the printing move that crosses that point, which is split there exactly (X, Y, Z
+    and E interpolated, along the arc for G2/G3 with the same centre, E and Z linear in
+    the angle). The first half carries the line's own F if it had one, the second half
+    none: the T line in between does not change the modal feed, so both halves run at
+    the line's feed rate. When S - P falls exactly at the end of a printing move, the
+    change goes right after that move.
+
+    Changes are never reordered: a change is never placed before an earlier one. With
+    one purge amount, closely spaced changes (closer than P) all move by P and keep
+    their spacing (seed 002's bug was measuring each from the previous *original*
+    place). With a purge matrix, a change whose pair needs more than the gap to the
+    previous change is held just behind the previous one, with a warning. Near the
+    start of the print, where less than P mm was extruded before a change, it goes
+    just before the first printing move after the previous change, with a warning.
+    The first `T` before any printing is the initial selection and stays where it is.
+    A `T` that selects the tool already in use moves with the same purge as the change
+    before it, so it can never re-select a stale tool.
+
+Conventions handled
+    M82/M83 and G90/G91 (G90/G91 set E too, as in Marlin and this firmware), `G92`
+    (with or without axes), `G28`, F-only lines, comments, CR/LF endings. PrusaSlicer
+    (`T<n>` then `G92 E0`; `;WIPE_START`/`;WIPE_END`), Slic3r 1.3 (`G92 E0` around the
+    change, wipes as retracting moves) and Cura (`;LAYER:n`, absolute E, switch
+    retraction of 16 mm before `T<n>`) need nothing special beyond these rules. Words
+    must be separated by spaces, as every slicer writes them.
+
+Output
+    Every line that is not moved or split comes out byte for byte. A moved `T` line is
+    the original line, moved. New numbers are written with 4 decimals for X Y Z I J and
+    5 for E (an error below 5e-6 mm of filament).
+
+Memory
+    The file is streamed. A line can be written once no later change can land before
+    it, i.e. once it lies more than the largest purge amount of extrusion behind the
+    line being read. So memory is bounded by the lines within one purge length of
+    extrusion (plus the non-printing lines among them), not by the file. Should a
+    stretch without extrusion exceed `max_buffer_lines` lines, the oldest lines are
+    written anyway and a change that would have needed them advances less, with a
+    warning.
+
+Purge matrix file (`--purge-matrix FILE`)
+    One rule per line, `#` or `;` starts a comment::
+
+        default 2.5        # any pair not listed
+        0 1 2.0            # from T0 to T1: 2.0 mm
+        T1 T0 3.0          # the T is optional
+        * 2 4.0            # from any tool to T2
+        2 * 1.5            # from T2 to any tool
+
+    An exact pair wins over `from *`, which wins over `* to`, which wins over
+    `default`. A pair that matches no rule is an error.
+"""
+import json
+import math
+import sys
+from collections import deque
+
+_SNAP_MM = 5e-6     # a split closer than this to a move's end is not worth a new line
+_E_EPS_MM = 1e-7    # retraction debt below this is rounding, not filament
+_DEFAULT_MAX_BUFFER_LINES = 200000
+
+
+class PurgeMatrix:
+    """Purge amount per (from tool, to tool) pair, read from the text format above."""
+
+    def __init__(self, text):
+        self.pairs = {}
+        self.default = None
+        for n, raw in enumerate(text.splitlines(), 1):
+            line = raw.split("#")[0].split(";")[0].strip()
+            if not line:
+                continue
+            words = line.split()
+            try:
+                if words[0].lower() == "default" and len(words) == 2:
+                    self.default = self._mm(words[1])
+                elif len(words) == 3:
+                    self.pairs[(self._tool(words[0]), self._tool(words[1]))] = self._mm(words[2])
+                else:
+                    raise ValueError("expected 'FROM TO MM' or 'default MM'")
+            except ValueError as err:
+                raise ValueError("purge matrix line %d (%r): %s" % (n, raw.strip(), err))
+        values = list(self.pairs.values()) + ([self.default] if self.default is not None else [])
+        if not values:
+            raise ValueError("purge matrix has no rules")
+        self.max_mm = max(values)
+
+    @staticmethod
+    def _tool(word):
+        if word == "*":
+            return "*"
+        t = int(word[1:] if word[:1] in "Tt" else word)
+        if t < 0:
+            raise ValueError("tool %d is negative" % t)
+        return t
+
+    @staticmethod
+    def _mm(word):
+        v = float(word)
+        if not (v >= 0 and math.isfinite(v)):
+            raise ValueError("purge %r mm must be a finite number >= 0" % word)
+        return v
+
+    @classmethod
+    def from_file(cls, path):
+        with open(path) as f:
+            return cls(f.read())
+
+    def __call__(self, from_tool, to_tool):
+        for key in ((from_tool, to_tool), (from_tool, "*"), ("*", to_tool)):
+            if key in self.pairs:
+                return self.pairs[key]
+        if self.default is None:
+            raise ValueError("purge matrix has no rule for T%s -> T%s and no default"
+                             % (from_tool, to_tool))
+        return self.default
+
+
+def l0_mm(l1_mm, l2_mm):
+    """Ovenbird's advancement length: the delay plus half the transition."""
+    return l1_mm + l2_mm / 2.0
+
+
+class _Change:
+    """A T line in the buffer, and its report record."""
+    __slots__ = ("text", "rec")
+
+    def __init__(self, text, rec):
+        self.text = text
+        self.rec = rec
+
+
+def _fmt(v, places):
+    s = "%.*f" % (places, v)
+    if "." in s:
+        s = s.rstrip("0").rstrip(".")
+    if s in ("-0", ""):
+        s = "0"
+    return s
+
+
+def _split_code(line):
+    """(code, rest) where rest is the comment and line ending, kept verbatim."""
+    semi = line.find(";")
+    if semi < 0:
+        code = line.rstrip("\r\n")
+    else:
+        code = line[:semi]
+    rest = line[len(code):]
+    stripped = code.rstrip()
+    return stripped, code[len(stripped):] + rest
+
+
+def _arc_centre(x0, y0, x1, y1, words, clockwise):
+    """Centre of a G2/G3 arc from I/J or from R (Marlin's rule for R)."""
+    if "I" in words or "J" in words:
+        return x0 + float(words.get("I", 0.0)), y0 + float(words.get("J", 0.0))
+    r = float(words["R"])
+    dx, dy = x1 - x0, y1 - y0
+    d = math.hypot(dx, dy)
+    if d == 0:
+        raise ValueError("R arc with the same start and end")
+    h = math.sqrt(max(r * r - d * d / 4.0, 0.0))
+    e = -1.0 if (clockwise != (r < 0)) else 1.0
+    return (x0 + x1) / 2.0 + e * h * (-dy / d), (y0 + y1) / 2.0 + e * h * (dx / d)
+
+
+def _arc_sweep(x0, y0, x1, y1, cx, cy, clockwise):
+    """Signed angle of the arc in radians: negative for G2, positive for G3."""
+    ax, ay = x0 - cx, y0 - cy
+    bx, by = x1 - cx, y1 - cy
+    a = math.atan2(ax * by - ay * bx, ax * bx + ay * by)
+    if a < 0:
+        a += 2 * math.pi
+    if clockwise:
+        a -= 2 * math.pi
+    if abs(x1 - x0) < 1e-9 and abs(y1 - y0) < 1e-9:
+        a = -2 * math.pi if clockwise else 2 * math.pi
+    return a
+
+
+def _split_move(ent, t_mm):
+    """Split a buffered printing move at printing extrusion t_mm.
+
+    Returns (first_text, point, e_first, second_entry) or None when it can't be split
+    (an arc with P turns)."""
+    s_end, line, s_start, x0, y0, z0, e0, repay, flags, lineno = ent
+    rel_xyz, rel_e = flags & 1, flags & 2
+    code, rest = _split_code(line)
+    nl = "\r\n" if line.endswith("\r\n") else "\n"
+    parts = code.split()
+    cmd = parts[0]
+    words = {}
+    order = []
+    for w in parts[1:]:
+        words[w[0]] = w[1:]
+        order.append(w[0])
+    if "P" in words and cmd in ("G2", "G3"):
+        return None
+    x1 = (x0 + float(words["X"]) if rel_xyz else float(words["X"])) if "X" in words else x0
+    y1 = (y0 + float(words["Y"]) if rel_xyz else float(words["Y"])) if "Y" in words else y0
+    z1 = (z0 + float(words["Z"]) if rel_xyz else float(words["Z"])) if "Z" in words else z0
+    de = float(words["E"]) if rel_e else float(words["E"]) - e0
+    e_first = round(repay + (t_mm - s_start), 5)
+    if not rel_e:   # the E word written is rounded: measure the split from it
+        e_first = round(e0 + e_first, 5) - e0
+    f = e_first / de
+    arc = cmd in ("G2", "G3")
+    if arc:
+        clockwise = cmd == "G2"
+        cx, cy = _arc_centre(x0, y0, x1, y1, words, clockwise)
+        sweep = _arc_sweep(x0, y0, x1, y1, cx, cy, clockwise)
+        a0 = math.atan2(y0 - cy, x0 - cx) + f * sweep
+        r0 = math.hypot(x0 - cx, y0 - cy)
+        xm, ym = cx + r0 * math.cos(a0), cy + r0 * math.sin(a0)
+    else:
+        xm, ym = x0 + f * (x1 - x0), y0 + f * (y1 - y0)
+    zm = z0 + f * (z1 - z0)
+    xm, ym, zm = round(xm, 4), round(ym, 4), round(zm, 4)
+
+    def axis(letter, v_mid, v0, v1, first):
+        if rel_xyz:
+            return _fmt(v_mid - v0 if first else v1 - v_mid, 4)
+        return _fmt(v_mid, 4) if first else words[letter]
+
+    first = [cmd]
+    second = [cmd]
+    mids = {"X": (xm, x0, x1), "Y": (ym, y0, y1), "Z": (zm, z0, z1)}
+    for letter in ("X", "Y", "Z"):
+        if letter in words or (arc and letter != "Z"):
+            first.append(letter + axis(letter, *mids[letter], True))
+    if arc:
+        if "R" in words:
+            first.append("I" + _fmt(cx - x0, 4))
+            first.append("J" + _fmt(cy - y0, 4))
+        else:
+            first.extend(k + words[k] for k in ("I", "J") if k in words)
+    first.append("E" + _fmt(e_first if rel_e else e0 + e_first, 5))
+    if "F" in words:
+        first.append("F" + words["F"])
+    for letter in order:
+        if letter in "XYZ":
+            second.append(letter + axis(letter, *mids[letter], False))
+        elif letter == "E":
+            second.append("E" + (_fmt(de - e_first, 5) if rel_e else words["E"]))
+        elif letter in "IJRF":
+            continue
+        else:
+            second.append(letter + words[letter])
+    if arc:
+        if "X" not in words:
+            second.append("X" + _fmt(x1 if not rel_xyz else x1 - xm, 4))
+        if "Y" not in words:
+            second.append("Y" + _fmt(y1 if not rel_xyz else y1 - ym, 4))
+        second.append("I" + _fmt(cx - xm, 4))
+        second.append("J" + _fmt(cy - ym, 4))
+    s_mid = s_start + (e_first - repay)
+    second_ent = (s_end, " ".join(second) + rest, s_mid, xm, ym, zm, e0 + e_first, 0.0,
+                  flags, lineno)
+    return " ".join(first) + nl, (xm, ym, zm), s_mid, second_ent
+
+
+class _Advancer:
+    def __init__(self, write, purge_for, max_purge_mm, max_buffer_lines):
+        self.write = write
+        self.purge_for = purge_for
+        self.max_purge_mm = max_purge_mm
+        self.max_buffer_lines = max_buffer_lines
+        self.buf = deque()
+        self.out_lines = 0
+        self.forced_flush = False
+        self.max_buffered = 0
+        self.changes = []
+        self.warnings = []
+
+    def flush_to(self, limit_s):
+        buf = self.buf
+        write = self.write
+        n = self.out_lines
+        while buf and buf[0][0] < limit_s:
+            p = buf.popleft()[1]
+            n += 1
+            if p.__class__ is str:
+                write(p)
+            else:
+                p.rec["out_line"] = n
+                write(p.text)
+        self.out_lines = n
+
+    def flush_all(self):
+        self.flush_to(math.inf)
+
+    def force_flush(self):
+        """Keep memory bounded through long stretches without extrusion."""
+        buf = self.buf
+        while len(buf) > self.max_buffer_lines:
+            self.forced_flush = True
+            self.flush_to(buf[0][0] + 1e-12)
+            if len(buf) > self.max_buffer_lines:   # many lines at the same extrusion
+                p = buf.popleft()[1]
+                self.out_lines += 1
+                if p.__class__ is str:
+                    self.write(p)
+                else:
+                    p.rec["out_line"] = self.out_lines
+                    self.write(p.text)
+
+    def place(self, text, lineno, s_mm, from_tool, to_tool, purge_mm):
+        """Put a T line purge_mm of printing extrusion before s_mm (see the module doc)."""
+        if not text.endswith("\n"):
+            text += "\n"
+        buf = self.buf
+        t = s_mm - purge_mm
+        rec = {"line": lineno, "text": text.rstrip("\r\n"), "from": from_tool,
+               "to": to_tool, "purge_mm": purge_mm}
+        change = _Change(text, rec)
+        cand = None
+        stop = "front"
+        i = len(buf) - 1
+        if purge_mm > 0:
+            while i >= 0:
+                ent = buf[i]
+                if len(ent) == 10:
+                    if ent[0] < t - _SNAP_MM:
+                        stop = None
+                        break
+                    cand = i
+                elif ent[1].__class__ is _Change:
+                    stop = "initial" if "initial" in ent[1].rec else ent[1].rec["line"]
+                    break
+                i -= 1
+        split = None
+        if cand is None:
+            new_s = s_mm
+            buf.append((new_s, change))
+            how = "in place"
+        else:
+            ent = buf[cand]
+            if ent[0] <= t + _SNAP_MM:
+                new_s = ent[0]
+                buf.insert(cand + 1, (new_s, change))
+                how = "after line %d" % ent[9]
+            elif ent[2] >= t - _SNAP_MM:
+                new_s = ent[2]
+                buf.insert(cand, (new_s, change))
+                how = "before line %d" % ent[9]
+            else:
+                split = _split_move(ent, t)
+                if split is None:   # an arc with P turns: go after it
+                    new_s = ent[0]
+                    buf.insert(cand + 1, (new_s, change))
+                    how = "after line %d (arc with P not split)" % ent[9]
+                else:
+                    first_text, point, new_s, second = split
+                    buf[cand] = second
+                    buf.insert(cand, (new_s, change))
+                    buf.insert(cand, (new_s, first_text))
+                    how = "splits line %d" % ent[9]
+                    rec["split_line"] = ent[9]
+                    rec["split_point"] = list(point)
+        rec["placed"] = how
+        rec["s_mm"] = round(s_mm, 6)
+        rec["new_s_mm"] = round(new_s, 6)
+        rec["advanced_mm"] = round(s_mm - new_s, 6)
+        self.changes.append(rec)
+        short = purge_mm - (s_mm - new_s)
+        if short > 1e-4:
+            if isinstance(stop, int):
+                why = "held behind the change at line %d, which is closer than the purge" % stop
+            elif self.forced_flush:
+                why = "the earlier lines were already written (max_buffer_lines)"
+            else:
+                why = "not enough printing extrusion before it"
+            self.warnings.append({"line": lineno, "message": "%s advanced %.5f of %.5f mm: %s"
+                                  % (rec["text"], s_mm - new_s, purge_mm, why)})
+            rec["short_mm"] = round(short, 6)
+        return rec
+
+
+def advance(lines_in, write, purge_for, max_purge_mm=None,
+            max_buffer_lines=_DEFAULT_MAX_BUFFER_LINES):
+    """Stream G-code lines from lines_in to write(), every tool change moved earlier.
+
+    purge_for is a number (mm) or a callable (from_tool, to_tool) -> mm; a callable
+    needs max_purge_mm or a max_mm attribute (PurgeMatrix has one), which bounds the
+    lines held back. Returns the report: changes (each with its input line, where it
+    went, mm advanced), warnings, lines in and out, the most lines held at once."""
+    if not callable(purge_for):
+        constant = float(purge_for)
+        if not (constant >= 0 and math.isfinite(constant)):
+            raise ValueError("purge must be a finite number >= 0, not %r" % purge_for)
+        purge_for = lambda a, b: constant  # noqa: E731
+        max_purge_mm = constant
+    if max_purge_mm is None:
+        max_purge_mm = getattr(purge_for, "max_mm", None)
+    if max_purge_mm is None:
+        raise ValueError("a purge function needs max_purge_mm")
+    adv = _Advancer(write, purge_for, max_purge_mm, max_buffer_lines)
+    buf = adv.buf
+    append = buf.append
+    flush_to = adv.flush_to
+    x = y = z = e = 0.0         # logical position, E in the current G92 frame
+    rel_xyz = rel_e = False
+    s = 0.0                     # printing extrusion so far, mm
+    tool = None                 # the input's tool (the slicer's view)
+    last_purge = None
+    debt = {}                   # retracted mm per slicer tool
+    wipe = False
+    n = 0
+    limit = -math.inf
+    cap = max_buffer_lines
+    for line in lines_in:
+        n += 1
+        c = line[:1]
+        if c == "G":
+            try:
+                semi = line.find(";")
+                parts = (line if semi < 0 else line[:semi]).split()
+                cmd = parts[0]
+                if cmd in ("G1", "G0", "G2", "G3"):
+                    x0, y0, z0, e0 = x, y, z, e
+                    de = 0.0
+                    has_e = False
+                    for w in parts[1:]:
+                        k = w[0]
+                        if k == "X":
+                            x = x + float(w[1:]) if rel_xyz else float(w[1:])
+                        elif k == "Y":
+                            y = y + float(w[1:]) if rel_xyz else float(w[1:])
+                        elif k == "E":
+                            has_e = True
+                            if rel_e:
+                                de = float(w[1:])
+                                e += de
+                            else:
+                                v = float(w[1:])
+                                de = v - e
+                                e = v
+                        elif k == "Z":
+                            z = z + float(w[1:]) if rel_xyz else float(w[1:])
+                    if has_e and de > 0:
+                        owed = debt.get(tool, 0.0)
+                        if owed > 0:
+                            if de <= owed + _E_EPS_MM:
+                                debt[tool] = owed - de if owed - de > _E_EPS_MM else 0.0
+                                append((s, line))
+                                continue
+                            debt[tool] = 0.0
+                        else:
+                            owed = 0.0
+                        if wipe or not (x != x0 or y != y0 or z != z0 or cmd in ("G2", "G3")):
+                            append((s, line))
+                            continue
+                        s0 = s
+                        s += de - owed
+                        append((s, line, s0, x0, y0, z0, e0, owed,
+                                (1 if rel_xyz else 0) | (2 if rel_e else 0), n))
+                        limit = s - max_purge_mm - 2 * _SNAP_MM
+                        if buf[0][0] < limit:
+                            flush_to(limit)
+                        continue
+                    if has_e and de < 0:
+                        debt[tool] = debt.get(tool, 0.0) - de
+                elif cmd == "G92":
+                    axes = [w for w in parts[1:] if w[0] in "XYZE"]
+                    if not axes:
+                        x = y = z = e = 0.0
+                    for w in axes:
+                        v = float(w[1:]) if len(w) > 1 else 0.0
+                        if w[0] == "E":
+                            e = v
+                        elif w[0] == "X":
+                            x = v
+                        elif w[0] == "Y":
+                            y = v
+                        else:
+                            z = v
+                elif cmd == "G90":
+                    rel_xyz = rel_e = False
+                elif cmd == "G91":
+                    rel_xyz = rel_e = True
+                elif cmd == "G28":
+                    named = [w[0] for w in parts[1:] if w[0] in "XYZ"]
+                    if not named or "X" in named:
+                        x = 0.0
+                    if not named or "Y" in named:
+                        y = 0.0
+                    if not named or "Z" in named:
+                        z = 0.0
+            except (ValueError, IndexError):
+                adv.warnings.append({"line": n, "message": "could not read: " + line.strip()})
+        elif c == "M":
+            if line.startswith("M83") and not line[3:4].isdigit():
+                rel_e = True
+            elif line.startswith("M82") and not line[3:4].isdigit():
+                rel_e = False
+        elif c == "T":
+            semi = line.find(";")
+            parts = (line if semi < 0 else line[:semi]).split()
+            new_tool = None
+            if parts and parts[0][1:].isdigit():
+                new_tool = int(parts[0][1:])
+            if new_tool is not None:
+                if tool is None and s == 0.0:
+                    tool = new_tool
+                    append((s, _Change(line, {"line": n, "initial": True})))
+                    continue
+                from_tool = 0 if tool is None else tool
+                if new_tool == from_tool and last_purge is not None:
+                    purge = last_purge
+                else:
+                    purge = float(purge_for(from_tool, new_tool))
+                if purge > max_purge_mm + 1e-9:
+                    raise ValueError("purge %g mm for T%d -> T%d exceeds max_purge_mm %g"
+                                     % (purge, from_tool, new_tool, max_purge_mm))
+                last_purge = purge
+                adv.place(line, n, s, from_tool, new_tool, purge)
+                tool = new_tool
+                if len(buf) > adv.max_buffered:
+                    adv.max_buffered = len(buf)
+                continue
+        elif c == ";":
+            if line.startswith(";WIPE_"):
+                if line.startswith(";WIPE_START"):
+                    wipe = True
+                elif line.startswith(";WIPE_END"):
+                    wipe = False
+        elif c == " " or c == "\t":
+            stripped = line.lstrip(" \t")
+            if stripped[:1] in ("G", "M", "T"):
+                adv.warnings.append({"line": n, "message": "indented command not read: "
+                                     + line.strip()})
+        append((s, line))
+        if len(buf) > cap:
+            adv.force_flush()
+            if len(buf) > adv.max_buffered:
+                adv.max_buffered = len(buf)
+        elif (n & 1023) == 0 and len(buf) > adv.max_buffered:
+            adv.max_buffered = len(buf)
+    if len(buf) > adv.max_buffered:
+        adv.max_buffered = len(buf)
+    adv.flush_all()
+    return {"lines_in": n, "lines_out": adv.out_lines, "extrusion_mm": round(s, 6),
+            "max_purge_mm": max_purge_mm, "max_buffered_lines": adv.max_buffered,
+            "changes": adv.changes, "warnings": adv.warnings}
+
+
+def advance_file(in_path, out_path, purge_for, max_purge_mm=None,
+                 max_buffer_lines=_DEFAULT_MAX_BUFFER_LINES):
+    """advance() from one file to another; lines are kept byte for byte."""
+    with open(in_path, newline="", encoding="utf-8", errors="surrogateescape") as fin, \
+            open(out_path, "w", newline="", encoding="utf-8", errors="surrogateescape",
+                 buffering=1 << 20) as fout:
+        return advance(fin, fout.write, purge_for, max_purge_mm, max_buffer_lines)
+
+
+def add_parser(sub):
+    """Register `mixstep advance` on the command's subparsers."""
+    p = sub.add_parser("advance", help="move every tool change earlier by the purge amount")
+    p.set_defaults(run=main)
+    p.add_argument("gcode", help="input G-code")
+    p.add_argument("-o", "--output", required=True, help="write the advanced G-code here")
+    g = p.add_mutually_exclusive_group(required=True)
+    g.add_argument("--purge-mm", type=float, help="purge amount, mm of filament")
+    g.add_argument("--l1-mm", type=float, help="delay length L1 (with --l2-mm): purge L1 + L2/2")
+    g.add_argument("--purge-matrix", metavar="FILE",
+                   help="purge amount per tool pair (format: pydoc mixstep.advance)")
+    p.add_argument("--l2-mm", type=float, help="transition length L2 (with --l1-mm)")
+    p.add_argument("--report", metavar="FILE", help="write the JSON report here ('-': stdout)")
+    p.add_argument("--max-buffer-lines", type=int, default=_DEFAULT_MAX_BUFFER_LINES,
+                   help="most lines held back at once (default %(default)s)")
+
+
+def main(args):
+    if args.l1_mm is not None:
+        if args.l2_mm is None:
+            print("mixstep advance: --l1-mm needs --l2-mm", file=sys.stderr)
+            return 2
+        purge = l0_mm(args.l1_mm, args.l2_mm)
+    elif args.l2_mm is not None:
+        print("mixstep advance: --l2-mm needs --l1-mm", file=sys.stderr)
+        return 2
+    elif args.purge_matrix:
+        purge = PurgeMatrix.from_file(args.purge_matrix)
+    else:
+        purge = args.purge_mm
+    try:
+        report = advance_file(args.gcode, args.output, purge,
+                              max_buffer_lines=args.max_buffer_lines)
+    except ValueError as err:
+        print("mixstep advance: %s" % err, file=sys.stderr)
+        return 2
+    for rec in report["changes"]:
+        print("line %d %s: %s, advanced %.5f mm (purge %.5f), output line %d" % (
+            rec["line"], rec["text"], rec["placed"], rec["advanced_mm"], rec["purge_mm"],
+            rec.get("out_line", 0)), file=sys.stderr)
+    for w in report["warnings"]:
+        print("warning: line %d: %s" % (w["line"], w["message"]), file=sys.stderr)
+    if args.report == "-":
+        print(json.dumps(report, indent=1))
+    elif args.report:
+        with open(args.report, "w") as f:
+            json.dump(report, f, indent=1)
+    return 0
