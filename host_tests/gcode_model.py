@@ -1,6 +1,7 @@
 """What a G-code file asks of each axis and drive, worked out independently of the
-firmware: modal state, G92 offsets and tool changes, then the same rounding rule
-(absolute millimetres -> nearest step, half away from zero)."""
+firmware: modal state, G92 offsets and tool changes give each drive's total filament,
+and each axis and drive ends at its absolute position rounded to the nearest step
+(half away from zero). Tools here are single drives (T<n> = 100 % drive n)."""
 import re
 
 WORD = re.compile(r"([A-Za-z])\s*([-+]?[0-9]*\.?[0-9]*)")
@@ -16,8 +17,7 @@ def expected_steps(path, steps_per_mm, drives=6):
     off = [0.0] * 4
     absolute = absolute_e = True
     tool = 0
-    e_steps = 0
-    per_drive = [0] * drives
+    drive_mm = [0.0] * drives
     for raw in open(path):
         code = raw.split(";")[0].strip()
         if not code:
@@ -31,9 +31,7 @@ def expected_steps(path, steps_per_mm, drives=6):
                 if ch in params:
                     rel = not (absolute_e if i == 3 else absolute)
                     target[i] = target[i] + params[ch] if rel else params[ch]
-            new_e = _steps(target[3] + off[3], steps_per_mm[3])
-            per_drive[tool] += new_e - e_steps
-            e_steps = new_e
+            drive_mm[tool] += target[3] - pos[3]
             pos = target
         elif cmd == "G92":
             named = [i for i, ch in enumerate("XYZE") if ch in params] or range(4)
@@ -55,5 +53,5 @@ def expected_steps(path, steps_per_mm, drives=6):
         elif cmd.startswith("T"):
             tool = int(cmd[1:])
     result = {a: _steps(pos[i] + off[i], steps_per_mm[i]) for i, a in enumerate("xyz")}
-    result.update({"e%d" % d: per_drive[d] for d in range(drives)})
+    result.update({"e%d" % d: _steps(drive_mm[d], steps_per_mm[3]) for d in range(drives)})
     return result

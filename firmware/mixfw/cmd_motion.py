@@ -9,7 +9,6 @@ AXIS_LETTERS = "XYZE"
 # drive equally (and push them back equally).
 RETRACT_FOLLOW_MIX = 0
 RETRACT_EQUAL = 1
-EQUAL_MIX_ID = 0x3FFFFFF0  # never reached by tool mix ids, which count up from 1
 
 
 class Motion:
@@ -45,7 +44,7 @@ class Motion:
         p = self.planner
         p.synchronize()
         p.steps_per_mm[:] = list(settings["steps_per_mm"])
-        p.set_drive_steps(settings["drive_steps_per_mm"], self.pos_mm[3] + self.offset_mm[3])
+        p.set_drive_steps(settings["drive_steps_per_mm"])
         p.max_feed_mm_s = settings["max_feed_mm_s"]
         p.max_accel_mm_s2 = settings["max_accel_mm_s2"]
         p.acceleration_mm_s2 = settings["acceleration_mm_s2"]
@@ -65,23 +64,22 @@ class Motion:
         self.unretract_feed_mm_s = settings.get("unretract_feed_mm_s", 40.0)
 
     def resync(self):
-        """After the queue was dropped: the logical position is where the axes are."""
+        """After the queue was dropped: the logical X Y Z are where the axes are. E keeps
+        its logical value; the drives' own positions were taken by the planner."""
         p = self.planner
         steps = p.position_steps
         for i in range(3):
             self.pos_mm[i] = steps[i] / p.steps_per_mm[i] - self.offset_mm[i]
-        self.pos_mm[3] = (p._e_base_mm + (steps[3] - p._e_base_units) / p.e_units_per_mm
-                          - self.offset_mm[3])
 
     def machine_steps(self):
+        """X Y Z as absolute steps from the logical position; E as planned (drive steps)."""
         return self._steps(self.pos_mm)
 
     def _steps(self, pos_mm):
-        """Logical position -> absolute steps (E in drive steps)."""
         spm = self.planner.steps_per_mm
         off = self.offset_mm
         return [steps_from_mm(pos_mm[0] + off[0], spm[0]), steps_from_mm(pos_mm[1] + off[1], spm[1]),
-                steps_from_mm(pos_mm[2] + off[2], spm[2]), self.planner.e_units(pos_mm[3] + off[3])]
+                steps_from_mm(pos_mm[2] + off[2], spm[2]), self.planner.position_steps[3]]
 
     def enable_for(self, axes_mask):
         want = axes_mask & 7
@@ -127,44 +125,38 @@ class Motion:
                     raise GcodeError("move to %s%.3f is outside the soft limits 0..%g mm"
                                      % (AXIS_LETTERS[i], target[i], self.travel_mm[i]))
         steps = self._steps(target)
-        delta = [steps[i] - self.planner.position_steps[i] for i in range(4)]
-        axes = 0
-        for i in range(4):
-            if delta[i]:
-                axes |= 1 << i
-        if axes:
-            e_from = self.pos_mm[3] + self.offset_mm[3]
-            self._queue(steps, delta, axes, self.feed_mm_s, e_from, target[3] + self.offset_mm[3])
+        e_mm = target[3] - self.pos_mm[3]
+        xyz = 0
+        for i in range(3):
+            if steps[i] != self.planner.position_steps[i]:
+                xyz |= 1 << i
+        if xyz or e_mm:
+            self._queue(steps, xyz, e_mm, self.feed_mm_s)
         self.pos_mm = target
         return None
 
-    def _queue(self, steps, delta, axes, feed_mm_s, e_from_mm, e_target_mm):
-        if axes & 8:
-            e_mm = abs(delta[3]) / self.planner.e_units_per_mm
-            if e_mm > self.max_extrude_mm:
+    def _queue(self, steps, xyz, e_mm, feed_mm_s):
+        """Queue a move of X Y Z (axes in xyz) to steps, with e_mm of filament."""
+        if e_mm:
+            if abs(e_mm) > self.max_extrude_mm:
                 raise GcodeError("extrusion of %.1f mm in one move is over max_extrude_mm %g"
-                                 % (e_mm, self.max_extrude_mm))
+                                 % (abs(e_mm), self.max_extrude_mm))
             for guard in self.extrusion_guards:
                 guard()
-        self.enable_for(axes)
-        if axes == 8 and self.retract_policy == RETRACT_EQUAL and (
-                delta[3] < 0 or self.retracted_mm > 0):
-            self._queue_equal(steps, feed_mm_s, e_from_mm, e_target_mm)
-        else:
-            self.planner.add_move(steps, feed_mm_s, dir_masks=self.dir_masks)
-
-    def _queue_equal(self, steps, feed_mm_s, e_from_mm, e_target_mm):
-        """A retraction, or the unretraction after it, with every drive pulling equally.
-        One fixed mix id for both, so the mixer's schedule runs back exactly."""
+        self.enable_for(xyz | (8 if e_mm else 0))
         p = self.planner
-        tool_id, tool_mix = p.mix_id, p.tool_mix
-        p.set_mix(EQUAL_MIX_ID, (1,) * self.drives)
-        steps[3] = p.e_units(e_target_mm)  # at the equal mix's rate
-        try:
-            p.add_move(steps, feed_mm_s, dir_masks=self.dir_masks)
-        finally:
-            p.set_mix(tool_id, tool_mix)
-        self.retracted_mm = max(0.0, self.retracted_mm - (e_target_mm - e_from_mm))
+        if not xyz and self.retract_policy == RETRACT_EQUAL and (e_mm < 0 or self.retracted_mm > 0):
+            # A retraction, or the unretraction after it: every drive pulls equally, and
+            # as drives are planned from absolute positions, pushes back exactly.
+            tool_id, tool_mix = p.mix_id, p.tool_mix
+            p.set_mix(tool_id, (1,) * self.drives)
+            try:
+                p.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_mm=e_mm)
+            finally:
+                p.set_mix(tool_id, tool_mix)
+            self.retracted_mm = max(0.0, self.retracted_mm - e_mm)
+        else:
+            p.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_mm=e_mm)
 
     # G10: firmware retraction by retract_mm at retract_feed_mm_s; the logical E stays.
     def g10(self, line):
@@ -181,12 +173,8 @@ class Motion:
         self.fw_retracted = False
 
     def _fw_retract(self, e_mm, feed_mm_s):
-        self.offset_mm[3] += e_mm
-        steps = self.machine_steps()
-        delta = [steps[i] - self.planner.position_steps[i] for i in range(4)]
-        if delta[3]:
-            e_to = self.pos_mm[3] + self.offset_mm[3]
-            self._queue(steps, delta, 8, feed_mm_s, e_to - e_mm, e_to)
+        self.offset_mm[3] += e_mm  # the filament moves; the logical E does not
+        self._queue(self.machine_steps(), 0, e_mm, feed_mm_s)
 
     # G4 P<ms> | S<s>: dwell after the queued moves. Example: G4 P500
     def g4(self, line):

@@ -149,6 +149,19 @@ def mix_step(mem: ptr32, base: int, reverse: int) -> int:
     return best
 
 
+def schedule_counts(weights, steps, reverse=False):
+    """Steps per drive the schedule gives from a fresh start in `steps` steps: the
+    planner's forecast of a block, made with the step loop's own mix_step."""
+    from array import array
+    mem = array("i", bytes(4 * M_WORDS))
+    mem[M_N] = len(weights)
+    load(mem, 0, 1, weights)
+    counts = [0] * len(weights)
+    for _ in range(steps):
+        counts[mix_step(mem, 0, 1 if reverse else 0)] += 1
+    return tuple(counts)
+
+
 def default_tool_mixes(drives, count=16):
     """T<n> is 100 % drive n below the drive count, an equal mix of all drives above."""
     return tuple(tuple(1 if i == t else 0 for i in range(drives)) if t < drives

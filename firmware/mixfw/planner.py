@@ -7,7 +7,10 @@
 # passed in by main.py, so host tools can plan on CPython too.
 from math import sqrt
 from mixfw import stepper as st
-from mixfw.mixer import MAX_DRIVES, WEIGHT_SCALE, normalize
+from mixfw.mixer import MAX_DRIVES, normalize, schedule_counts
+
+# Largest schedule period the step loop's mixer takes: its products stay below 2**30.
+MAX_PERIOD = 20000
 
 _INF = 1e30
 
@@ -22,19 +25,19 @@ def steps_from_mm(mm, steps_per_mm):
     return round_steps(mm * steps_per_mm)
 
 
-def drive_weights(weights, drive_steps_per_mm):
-    """Mixer weights that give each drive its share of filament when drives have
-    different steps per mm: drive i needs weights[i] * steps_per_mm[i] of the E steps.
-    Exact when the steps/mm have at most 3 decimals and the reduced weights stay within
-    the mixer's range; otherwise normalised to 1/10000."""
-    scaled = [w * round_steps(spm * 1000) for w, spm in zip(weights, drive_steps_per_mm)]
+def block_weights(counts):
+    """Mixer weights that make the step loop give each drive exactly counts[i] steps in
+    a block (one whole period of the schedule). Returns (weights, counts given): when
+    the counts are too large for the mixer's integer range they are scaled, and the
+    counts the schedule then gives are worked out with the mixer itself."""
     g = 0
-    for v in scaled:
-        g = _gcd(g, v)
-    exact = tuple(v // g for v in scaled)
-    if sum(exact) <= WEIGHT_SCALE:
-        return exact
-    return normalize([w * spm for w, spm in zip(weights, drive_steps_per_mm)], len(weights))
+    for c in counts:
+        g = _gcd(g, c)
+    reduced = tuple(c // g for c in counts) if g else tuple(counts)
+    if sum(reduced) <= MAX_PERIOD:
+        return reduced, tuple(counts)
+    weights = normalize(counts, len(counts))
+    return weights, schedule_counts(weights, sum(counts))
 
 
 def _gcd(a, b):
@@ -79,17 +82,15 @@ class Planner:
         self.prev_unit = None
         self.prev_nominal = 0.0
         self.mix_id = 0
-        self.mix = (1,) + (0,) * (MAX_DRIVES - 1)  # the block's weights, per drive steps
-        self.tool_mix = self.mix  # the weights as the tool gives them
-        # E is counted in drive steps. With drives of different steps/mm the steps per
-        # mm of filament depend on the mix, so they are counted from a base that moves
-        # whenever that rate changes: units = base_units + (e_mm - base_mm) * rate.
+        self.tool_mix = (1,) + (0,) * (MAX_DRIVES - 1)  # the active tool's weights
+        self._block_mix_id = 0
+        # E is planned per drive, from absolute positions so rounding never drifts:
+        # each drive's exact filament (its share of every E move) -> its target step.
+        self.drives = settings["drives"]
         self.drive_steps_per_mm = list(settings.get("drive_steps_per_mm") or
-                                       [self.steps_per_mm[3]] * settings["drives"])
-        self.e_units_per_mm = self.steps_per_mm[3]
-        self._e_base_units = 0.0
-        self._e_base_mm = 0.0
-        self._e_last_mm = 0.0
+                                       [self.steps_per_mm[3]] * self.drives)
+        self.drive_mm = [0.0] * self.drives
+        self.drive_steps = [0] * self.drives
 
     # --- queue state, shared with the step loop ---
     def _count(self):
@@ -116,6 +117,9 @@ class Planner:
         m[st.S_ACTIVE] = 0
         self._irq_on(state)
         self.position_steps = [m[st.S_POS + i] for i in range(4)]
+        for i in range(self.drives):
+            self.drive_steps[i] = m[st.S_DRIVE_POS + i]
+            self.drive_mm[i] = self.drive_steps[i] / self.drive_steps_per_mm[i]
         self.prev_unit = None
         self.prev_nominal = 0.0
 
@@ -127,32 +131,27 @@ class Planner:
             self.prev_nominal = 0.0
 
     def set_mix(self, mix_id, weights):
+        """The mix for E moves queued from now on (already normalised weights)."""
         self.mix_id = mix_id & 0x3FFFFFFF
         self.tool_mix = tuple(weights)
-        spm = self.drive_steps_per_mm
-        mix = drive_weights(weights, spm)
-        self.mix = tuple(mix) + (0,) * (MAX_DRIVES - len(mix))
-        rate = sum(w * s for w, s in zip(weights, spm)) / sum(weights)
-        if rate != self.e_units_per_mm:
-            self._e_base_units += (self._e_last_mm - self._e_base_mm) * self.e_units_per_mm
-            self._e_base_mm = self._e_last_mm
-            self.e_units_per_mm = rate
 
-    def e_units(self, e_mm):
-        """Absolute machine E in mm -> absolute E position in drive steps."""
-        self._e_last_mm = e_mm
-        return round_steps(self._e_base_units + (e_mm - self._e_base_mm) * self.e_units_per_mm)
-
-    def set_drive_steps(self, drive_steps_per_mm, e_mm):
-        """New steps/mm per drive (M92 E, M930), between moves: the E position in steps
-        is kept, counting goes on at the new rate."""
+    def set_drive_steps(self, drive_steps_per_mm):
+        """New steps/mm per drive (M92 E, M930), between moves: each drive stays where
+        it is, counted in the new unit."""
         self.synchronize()
         self.drive_steps_per_mm = list(drive_steps_per_mm)
-        self._e_base_units = float(self.position_steps[3])
-        self._e_base_mm = self._e_last_mm = e_mm
-        self.e_units_per_mm = -1.0  # so set_mix takes the new rate without a rebase
-        self.set_mix(self.mix_id, self.tool_mix)
-        self._e_base_units = float(self.position_steps[3])
+        for i in range(self.drives):
+            self.drive_mm[i] = self.drive_steps[i] / self.drive_steps_per_mm[i]
+
+    def _plan_e(self, e_mm):
+        """Per-drive exact filament and step targets after an E move of e_mm."""
+        w = self.tool_mix
+        total = sum(w)
+        spm = self.drive_steps_per_mm
+        drive_mm = [self.drive_mm[i] + e_mm * w[i] / total for i in range(self.drives)]
+        counts = [steps_from_mm(drive_mm[i], spm[i]) - self.drive_steps[i]
+                  for i in range(self.drives)]
+        return drive_mm, counts
 
     def set_position_steps(self, steps):
         """Redefine where the axes are (G92, homing) once the queue is empty."""
@@ -182,22 +181,28 @@ class Planner:
         self.prev_unit = None
         self.prev_nominal = 0.0
 
-    def add_move(self, target_steps, feed_mm_s, homing_axes=0, dir_masks=None):
-        """Queue a straight move to absolute step targets [x, y, z, e]. Returns False if
-        the move is shorter than one step on every axis (nothing to do)."""
+    def add_move(self, target_steps, feed_mm_s, homing_axes=0, dir_masks=None, e_mm=0.0):
+        """Queue a straight move to absolute X Y Z step targets (target_steps[:3]) with
+        e_mm of filament shared by the drives in the active mix. Returns False if the
+        move is shorter than one step on every axis (nothing to do)."""
         if feed_mm_s <= 0:
             raise PlanError("feed rate must be > 0")
         pos = self.position_steps
         spm = self.steps_per_mm
-        delta = [target_steps[i] - pos[i] for i in range(4)]
+        drive_mm, counts = self._plan_e(e_mm)
+        e_steps = sum(counts)
+        delta = [target_steps[0] - pos[0], target_steps[1] - pos[1], target_steps[2] - pos[2],
+                 e_steps]
         steps = [abs(d) for d in delta]
         n = max(steps)
         if n == 0:
+            self.drive_mm = drive_mm  # less than a step: it counts toward the next move
             return False
         if n >= 0x3FFFFFFF:
             raise PlanError("move too long: %d steps" % n)
-        d_mm = [delta[0] / spm[0], delta[1] / spm[1], delta[2] / spm[2],
-                delta[3] / self.e_units_per_mm]
+        d_mm = [delta[0] / spm[0], delta[1] / spm[1], delta[2] / spm[2], e_mm]
+        if e_steps and not e_mm:
+            d_mm[3] = e_steps / spm[3]
         xyz_mm = sqrt(d_mm[0] * d_mm[0] + d_mm[1] * d_mm[1] + d_mm[2] * d_mm[2])
         dist = xyz_mm if steps[0] or steps[1] or steps[2] else abs(d_mm[3])
         inv = 1.0 / dist
@@ -250,14 +255,25 @@ class Planner:
         m[b + st.B_DIR_SET] = dset
         m[b + st.B_DIR_CLR] = dclr
         m[b + st.B_DWELL] = 0
-        m[b + st.B_MIX] = self.mix_id
-        for i in range(MAX_DRIVES):
-            m[b + st.B_MIX + 1 + i] = self.mix[i]
+        given = counts
+        if e_steps:
+            # Exact per-drive counts as the block's mix; a fresh id, so the step loop
+            # starts its schedule anew and gives each drive exactly its count.
+            weights, given = block_weights([abs(c) for c in counts])
+            if e_steps < 0:
+                given = [-c for c in given]
+            self._block_mix_id = (self._block_mix_id + 1) & 0x3FFFFFF
+            m[b + st.B_MIX] = self._block_mix_id
+            for i in range(MAX_DRIVES):
+                m[b + st.B_MIX + 1 + i] = weights[i] if i < len(weights) else 0
         self._set_plan(slot, dist, accel, speed, max_entry, unit)
         self.entry[slot] = min(max_entry, sqrt(2.0 * accel * dist))
         self._recalculate(slot)
         self._commit(slot)
-        self.position_steps = list(target_steps)
+        self.position_steps = [target_steps[0], target_steps[1], target_steps[2], pos[3] + e_steps]
+        self.drive_mm = drive_mm
+        for i in range(self.drives):
+            self.drive_steps[i] += given[i]
         if homing_axes:
             self.prev_unit = None
             self.prev_nominal = 0.0
