@@ -61,6 +61,7 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     mixing = cmd_mixing.Mixing(planner, settings, config, printer.reply,
                                lambda i: mem[st.S_DRIVE_POS + i])
     config.before_save.append(mixing.filament_used_mm)
+    motion.before_extrude.append(mixing.before_extrude)
     cmd_mixing.register(printer, mixing)
     thermal = Thermal(machine, pin_map, settings, printer)
     cmd_thermal.register(printer, thermal, motion)

@@ -4,6 +4,7 @@
 # M500 keeps them across a reboot and M503 prints them.
 from mixfw.gcode import GcodeError
 from mixfw.mixer import normalize
+from mixfw.gradient import Gradient, ALONG_Z, ALONG_E
 
 _MARLIN_LETTERS = "ABCDHI"  # Marlin's letters for drives 0..5 in M165
 
@@ -23,6 +24,9 @@ class Mixing:
         self.active = 0
         self.mix_id = 1
         self.mix = None
+        self.gradient = None
+        self.gradient_on = False
+        self.extruded_mm = 0.0  # printing extrusion since the gradient was set (ALONG_E)
         self._activate(0)
 
     def filament_used_mm(self):
@@ -73,6 +77,99 @@ class Mixing:
             self.config.save()
         else:
             self.reply("echo:T%d mix set; M500 keeps it after a restart" % tool)
+
+    def before_extrude(self, z_mm, e_mm):
+        """Called by motion before each move that extrudes: a gradient sets the mix the
+        move prints with, taken at the middle of the move."""
+        g = self.gradient
+        if g is None or not self.gradient_on or (g.alias >= 0 and g.alias != self.active):
+            return
+        if g.along == ALONG_Z:
+            pos = z_mm
+        else:
+            pos = self.extruded_mm + max(e_mm, 0.0) / 2
+            if e_mm > 0:
+                self.extruded_mm += e_mm
+        mix = g.weights_at(pos)
+        if mix != self.mix:
+            self.mix = mix
+            self.mix_id += 1
+            self.planner.set_mix(self.mix_id, mix)
+
+    def _tool_shares(self, tool):
+        return self.tool_mix(self._check_tool(tool))
+
+    # M166 A<z0> Z<z1> I<tool0> J<tool1> [S0|S1] [T<alias>]: Marlin's Z gradient from
+    # tool I at height A to tool J at height Z; T: only while that tool prints. No
+    # words: report. Example: M166 A0 Z10 I0 J1 S1
+    def m166(self, line):
+        if not line.present:
+            return self._report()
+        if line.has("A") or line.has("Z") or line.has("I") or line.has("J"):
+            for ch in "AZIJ":
+                line.require(ch)
+            stops = [(line.float("A"), self._tool_shares(line.int("I"))),
+                     (line.float("Z"), self._tool_shares(line.int("J")))]
+            alias = self._check_tool(line.int("T")) if line.has("T") else -1
+            self.gradient = Gradient(stops, ALONG_Z, alias, self.drives)
+            self.gradient_on = True
+        if line.has("S"):
+            if self.gradient is None:
+                raise GcodeError("no gradient set (M166 A Z I J or M169)")
+            self.gradient_on = line.int("S", lo=0, hi=1) == 1
+        self._after_gradient_change()
+
+    # M169 [T<alias>] Z<pos>:<tool>,<pos>:<tool>,... | E<mm>:<tool>,...: a gradient of
+    # two or more stops along Z (mm) or along the filament extruded from now (mm).
+    # M169 alone turns gradients off. Example: M169 T4 Z0:0,2:1,4:2,6:0
+    def m169(self, line):
+        words = line.args_text.split()
+        if not words:
+            self.gradient = None
+            self.gradient_on = False
+            self._after_gradient_change()
+            return
+        alias = -1
+        along = stops = None
+        for word in words:
+            letter, value = word[0].upper(), word[1:]
+            try:
+                if letter == "T":
+                    alias = self._check_tool(int(value))
+                elif letter in "ZE":
+                    along = ALONG_Z if letter == "Z" else ALONG_E
+                    stops = []
+                    for stop in value.split(","):
+                        pos, tool = stop.split(":")
+                        stops.append((float(pos), self._tool_shares(int(tool))))
+                else:
+                    raise GcodeError("M169 takes T<tool> and Z or E stops, not %s" % word)
+            except ValueError as e:
+                if isinstance(e, GcodeError):
+                    raise
+                raise GcodeError("malformed stop list %s: want <pos>:<tool>,..." % word)
+        if stops is None:
+            raise GcodeError("M169 needs stops: Z<pos>:<tool>,... or E<mm>:<tool>,...")
+        self.gradient = Gradient(stops, along, alias, self.drives)
+        self.gradient_on = True
+        self.extruded_mm = 0.0
+        self._after_gradient_change()
+
+    def _after_gradient_change(self):
+        if not self.gradient_on:
+            self.mix = None
+            self._activate(self.active)
+        self._report()
+
+    def _report(self):
+        g = self.gradient
+        if g is None:
+            self.reply("echo:no gradient")
+            return
+        self.reply("echo:gradient along %s %s%s: %s" % (
+            "Z" if g.along == ALONG_Z else "E", "on" if self.gradient_on else "off",
+            "" if g.alias < 0 else " for T%d" % g.alias,
+            ", ".join("%g:%s" % (p, ":".join("%.4f" % x for x in m)) for p, m in g.stops)))
 
     def apply(self, settings):
         """M930: the active tool's mix may have changed through M926."""
@@ -142,7 +239,7 @@ class Mixing:
             self._activate(tool)
 
 
-RAW_COMMANDS = (("M", 567),)
+RAW_COMMANDS = (("M", 567), ("M", 169))
 
 
 def register(printer, mixing):
@@ -151,4 +248,6 @@ def register(printer, mixing):
     printer.register("M165", mixing.m165, "whole mix A B C D H I; R reports every tool")
     printer.register("M567", mixing.m567, "a tool's mix: P<tool> E<w0>:<w1>:...")
     printer.register("M167", mixing.m167, "filament used per drive; R clears")
+    printer.register("M166", mixing.m166, "Z gradient A<z0> Z<z1> I<tool0> J<tool1> S T")
+    printer.register("M169", mixing.m169, "gradient of stops along Z or E")
     printer.register("T", mixing.t, "select virtual tool")

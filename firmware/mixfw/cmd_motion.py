@@ -37,6 +37,8 @@ class Motion:
         # Called before a move that extrudes; each raises GcodeError to refuse it
         # (cold extrusion, ...).
         self.extrusion_guards = []
+        # Called as fn(z_mm, e_mm) before a move that extrudes (gradients set the mix).
+        self.before_extrude = []
 
     def apply(self, settings):
         """Take changed settings (M930, M92, M201...): the queue drains first, and the
@@ -131,6 +133,9 @@ class Motion:
             if steps[i] != self.planner.position_steps[i]:
                 xyz |= 1 << i
         if xyz or e_mm:
+            if e_mm:
+                for fn in self.before_extrude:
+                    fn((self.pos_mm[2] + target[2]) / 2, e_mm)
             self._queue(steps, xyz, e_mm, self.feed_mm_s)
         self.pos_mm = target
         return None

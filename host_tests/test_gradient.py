@@ -1,0 +1,74 @@
+"""Gradients: Marlin's M166 along Z, and M169 with several stops along Z or along the
+filament extruded, on the firmware running on the unix port."""
+import pytest
+
+from mixstep.simprinter import SimPrinter
+
+E_SPM = 415
+
+
+def printer():
+    p = SimPrinter()
+    p.send("M302 P1")
+    p.send("M83")
+    return p
+
+
+def test_m166_blends_two_tools_along_z_finer_than_one_percent():
+    p = printer()
+    assert p.send("M166 A0 Z2 I0 J1 S1")[0].startswith("echo:gradient along Z on")
+    ideal = [0.0, 0.0]
+    for layer in range(1, 8):  # Z 0.3 .. 2.1: the last layer is past the end stop
+        z = 0.3 * layer
+        p.send("G1 Z%.1f F600" % z)
+        p.send("G1 X%d E7 F1200" % (10 * (layer % 2)))
+        f = min(z / 2, 1.0)
+        ideal[0] += 7 * (1 - f)
+        ideal[1] += 7 * f
+    steps = p.finish()["steps"]
+    # Each layer's mix is exact to 1/10000: well within a step per drive overall.
+    assert abs(steps["e0"] - ideal[0] * E_SPM) <= 1.5
+    assert abs(steps["e1"] - ideal[1] * E_SPM) <= 1.5
+    assert steps["e0"] + steps["e1"] == 49 * E_SPM  # E neither loses nor gains a step
+
+
+def test_m169_four_stops_along_the_extruded_length():
+    p = printer()
+    p.send("M169 E0:0,10:1,20:2,30:0")
+    for _ in range(60):
+        p.send("G1 E0.5 F1200")
+    steps = p.finish()["steps"]
+    # Linear blends between stops: each drive gets 10 mm of the 30 mm.
+    for d in range(3):
+        assert abs(steps["e%d" % d] - 10 * E_SPM) <= 2, steps
+    assert sum(steps["e%d" % d] for d in range(6)) == 30 * E_SPM
+
+
+def test_gradient_alias_tool_and_switching_off():
+    p = printer()
+    p.send("M169 T7 Z0:0,1:1")
+    p.send("G1 Z0.5 F600")
+    p.send("T2")
+    p.send("G1 E4 F1200")  # T2 is not the alias: its own mix
+    p.send("T7")
+    p.send("G1 E4 F1200")  # the gradient at Z0.5: half drive 0, half drive 1
+    assert p.send("M169")[0] == "echo:no gradient"
+    p.send("G1 E6 F1200")  # T7's own mix again: all six drives equally
+    steps = p.finish()["steps"]
+    assert steps["e2"] == 4 * E_SPM + E_SPM
+    assert (steps["e0"], steps["e1"]) == (2 * E_SPM + E_SPM, 2 * E_SPM + E_SPM)
+
+
+@pytest.mark.parametrize("line, reason", [
+    ("M169 Z0:0", "at least 2 stops"),
+    ("M169 Z1:0,1:1", "stops must increase"),
+    ("M169 Z0:0,1:99", "tool T99 out of range"),
+    ("M169 Z0-0", "malformed stop list"),
+    ("M166 A0 Z2 I0", "missing parameter J"),
+    ("M166 S1", "no gradient set"),
+])
+def test_bad_gradients_are_refused(line, reason):
+    p = printer()
+    reply = p.send(line)
+    assert reply[0].startswith("Error:") and reason in reply[0], reply
+    p.finish()
