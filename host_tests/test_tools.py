@@ -164,3 +164,24 @@ def test_any_sequence_of_mixes_and_moves_gives_each_drive_its_exact_share(moves)
     steps = p.finish()["steps"]
     for i in range(6):
         assert abs(steps["e%d" % i] - ideal_mm[i] * E_SPM) <= 0.5 + 1e-6, (i, steps, ideal_mm)
+
+
+def test_palette_mixtures_of_mixtures():
+    """Ovenbird's mixing matrix: tools as amounts of the palette's mixtures (u . P)."""
+    p = SimPrinter()
+    p.send("M302 P1")
+    assert p.send("M168")[0] == "echo:palette 0: 1.0000:0.0000:0.0000:0.0000:0.0000:0.0000"
+    replies = p.send("M168 1:1,0:0:1,2:0:2")  # rows normalised
+    assert replies[:3] == ["echo:palette 0: 0.5000:0.5000:0.0000:0.0000:0.0000:0.0000",
+                           "echo:palette 1: 0.0000:0.0000:1.0000:0.0000:0.0000:0.0000",
+                           "echo:palette 2: 0.5000:0.0000:0.5000:0.0000:0.0000:0.0000"]
+    p.send("M567 P3 U1:0:1")  # half of mixture 0, half of mixture 2
+    assert [l for l in p.send("M165 R") if l.startswith("M567 P3 ")] == ["M567 P3 E2:1:1:0:0:0"]
+    assert p.send("M567 P3 U1:1:1:1")[0] == "Error:4 amounts for a palette of 3 mixtures"
+    assert p.send("M567 P3 U1:-1")[0] == "Error:mixture amounts must be >= 0, got -1.0"
+    assert p.send("M168 1:x")[0].startswith("Error:malformed palette row")
+    assert p.send("M168 0:0")[0].startswith("Error:all-zero mix refused")
+    p.send("T3")
+    p.send("G1 E8 F1200")
+    steps = p.finish()["steps"]
+    assert (steps["e0"], steps["e1"], steps["e2"]) == (4 * E_SPM, 2 * E_SPM, 2 * E_SPM)

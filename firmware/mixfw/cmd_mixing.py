@@ -24,6 +24,7 @@ class Mixing:
         self.active = 0
         self.mix_id = 1
         self.mix = None
+        self.palette = None  # Ovenbird's mixing matrix: rows of drive shares; None: identity
         self.gradient = None
         self.gradient_on = False
         self.extruded_mm = 0.0  # printing extrusion since the gradient was set (ALONG_E)
@@ -212,8 +213,8 @@ class Mixing:
             raise GcodeError("M165 needs drive weights A B C D H I, or R to report")
         self.store(self.active, weights)
 
-    # M567 P<tool> E<w0>:<w1>:...: a tool's mix, as RepRapFirmware writes it.
-    # Example: M567 P2 E0.2:0.3:0.5
+    # M567 P<tool> E<w0>:<w1>:...: a tool's mix, as RepRapFirmware writes it. Or
+    # U<u0>:<u1>:...: a mixture of the palette's mixtures (M168). Example: M567 P2 E1:2:3
     def m567(self, line):
         tool = None
         weights = None
@@ -224,13 +225,56 @@ class Mixing:
                     tool = int(value)
                 elif letter == "E":
                     weights = [float(w) for w in value.split(":")]
+                elif letter == "U":
+                    weights = self.mixture_of_mixtures([float(u) for u in value.split(":")])
                 else:
-                    raise GcodeError("M567 takes P<tool> E<w0>:<w1>:..., not %s" % word)
-            except ValueError:
+                    raise GcodeError("M567 takes P<tool> E<w0>:<w1>:... or U<u0>:..., not %s"
+                                     % word)
+            except ValueError as e:
+                if isinstance(e, GcodeError):
+                    raise
                 raise GcodeError("malformed number in %s" % word)
         if tool is None or weights is None:
-            raise GcodeError("M567 needs P<tool> and E<w0>:<w1>:...")
+            raise GcodeError("M567 needs P<tool> and E<w0>:<w1>:... or U<u0>:<u1>:...")
         self.store(self._check_tool(tool), weights)
+
+    # M168 <row>,<row>,...: the palette, Ovenbird's mixing matrix: m mixtures over the
+    # drives, one row of drive weights w0:w1:... each, rows normalised. M168 alone:
+    # back to the identity (mixture k = drive k), and report. Example: M168 1:0,0:1,1:1
+    def m168(self, line):
+        text = line.args_text.strip()
+        if not text:
+            self.palette = None
+        else:
+            rows = []
+            for row in text.split(","):
+                try:
+                    weights = [float(w) for w in row.split(":")]
+                except ValueError:
+                    raise GcodeError("malformed palette row %r: want w0:w1:..." % row)
+                shares = normalize(weights, self.drives)
+                rows.append([w / sum(shares) for w in shares])
+            self.palette = rows
+        for k, row in enumerate(self._palette_rows()):
+            self.reply("echo:palette %d: %s" % (k, ":".join("%.4f" % w for w in row)))
+
+    def _palette_rows(self):
+        if self.palette is not None:
+            return self.palette
+        return [[1.0 if i == k else 0.0 for i in range(self.drives)] for k in range(self.drives)]
+
+    def mixture_of_mixtures(self, amounts):
+        """Drive weights of u . P: amounts of the palette's mixtures."""
+        rows = self._palette_rows()
+        if len(amounts) > len(rows):
+            raise GcodeError("%d amounts for a palette of %d mixtures" % (len(amounts), len(rows)))
+        total = [0.0] * self.drives
+        for u, row in zip(amounts, rows):
+            if u < 0:
+                raise GcodeError("mixture amounts must be >= 0, got %s" % u)
+            for i in range(self.drives):
+                total[i] += u * row[i]
+        return total
 
     # T<n>: select virtual tool n. Example: T2
     def t(self, line):
@@ -239,7 +283,7 @@ class Mixing:
             self._activate(tool)
 
 
-RAW_COMMANDS = (("M", 567), ("M", 169))
+RAW_COMMANDS = (("M", 567), ("M", 168), ("M", 169))
 
 
 def register(printer, mixing):
@@ -248,6 +292,7 @@ def register(printer, mixing):
     printer.register("M165", mixing.m165, "whole mix A B C D H I; R reports every tool")
     printer.register("M567", mixing.m567, "a tool's mix: P<tool> E<w0>:<w1>:...")
     printer.register("M167", mixing.m167, "filament used per drive; R clears")
+    printer.register("M168", mixing.m168, "palette: mixtures over the drives, w0:w1,...")
     printer.register("M166", mixing.m166, "Z gradient A<z0> Z<z1> I<tool0> J<tool1> S T")
     printer.register("M169", mixing.m169, "gradient of stops along Z or E")
     printer.register("T", mixing.t, "select virtual tool")
