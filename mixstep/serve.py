@@ -8,6 +8,8 @@ import os
 import selectors
 import subprocess
 import sys
+import threading
+import time
 import tty
 
 from mixstep import paths
@@ -37,6 +39,7 @@ class PtyBridge:
     """A pseudo-terminal whose far end is the firmware's stdio console."""
 
     def __init__(self, realtime=1.0):
+        self._lock = threading.Lock()
         self.master, self.slave = os.openpty()
         tty.setraw(self.slave)  # a serial line: no echo, no line editing
         self.path = os.ttyname(self.slave)
@@ -53,10 +56,16 @@ class PtyBridge:
             while self.proc.poll() is None:
                 for key, _ in sel.select(timeout=0.5):
                     if key.data == "host":
-                        try:
-                            data = os.read(self.master, 4096)
-                        except OSError:  # no host has the device open just now
-                            data = b""
+                        with self._lock:
+                            if self.master is None:
+                                return
+                            try:
+                                data = os.read(self.master, 4096)
+                            except OSError:  # no host has the device open just now
+                                data = None
+                        if data is None:
+                            time.sleep(0.05)
+                            continue
                         if data:
                             self.proc.stdin.write(data)
                     else:
@@ -64,19 +73,25 @@ class PtyBridge:
                             self.proc.stdout, "read1") else os.read(self.proc.stdout.fileno(), 4096)
                         if not data:
                             return
-                        os.write(self.master, data)
+                        with self._lock:
+                            if self.master is None:
+                                return
+                            os.write(self.master, data)
         finally:
             self.close()
 
     def close(self):
-        if self.proc.poll() is None:
-            self.proc.terminate()
-            self.proc.wait()
-        for fd in (self.master, self.slave):
-            try:
+        """Idempotent: the bridge thread and its owner may both call it, and closing an
+        fd number twice could close a file someone else has opened since."""
+        with self._lock:
+            if self.master is None:
+                return
+            if self.proc.poll() is None:
+                self.proc.terminate()
+                self.proc.wait()
+            for fd in (self.master, self.slave):
                 os.close(fd)
-            except OSError:
-                pass
+            self.master = self.slave = None
 
 
 def main(tcp=None, pty=False, realtime=1.0):
