@@ -14,6 +14,7 @@ from mixfw.console import StreamConsole
 from mixfw.config import Config
 from mixfw.files import Files
 from mixfw.thermal import Thermal
+from mixfw.transition import Transitions
 from mixfw import cmd_motion, cmd_mixing, cmd_thermal, cmd_report, cmd_config, cmd_files
 
 # Commands whose arguments are text, not numbers.
@@ -58,7 +59,11 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     printer.on_halt.append(planner.abort)
     printer.on_halt.append(motion.resync)
     cmd_motion.register(printer, motion)
-    mixing = cmd_mixing.Mixing(planner, settings, config, printer.reply,
+    l0_mm = settings.get("transition_l1_mm", 0.0) + settings.get("transition_l2_mm", 0.0) / 2
+    if l0_mm > 0:
+        motion.queue = Transitions(planner, l0_mm, printer.reply)
+        printer.on_halt.insert(0, motion.queue.drop)
+    mixing = cmd_mixing.Mixing(motion.queue, settings, config, printer.reply,
                                lambda i: mem[st.S_DRIVE_POS + i])
     config.before_save.append(mixing.filament_used_mm)
     motion.before_extrude.append(mixing.before_extrude)

@@ -17,6 +17,7 @@ class Motion:
     def __init__(self, planner, pins, settings, reply):
         self.reply = reply
         self.planner = planner
+        self.queue = planner  # where moves go: the planner, or Transitions in front of it
         self.pins = pins
         self.pos_mm = [0.0, 0.0, 0.0, 0.0]  # logical, as G-code sees it
         self.offset_mm = [0.0, 0.0, 0.0, 0.0]  # machine = logical + offset (G92)
@@ -129,8 +130,9 @@ class Motion:
         steps = self._steps(target)
         e_mm = target[3] - self.pos_mm[3]
         xyz = 0
+        at = self.queue.position_steps
         for i in range(3):
-            if steps[i] != self.planner.position_steps[i]:
+            if steps[i] != at[i]:
                 xyz |= 1 << i
         if xyz or e_mm:
             if e_mm:
@@ -149,19 +151,15 @@ class Motion:
             for guard in self.extrusion_guards:
                 guard()
         self.enable_for(xyz | (8 if e_mm else 0))
-        p = self.planner
+        q = self.queue
         if not xyz and self.retract_policy == RETRACT_EQUAL and (e_mm < 0 or self.retracted_mm > 0):
             # A retraction, or the unretraction after it: every drive pulls equally, and
             # as drives are planned from absolute positions, pushes back exactly.
-            tool_id, tool_mix = p.mix_id, p.tool_mix
-            p.set_mix(tool_id, (1,) * self.drives)
-            try:
-                p.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_mm=e_mm)
-            finally:
-                p.set_mix(tool_id, tool_mix)
+            q.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_mm=e_mm,
+                       mix=(q.mix_id, (1,) * self.drives))
             self.retracted_mm = max(0.0, self.retracted_mm - e_mm)
         else:
-            p.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_mm=e_mm)
+            q.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_mm=e_mm)
 
     # G10: firmware retraction by retract_mm at retract_feed_mm_s; the logical E stays.
     def g10(self, line):
@@ -188,6 +186,7 @@ class Motion:
             raise GcodeError("dwell time must be >= 0")
         if seconds > 0:
             # Queued, so the dwell is exact in time; then waited for, as in Marlin.
+            self.planner.synchronize()
             self.planner.add_dwell(seconds)
             self.planner.synchronize()
         return None

@@ -24,6 +24,8 @@ FIRMWARE_DEFAULTS = {
     "retract_mm": 2.0,
     "retract_feed_mm_s": 40.0,
     "unretract_feed_mm_s": 40.0,
+    "transition_l1_mm": 0.0,
+    "transition_l2_mm": 0.0,
 }
 
 
@@ -123,6 +125,10 @@ SCHEMA = (
      "G10 retraction speed"),
     ("unretract_feed_mm_s",        "",     FLOAT, 0.1,     500.0,       LIVE,
      "G11 unretraction speed"),
+    ("transition_l1_mm",           "",     FLOAT, 0.0,     100.0,       RESTART,
+     "mixing chamber delay L1; with L2, changes apply L1 + L2/2 of extrusion early"),
+    ("transition_l2_mm",           "",     FLOAT, 0.0,     100.0,       RESTART,
+     "transition length L2 over which a change blends"),
     ("drive_steps_per_mm",         EACH,   FLOAT, 0.001,   100000.0,    LIVE,
      "steps per mm of filament of this mixing drive (M92 E sets them all)"),
     ("filament_used_mm",           EACH,   FLOAT, -1e9,    1e9,         LIVE,

@@ -91,6 +91,7 @@ class Planner:
                                        [self.steps_per_mm[3]] * self.drives)
         self.drive_mm = [0.0] * self.drives
         self.drive_steps = [0] * self.drives
+        self.before_sync = []  # fn() each: moves held before the planner are handed over
 
     # --- queue state, shared with the step loop ---
     def _count(self):
@@ -103,6 +104,8 @@ class Planner:
 
     def synchronize(self):
         """Wait until every queued block has run (M400)."""
+        for fn in self.before_sync:
+            fn()
         while self.busy():
             self.idle()
         self.prev_unit = None
@@ -143,9 +146,9 @@ class Planner:
         for i in range(self.drives):
             self.drive_mm[i] = self.drive_steps[i] / self.drive_steps_per_mm[i]
 
-    def _plan_e(self, e_mm):
+    def _plan_e(self, e_mm, weights=None):
         """Per-drive exact filament and step targets after an E move of e_mm."""
-        w = self.tool_mix
+        w = weights or self.tool_mix
         total = sum(w)
         spm = self.drive_steps_per_mm
         drive_mm = [self.drive_mm[i] + e_mm * w[i] / total for i in range(self.drives)]
@@ -181,15 +184,17 @@ class Planner:
         self.prev_unit = None
         self.prev_nominal = 0.0
 
-    def add_move(self, target_steps, feed_mm_s, homing_axes=0, dir_masks=None, e_mm=0.0):
+    def add_move(self, target_steps, feed_mm_s, homing_axes=0, dir_masks=None, e_mm=0.0,
+                 mix=None):
         """Queue a straight move to absolute X Y Z step targets (target_steps[:3]) with
         e_mm of filament shared by the drives in the active mix. Returns False if the
-        move is shorter than one step on every axis (nothing to do)."""
+        move is shorter than one step on every axis (nothing to do). mix: (id, weights)
+        for this move instead of the active one."""
         if feed_mm_s <= 0:
             raise PlanError("feed rate must be > 0")
         pos = self.position_steps
         spm = self.steps_per_mm
-        drive_mm, counts = self._plan_e(e_mm)
+        drive_mm, counts = self._plan_e(e_mm, mix[1] if mix else None)
         e_steps = sum(counts)
         delta = [target_steps[0] - pos[0], target_steps[1] - pos[1], target_steps[2] - pos[2],
                  e_steps]

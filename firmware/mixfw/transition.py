@@ -1,0 +1,92 @@
+# Transitions in firmware: a mix or tool change takes effect L0 = L1 + L2/2 of printing
+# extrusion before the G-code places it (Ovenbird's model: the nozzle delays a change by
+# L1 and blends it over L2), so no post-processor and no wipe tower are needed. Moves
+# wait here until L0 of printing extrusion follows them; a change applies to the
+# waiting moves within L0 of it, splitting the move that crosses that point exactly.
+# Only positive extrusion on moves that also move X, Y or Z counts, as in `advance`.
+
+
+class Transitions:
+    def __init__(self, planner, l0_mm, reply):
+        self.planner = planner
+        self.l0_mm = l0_mm
+        self.reply = reply
+        # Each waiting move: [start_xyz, target_xyz, e_mm, feed_mm_s, dir_masks, mix]
+        self.pending = []
+        self.pending_printing_mm = 0.0
+        self.mix_id = planner.mix_id
+        self.tool_mix = planner.tool_mix
+        planner.before_sync.append(self.flush)
+
+    def __getattr__(self, name):
+        # Everything else (synchronize, drive_steps_per_mm, ...) is the planner's.
+        return getattr(self.planner, name)
+
+    @property
+    def position_steps(self):
+        if self.pending:
+            return list(self.pending[-1][1]) + [self.planner.position_steps[3]]
+        return self.planner.position_steps
+
+    @staticmethod
+    def _printing_mm(move):
+        return move[2] if move[2] > 0 and move[0] != move[1] else 0.0
+
+    def add_move(self, target_steps, feed_mm_s, dir_masks=None, e_mm=0.0, mix=None):
+        start = self.position_steps[:3]
+        move = [start, list(target_steps[:3]), e_mm, feed_mm_s, dir_masks,
+                mix or (self.mix_id, self.tool_mix)]
+        self.pending.append(move)
+        self.pending_printing_mm += self._printing_mm(move)
+        # A move is released once L0 of printing extrusion follows it.
+        while self.pending and (self.pending_printing_mm - self._printing_mm(self.pending[0])
+                                >= self.l0_mm):
+            self._release()
+        return True
+
+    def _release(self):
+        move = self.pending.pop(0)
+        self.pending_printing_mm -= self._printing_mm(move)
+        p = self.planner
+        mix_id, weights = move[5]
+        p.set_mix(mix_id, weights)
+        p.add_move(move[1] + [0], move[3], dir_masks=move[4], e_mm=move[2])
+
+    def flush(self):
+        while self.pending:
+            self._release()
+
+    def drop(self):
+        """A halt: waiting moves are dropped with the queue."""
+        self.pending = []
+        self.pending_printing_mm = 0.0
+
+    def set_mix(self, mix_id, weights):
+        """A mix change: it reaches back over the last L0 of printing extrusion."""
+        self.mix_id = mix_id
+        self.tool_mix = tuple(weights)
+        mix = (mix_id, self.tool_mix)
+        need = self.l0_mm
+        k = len(self.pending)
+        while k > 0 and need > 0:
+            move = self.pending[k - 1]
+            e = self._printing_mm(move)
+            if e > need:
+                self._split(k - 1, need)  # the part after the split is pending[k]
+                break
+            need -= e
+            k -= 1
+        else:
+            if need > 1e-9:
+                self.reply("echo:transition advanced %.3f of %.3f mm: too little extrusion "
+                           "queued before the change" % (self.l0_mm - need, self.l0_mm))
+        for move in self.pending[k:]:
+            move[5] = mix
+
+    def _split(self, index, tail_mm):
+        """Split pending[index] so that its last tail_mm of extrusion is a move of its own."""
+        start, target, e, feed, masks, mix = self.pending[index]
+        f = (e - tail_mm) / e
+        mid = [start[i] + int(round((target[i] - start[i]) * f)) for i in range(3)]
+        self.pending[index] = [start, mid, e - tail_mm, feed, masks, mix]
+        self.pending.insert(index + 1, [mid, target, tail_mm, feed, masks, mix])

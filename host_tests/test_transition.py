@@ -1,0 +1,71 @@
+"""Transitions in firmware: with L1/L2 set, a tool change applies L0 = L1 + L2/2 of
+printing extrusion before the G-code places it, splitting the move that crosses that
+point; the simulated trace shows the drive switch there."""
+import numpy as np
+
+from mixstep import paths, trace
+from mixstep.simprinter import SimPrinter
+
+E_SPM = 415
+X_SPM = 80
+
+
+def configured(tmp_path, l1_mm, l2_mm):
+    cfg = tmp_path / "mixstep.cfg"
+    p = SimPrinter(config_path=cfg)
+    p.send("M926 Itransition_l1_mm V%s" % l1_mm)
+    p.send("M926 Itransition_l2_mm V%s" % l2_mm)
+    p.send("M500")
+    p.finish()
+    return cfg
+
+
+def test_tool_change_applies_l0_early_and_the_trace_shows_it(tmp_path, board):
+    cfg = configured(tmp_path, 1.0, 3.0)  # L0 = 2.5 mm
+    edges = tmp_path / "run.edges"
+    p = SimPrinter(config_path=cfg, edges_path=edges)
+    for line in ("M302 P1", "M83", "G1 X10 E5 F1200", "T1", "G1 X20 E5", "M400"):
+        assert p.send(line)[-1] == "ok"
+    steps = p.finish()["steps"]
+    # Each drive at its exact filament, rounded half away from zero: 1037.5 -> 1038.
+    assert (steps["e0"], steps["e1"], steps["x"]) == (1038, 3113, 20 * X_SPM)
+    # In the trace, drive e1's first step comes when X has reached the split point:
+    # 2.5 mm of the first move's 5 mm of E before its end, so X = 5 mm.
+    t, g, v = trace.read_edges(edges)
+    pins = board["PINS"]
+    first_e1 = t[(g == pins["e1_step"]) & (v == 1) & (t > 0)][0]
+    x_before = np.sum((g == pins["x_step"]) & (v == 1) & (t > 0) & (t <= first_e1))
+    assert abs(x_before - 5 * X_SPM) <= 1
+    last_e0 = t[(g == pins["e0_step"]) & (v == 1) & (t > 0)][-1]
+    assert last_e0 < first_e1
+
+
+def test_too_little_extrusion_before_a_change_is_reported(tmp_path):
+    cfg = configured(tmp_path, 1.0, 3.0)
+    p = SimPrinter(config_path=cfg)
+    p.send("M302 P1")
+    p.send("M83")
+    p.send("G1 X1 E1 F1200")
+    reply = p.send("T1")
+    assert reply[0] == ("echo:transition advanced 1.000 of 2.500 mm: too little extrusion "
+                        "queued before the change")
+    p.send("G1 X5 E4")
+    steps = p.finish()["steps"]
+    assert (steps["e0"], steps["e1"]) == (0, 5 * E_SPM)
+
+
+def test_the_example_print_with_firmware_transitions_keeps_every_step(tmp_path, board):
+    cfg = configured(tmp_path, 1.0, 3.0)
+    gcode = paths.ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
+    p = SimPrinter(config_path=cfg)
+    errors = []
+    for line in open(gcode):
+        errors += [r for r in p.send(line.rstrip("\n")) if r.startswith("Error")]
+    steps = p.finish()["steps"]
+    assert errors == []
+    from gcode_model import expected_steps
+    plain = expected_steps(gcode, board["SETTINGS"]["steps_per_mm"])
+    assert steps["x"] == plain["x"] and steps["y"] == plain["y"] and steps["z"] == plain["z"]
+    # Filament moved between drives, none lost.
+    assert abs(sum(steps["e%d" % d] for d in range(3)) - sum(plain["e%d" % d] for d in range(3))) <= 2
+    assert steps["e0"] != plain["e0"]
