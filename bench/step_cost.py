@@ -13,7 +13,7 @@ import simmachine
 sys.modules["machine"] = simmachine
 import board
 import main
-from mixfw import stepper as st, mixer
+from mixfw import stepper as st
 
 CALLS = 200000
 

@@ -1,5 +1,4 @@
 """Printing from flash (M20-M32) and uploading (M28/M29), on the unix port."""
-import time
 
 from mixstep.simprinter import SimPrinter
 from mixstep import paths

@@ -4,7 +4,6 @@ import socket
 import threading
 import time
 
-import pytest
 from printrun import gcoder
 from printrun.printcore import printcore
 

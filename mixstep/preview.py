@@ -165,7 +165,7 @@ class Toolpath:
                     if "E" in p:
                         de_mm = p["E"] - e_mm if absolute_e else p["E"]
                         e_mm += de_mm
-                    fed0, fed_mm = fed_mm, fed_mm + de_mm
+                    fed_mm += de_mm
                     x0_mm, x1_mm = outflow_mm, max(outflow_mm, fed_mm)
                     outflow_mm = x1_mm
                     points = self._path(cmd, pos, target, p)

@@ -1,7 +1,6 @@
 """`mixstep sim`: stream a G-code file through the simulated printer, one line per
 `ok` as a host does, and write the GPIO trace (VCD) and a JSON report."""
 import json
-import os
 import tempfile
 import time
 from pathlib import Path

@@ -166,20 +166,3 @@ def default_tool_mixes(drives, count=16):
     """T<n> is 100 % drive n below the drive count, an equal mix of all drives above."""
     return tuple(tuple(1 if i == t else 0 for i in range(drives)) if t < drives
                  else (1,) * drives for t in range(count))
-
-
-class Tools:
-    """Virtual tools T0..T15: each a normalised mix. Owned by the command side; a block
-    copies the mix it was queued with, so changing a tool never alters queued moves."""
-
-    def __init__(self, drives, count=16):
-        if not 1 <= drives <= MAX_DRIVES:
-            raise MixError("drive count %d outside 1..%d" % (drives, MAX_DRIVES))
-        self.drives = drives
-        self.count = count
-        self.mixes = list(default_tool_mixes(drives, count))
-
-    def check(self, tool):
-        if not 0 <= tool < self.count:
-            raise MixError("tool %d out of range 0..%d" % (tool, self.count - 1))
-        return tool
