@@ -185,3 +185,28 @@ def test_palette_mixtures_of_mixtures():
     p.send("G1 E8 F1200")
     steps = p.finish()["steps"]
     assert (steps["e0"], steps["e1"], steps["e2"]) == (4 * E_SPM, 2 * E_SPM, 2 * E_SPM)
+
+
+def test_replay_policy_takes_back_exactly_the_latest_steps_of_each_drive():
+    """Retract 2 mm after 1 mm of T0 then 1.5 mm of T1: the replay policy pulls back
+    1.5 mm on drive 1 and 0.5 mm on drive 0, and the unretraction after a change to T2
+    pushes exactly those back, where following the mix would pull T2's drive."""
+    lines = ["M83", "G1 E1 F600", "T1", "G1 E1.5 F600", "G1 E-2 F2400", "T2",
+             "G1 E2 F2400", "G1 E1 F600"]
+    steps = retract_run(2, lines)
+    assert [steps["e%d" % d] for d in range(3)] == [E_SPM, 623, E_SPM]  # 622.5 rounds up
+    # Mid-way, after the retraction: drive 1 gave back all its steps, drive 0 the rest.
+    mid = retract_run(2, lines[:5] + ["M114"])
+    assert abs(mid["e0"] - 0.5 * E_SPM) <= 1 and (mid["e1"], mid["e2"]) == (0, 0)
+    follow = retract_run(0, lines[:5] + ["M114"])
+    assert follow["e0"] == E_SPM and follow["e1"] < 0  # the mix pulls T1's drive only
+
+
+def test_replay_policy_covers_mixes_wipes_and_firmware_retraction():
+    # A 1:2:3 mix, then a wipe (retraction while moving) and G10/G11 across a tool change.
+    steps = retract_run(2, [
+        "M567 P0 E1:2:3", "M83", "G1 X5 E6 F600", "G1 X8 E-0.5 F3000", "G10", "T1",
+        "G1 X20 F3000", "G11", "G1 E0.5 F600", "G1 X25 E1 F600"])
+    # Everything taken back was pushed back to the same drives; then T1 extruded 1 mm.
+    assert [steps["e%d" % d] for d in range(3)] == [E_SPM, 2 * E_SPM + E_SPM, 3 * E_SPM]
+    assert steps["x"] == 25 * 80

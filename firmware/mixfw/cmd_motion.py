@@ -6,9 +6,11 @@ from mixfw import stepper as st
 
 AXIS_LETTERS = "XYZE"
 # retract_policy: retractions follow the mix and run it exactly backwards, or pull every
-# drive equally (and push them back equally).
+# drive equally (and push them back equally), or take back exactly the steps each drive
+# made in the latest extrusion (and push exactly those back).
 RETRACT_FOLLOW_MIX = 0
 RETRACT_EQUAL = 1
+RETRACT_REPLAY = 2
 
 
 class Motion:
@@ -32,7 +34,7 @@ class Motion:
         self.soft_limits = settings.get("soft_limits", True)
         # Longest E move accepted, as Marlin's PREVENT_LENGTHY_EXTRUDE.
         self.max_extrude_mm = settings.get("max_extrude_mm", 200.0)
-        self.retracted_mm = 0.0  # E-only retraction not yet undone (for the equal policy)
+        self.retracted_mm = 0.0  # retraction not yet undone (equal and replay policies)
         self.fw_retracted = False
         self._retraction_settings(settings)
         # Called before a move that extrudes; each raises GcodeError to refuse it
@@ -62,6 +64,7 @@ class Motion:
 
     def _retraction_settings(self, settings):
         self.retract_policy = settings.get("retract_policy", RETRACT_FOLLOW_MIX)
+        self.planner.keep_extrusion = self.retract_policy == RETRACT_REPLAY
         self.retract_mm = settings.get("retract_mm", 2.0)
         self.retract_feed_mm_s = settings.get("retract_feed_mm_s", 40.0)
         self.unretract_feed_mm_s = settings.get("unretract_feed_mm_s", 40.0)
@@ -152,13 +155,20 @@ class Motion:
                 guard()
         self.enable_for(xyz | (8 if e_mm else 0))
         q = self.queue
-        if not xyz and self.retract_policy == RETRACT_EQUAL and (e_mm < 0 or self.retracted_mm > 0):
+        policy = self.retract_policy
+        if not xyz and policy == RETRACT_EQUAL and (e_mm < 0 or self.retracted_mm > 0):
             # A retraction, or the unretraction after it: every drive pulls equally, and
             # as drives are planned from absolute positions, pushes back exactly.
             q.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_mm=e_mm,
                        mix=(q.mix_id, (1,) * self.drives))
             self.retracted_mm = max(0.0, self.retracted_mm - e_mm)
+        elif policy == RETRACT_REPLAY and (e_mm < 0 or (not xyz and self.retracted_mm > 0)):
+            # Wipes (retraction while moving) count as retraction too.
+            q.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_mm=e_mm, replay=True)
+            self.retracted_mm = max(0.0, self.retracted_mm - e_mm)
         else:
+            if policy == RETRACT_REPLAY and e_mm > 0:
+                self.retracted_mm = 0.0  # as the planner forgets them on extrusion
             q.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_mm=e_mm)
 
     # G10: firmware retraction by retract_mm at retract_feed_mm_s; the logical E stays.

@@ -117,8 +117,9 @@ SCHEMA = (
      "part fan PWM frequency"),
     ("thermal_period_ms",          "",     INT,   10,      10000,       RESTART,
      "heater control period"),
-    ("retract_policy",             "",     INT,   0,       1,           LIVE,
-     "0: retractions follow the mix, exactly reversed; 1: all drives equally"),
+    ("retract_policy",             "",     INT,   0,       2,           LIVE,
+     "0: retractions follow the mix, exactly reversed; 1: all drives equally; "
+     "2: replay each drive's latest steps exactly"),
     ("retract_mm",                 "",     FLOAT, 0.0,     50.0,        LIVE,
      "G10 retraction length"),
     ("retract_feed_mm_s",          "",     FLOAT, 0.1,     500.0,       LIVE,

@@ -13,6 +13,10 @@ from mixfw.mixer import MAX_DRIVES, normalize, schedule_counts
 MAX_PERIOD = 20000
 
 _INF = 1e30
+# How much of the latest extrusion retract_policy 2 remembers: enough blocks for the
+# longest retraction the options allow, within a bounded memory.
+REPLAY_MM = 50.0
+REPLAY_BLOCKS = 64
 
 
 def round_steps(v):
@@ -92,6 +96,12 @@ class Planner:
         self.drive_mm = [0.0] * self.drives
         self.drive_steps = [0] * self.drives
         self.before_sync = []  # fn() each: moves held before the planner are handed over
+        # For retract_policy 2: the latest extrusion as stretches [start, end) of block
+        # schedules (weights, start, end), newest last, and what retractions took back
+        # from it, taken-first first. See _replay_counts.
+        self.keep_extrusion = False
+        self.extruded = []
+        self.retracted = []
 
     # --- queue state, shared with the step loop ---
     def _count(self):
@@ -125,6 +135,8 @@ class Planner:
             self.drive_mm[i] = self.drive_steps[i] / self.drive_steps_per_mm[i]
         self.prev_unit = None
         self.prev_nominal = 0.0
+        self.extruded = []
+        self.retracted = []
 
     def _wait_for_slot(self):
         while self._count() >= self.queue - 1:
@@ -156,6 +168,69 @@ class Planner:
                   for i in range(self.drives)]
         return drive_mm, counts
 
+    def _replay_counts(self, e_mm):
+        """Per-drive steps of a retraction (e_mm < 0) that takes back exactly the drive
+        steps of the latest e_mm of extrusion, newest first, or of an unretraction that
+        pushes back exactly what retractions took, oldest first. What the record does
+        not cover follows the active mix."""
+        back = e_mm < 0
+        take = self.extruded if back else self.retracted
+        give = self.retracted if back else self.extruded
+        spm = self.drive_steps_per_mm
+        need_mm = abs(e_mm)
+        counts = [0] * self.drives
+        while take and need_mm > 1e-9:
+            w, start, end, part, mm = take[-1]
+            if mm > need_mm + 1e-9:
+                k = round_steps(need_mm * (end - start) / mm)
+                if k == 0:
+                    break
+                # A part of the stretch: its newest steps go back first, and come
+                # forward again oldest first.
+                cut = end - k if back else start + k
+                first = self._stretch(w, start, cut)
+                second = self._stretch(w, cut, end)
+                take[-1] = first if back else second
+                mine = second if back else first
+                give.append(mine)
+                part, mm = mine[3], mine[4]
+            else:
+                give.append(take.pop())
+            for i in range(self.drives):
+                counts[i] += part[i]
+            need_mm -= mm
+        # The drives' exact positions move by the replayed steps, and the rest by the
+        # mix: the step targets then follow from those positions as for any move.
+        sign = -1 if back else 1
+        for i in range(self.drives):
+            self.drive_mm[i] += sign * counts[i] / spm[i]
+        return self._plan_e(sign * need_mm if need_mm > 1e-9 else 0.0)
+
+    def _stretch(self, weights, start, end, counts=None):
+        """A record of steps [start, end) of a block's schedule, with its per-drive
+        steps and its filament in mm."""
+        if counts is None:
+            a = schedule_counts(weights, start)
+            b = schedule_counts(weights, end)
+            counts = [b[i] - a[i] for i in range(len(weights))]
+        spm = self.drive_steps_per_mm
+        mm = 0.0
+        for i in range(self.drives):
+            mm += counts[i] / spm[i]
+        return (weights, start, end, counts, mm)
+
+    def _remember_extrusion(self, weights, counts):
+        """Keep the latest extrusion for retract_policy 2: at most REPLAY_BLOCKS blocks,
+        and no more than REPLAY_MM beyond what the newest of them hold."""
+        ext = self.extruded
+        ext.append(self._stretch(weights, 0, sum(counts), counts))
+        self.retracted = []
+        total = 0.0
+        for stretch in ext:
+            total += stretch[4]
+        while len(ext) > REPLAY_BLOCKS or (len(ext) > 1 and total - ext[0][4] >= REPLAY_MM):
+            total -= ext.pop(0)[4]
+
     def set_position_steps(self, steps):
         """Redefine where the axes are (G92, homing) once the queue is empty."""
         self.synchronize()
@@ -185,16 +260,23 @@ class Planner:
         self.prev_nominal = 0.0
 
     def add_move(self, target_steps, feed_mm_s, homing_axes=0, dir_masks=None, e_mm=0.0,
-                 mix=None):
+                 mix=None, replay=False):
         """Queue a straight move to absolute X Y Z step targets (target_steps[:3]) with
         e_mm of filament shared by the drives in the active mix. Returns False if the
         move is shorter than one step on every axis (nothing to do). mix: (id, weights)
-        for this move instead of the active one."""
+        for this move instead of the active one. replay: a retraction or unretraction
+        that replays the latest extrusion exactly (retract_policy 2)."""
         if feed_mm_s <= 0:
             raise PlanError("feed rate must be > 0")
         pos = self.position_steps
         spm = self.steps_per_mm
-        drive_mm, counts = self._plan_e(e_mm, mix[1] if mix else None)
+        saved_mm = self.drive_mm
+        if replay and e_mm:
+            self.drive_mm = list(saved_mm)
+            drive_mm, counts = self._replay_counts(e_mm)
+            self.drive_mm = saved_mm
+        else:
+            drive_mm, counts = self._plan_e(e_mm, mix[1] if mix else None)
         e_steps = sum(counts)
         delta = [target_steps[0] - pos[0], target_steps[1] - pos[1], target_steps[2] - pos[2],
                  e_steps]
@@ -267,6 +349,8 @@ class Planner:
             weights, given = block_weights([abs(c) for c in counts])
             if e_steps < 0:
                 given = [-c for c in given]
+            elif self.keep_extrusion and not replay:
+                self._remember_extrusion(weights, given)
             self._block_mix_id = (self._block_mix_id + 1) & 0x3FFFFFF
             m[b + st.B_MIX] = self._block_mix_id
             for i in range(MAX_DRIVES):

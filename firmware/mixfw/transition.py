@@ -11,7 +11,7 @@ class Transitions:
         self.planner = planner
         self.l0_mm = l0_mm
         self.reply = reply
-        # Each waiting move: [start_xyz, target_xyz, e_mm, feed_mm_s, dir_masks, mix]
+        # Each waiting move: [start_xyz, target_xyz, e_mm, feed_mm_s, dir_masks, mix, replay]
         self.pending = []
         self.pending_printing_mm = 0.0
         self.mix_id = planner.mix_id
@@ -32,10 +32,11 @@ class Transitions:
     def _printing_mm(move):
         return move[2] if move[2] > 0 and move[0] != move[1] else 0.0
 
-    def add_move(self, target_steps, feed_mm_s, dir_masks=None, e_mm=0.0, mix=None):
+    def add_move(self, target_steps, feed_mm_s, dir_masks=None, e_mm=0.0, mix=None,
+                 replay=False):
         start = self.position_steps[:3]
         move = [start, list(target_steps[:3]), e_mm, feed_mm_s, dir_masks,
-                mix or (self.mix_id, self.tool_mix)]
+                mix or (self.mix_id, self.tool_mix), replay]
         self.pending.append(move)
         self.pending_printing_mm += self._printing_mm(move)
         # A move is released once L0 of printing extrusion follows it.
@@ -50,7 +51,7 @@ class Transitions:
         p = self.planner
         mix_id, weights = move[5]
         p.set_mix(mix_id, weights)
-        p.add_move(move[1] + [0], move[3], dir_masks=move[4], e_mm=move[2])
+        p.add_move(move[1] + [0], move[3], dir_masks=move[4], e_mm=move[2], replay=move[6])
 
     def flush(self):
         while self.pending:
@@ -85,8 +86,8 @@ class Transitions:
 
     def _split(self, index, tail_mm):
         """Split pending[index] so that its last tail_mm of extrusion is a move of its own."""
-        start, target, e, feed, masks, mix = self.pending[index]
+        start, target, e, feed, masks, mix, replay = self.pending[index]
         f = (e - tail_mm) / e
         mid = [start[i] + int(round((target[i] - start[i]) * f)) for i in range(3)]
-        self.pending[index] = [start, mid, e - tail_mm, feed, masks, mix]
-        self.pending.insert(index + 1, [mid, target, tail_mm, feed, masks, mix])
+        self.pending[index] = [start, mid, e - tail_mm, feed, masks, mix, replay]
+        self.pending.insert(index + 1, [mid, target, tail_mm, feed, masks, mix, replay])
