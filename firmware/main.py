@@ -14,7 +14,7 @@ from mixfw.console import StreamConsole
 from mixfw.config import Config
 from mixfw.files import Files
 from mixfw.thermal import Thermal
-from mixfw.transition import Transitions
+from mixfw.transition import Transitions, l0_mm
 from mixfw import cmd_motion, cmd_mixing, cmd_thermal, cmd_report, cmd_config, cmd_files
 
 # Commands whose arguments are text, not numbers.
@@ -59,9 +59,12 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     printer.on_halt.append(planner.abort)
     printer.on_halt.append(motion.resync)
     cmd_motion.register(printer, motion)
-    l0_mm = settings.get("transition_l1_mm", 0.0) + settings.get("transition_l2_mm", 0.0) / 2
-    if l0_mm > 0:
-        motion.queue = Transitions(planner, l0_mm, printer.reply)
+    transitions = Transitions(
+        planner, l0_mm(settings["transition_l1_mm"], settings["transition_l2_mm"]),
+        settings["transition_pairs"], printer.reply)
+    if transitions.l0_mm > 0:
+        motion.queue = transitions
+        planner.before_sync.append(transitions.flush)
         printer.on_halt.insert(0, motion.queue.drop)
     mixing = cmd_mixing.Mixing(motion.queue, settings, config, printer.reply,
                                lambda i: mem[st.S_DRIVE_POS + i])

@@ -235,6 +235,7 @@ print(json.dumps({"names": [o.name for o in c.options],
         "tcp_max_clients"]
     expected += [n for n in optional if n in board["SETTINGS"]]
     expected += ["tool_mixes_%d" % t for t in range(board["SETTINGS"]["virtual_tools"])]
+    expected += ["transition_pairs_%d" % k for k in range(8)]
     expected += ["%s_%d" % (k, d) for d in range(board["SETTINGS"]["drives"])
                  for k in ("drive_steps_per_mm", "filament_used_mm")]
     assert sorted(names) == sorted(expected)
@@ -294,6 +295,9 @@ def configurations(draw, options):
         elif kind == "mix":
             weights = draw(st.lists(st.integers(0, 50), min_size=1, max_size=6).filter(any))
             v = ":".join(str(w) for w in weights)
+        elif kind == "pair":
+            v = "%d:%d:%r:%r" % (draw(st.integers(0, 15)), draw(st.integers(0, 15)),
+                                 draw(st.floats(lo, hi)), draw(st.floats(lo, hi)))
         else:
             v = str(draw(st.integers(0, 1)))
         pairs.append((name, v))
@@ -330,6 +334,10 @@ print(json.dumps(out))
                     b = [float(w) for w in shown[name].split(":")]
                     ratio = sum(b) / sum(a)
                     assert all(abs(x * ratio - y) < 1e-9 for x, y in zip(a, b)), name
+                elif name.startswith("transition_pairs_"):
+                    a = [float(w) for w in text.split(":")]
+                    b = [float(w) for w in shown[name].split(":")]
+                    assert b == pytest.approx(a, rel=4e-16), name
                 else:
                     # MicroPython's text-to-float is not correctly rounded for 17-digit
                     # numbers, so its parse may be the neighbouring double of CPython's.

@@ -40,6 +40,36 @@ def test_tool_change_applies_l0_early_and_the_trace_shows_it(tmp_path, board):
     assert last_e0 < first_e1
 
 
+def test_a_tool_pair_uses_its_own_l1_and_l2(tmp_path, board):
+    cfg = configured(tmp_path, 1.0, 3.0)  # L0 = 2.5 mm for any change without a pair
+    p = SimPrinter(config_path=cfg)
+    assert p.send("M926 Itransition_pairs_0 V0:1:0.5:1.0")[-1] == "ok"  # T0 -> T1: 1 mm
+    assert p.send("M926 Itransition_pairs_1 V0:99:1:1")[0].startswith(
+        "Error:transition_pairs_1: tools (0, 99) must be T0..T15")
+    assert p.send("M926 Itransition_pairs_1 V1:2:x")[0].startswith(
+        "Error:transition_pairs_1: '1:2:x' is not a tool pair from:to:l1_mm:l2_mm")
+    assert any(l.startswith("echo:M926 Itransition_pairs_0 V0:1:0.5:1.0 ;") for l in p.send("M503"))
+    p.send("M500")
+    p.finish()
+    edges = tmp_path / "run.edges"
+    p = SimPrinter(config_path=cfg, edges_path=edges)
+    for line in ("M302 P1", "M83", "G1 X10 E5 F1200", "T1", "G1 X20 E5", "T0", "G1 X30 E5",
+                 "M400"):
+        assert p.send(line)[-1] == "ok"
+    p.finish()
+    t, g, v = trace.read_edges(edges)
+    pins = board["PINS"]
+
+    def x_at(time):
+        return np.sum((g == pins["x_step"]) & (v == 1) & (t > 0) & (t <= time)) / X_SPM
+
+    e1 = t[(g == pins["e1_step"]) & (v == 1) & (t > 0)]
+    e0 = t[(g == pins["e0_step"]) & (v == 1) & (t > 0)]
+    # T0 -> T1 by its pair's 1 mm of E (2 mm of X); T1 -> T0 by the default 2.5 mm (5 mm).
+    assert abs(x_at(e1[0]) - 8.0) <= 1.5 / X_SPM
+    assert abs(x_at(e0[e0 > e1[0]][0]) - 15.0) <= 1.5 / X_SPM
+
+
 def test_too_little_extrusion_before_a_change_is_reported(tmp_path):
     cfg = configured(tmp_path, 1.0, 3.0)
     p = SimPrinter(config_path=cfg)

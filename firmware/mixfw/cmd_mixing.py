@@ -67,7 +67,7 @@ class Mixing:
         if mix != self.mix:
             self.mix = mix
             self.mix_id += 1
-            self.planner.set_mix(self.mix_id, mix)
+            self.planner.set_mix(self.mix_id, mix, tool)
 
     def store(self, tool, weights, save=False):
         """Set a virtual tool's mix (normalised; an all-zero mix is refused)."""

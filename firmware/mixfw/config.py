@@ -11,7 +11,7 @@
 #
 # Pure logic: no `machine`; the file system is passed in (see FileStorage).
 import os
-from mixfw.options import SCHEMA, FIRMWARE_DEFAULTS, FLOAT, INT, BOOL, MIX, EACH
+from mixfw.options import SCHEMA, FIRMWARE_DEFAULTS, FLOAT, INT, BOOL, MIX, PAIR, EACH
 from mixfw.mixer import normalize, default_tool_mixes
 
 HEADER = "# mixstep configuration, version 1\n"
@@ -71,6 +71,16 @@ class Option:
 
     def parse(self, text):
         """The typed value of text as M926 or the file gives it."""
+        if self.kind == PAIR:
+            words = text.split(":")
+            try:
+                if len(words) != 4:
+                    raise ValueError("4 fields")
+                v = (int(words[0]), int(words[1]), float(words[2]), float(words[3]))
+            except ValueError:
+                raise ConfigError("%s: %r is not a tool pair from:to:l1_mm:l2_mm"
+                                  % (self.name, text))
+            return self.check(v)
         if self.kind == MIX:
             try:
                 return self.check(tuple(float(w) for w in text.split(":")))
@@ -84,6 +94,15 @@ class Option:
         return self.check(v)
 
     def check(self, v):
+        if self.kind == PAIR:
+            tools = self.width
+            if len(v) != 4 or not (0 <= v[0] < tools and 0 <= v[1] < tools):
+                raise ConfigError("%s: tools %r must be T0..T%d" % (self.name, v[:2], tools - 1))
+            for mm in v[2:]:
+                if not self.lo <= mm <= self.hi:
+                    raise ConfigError("%s: length %s is outside %s..%s mm" % (
+                        self.name, mm, self.lo, self.hi))
+            return (int(v[0]), int(v[1]), float(v[2]), float(v[3]))
         if self.kind == MIX:
             try:
                 return normalize(v, self.width)
@@ -105,6 +124,8 @@ class Option:
         return v
 
     def format(self, v):
+        if self.kind == PAIR:
+            return "%d:%d:%r:%r" % (v[0], v[1], float(v[2]), float(v[3]))
         if self.kind == MIX:
             return ":".join("%d" % w for w in v)
         if self.kind == FLOAT:
@@ -127,6 +148,9 @@ def _options(defaults):
         if kind == MIX:
             for o in opts[-len(axes):]:
                 o.width = defaults["drives"]
+        if kind == PAIR:
+            for o in opts[-len(axes):]:
+                o.width = len(defaults["tool_mixes"])
     return opts
 
 
@@ -208,7 +232,7 @@ class Config:
     def describe(self, name):
         """One line M926 takes back, its help as a comment."""
         o = self.option(name)
-        limits = "" if o.kind == MIX else ", %s..%s" % (o.format(o.lo), o.format(o.hi))
+        limits = "" if o.kind in (MIX, PAIR) else ", %s..%s" % (o.format(o.lo), o.format(o.hi))
         return "M926 I%s V%s ; %s%s%s" % (
             name, self.format(name), o.help, limits, " (restart)" if o.restart else "")
 

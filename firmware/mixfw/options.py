@@ -12,6 +12,7 @@ FLOAT = "float"
 INT = "int"
 BOOL = "bool"  # written and read as 0 or 1, as in APrinter
 MIX = "mix"  # drive weights w0:w1:..., normalised to integers (mixer.normalize)
+PAIR = "pair"  # a tool pair's transition from:to:l1_mm:l2_mm; 0:0:0:0 is an empty slot
 EACH = "each"  # axes of a row whose setting is a tuple of any length: _0, _1, ...
 LIVE = False  # takes effect with M930
 RESTART = True  # takes effect after a restart
@@ -26,6 +27,7 @@ FIRMWARE_DEFAULTS = {
     "unretract_feed_mm_s": 40.0,
     "transition_l1_mm": 0.0,
     "transition_l2_mm": 0.0,
+    "transition_pairs": ((0, 0, 0.0, 0.0),) * 8,
 }
 
 
@@ -130,6 +132,8 @@ SCHEMA = (
      "mixing chamber delay L1; with L2, changes apply L1 + L2/2 of extrusion early"),
     ("transition_l2_mm",           "",     FLOAT, 0.0,     100.0,       RESTART,
      "transition length L2 over which a change blends"),
+    ("transition_pairs",           EACH,   PAIR,  0.0,     100.0,       RESTART,
+     "L1 and L2 for changes from one tool to another, from:to:l1_mm:l2_mm"),
     ("drive_steps_per_mm",         EACH,   FLOAT, 0.001,   100000.0,    LIVE,
      "steps per mm of filament of this mixing drive (M92 E sets them all)"),
     ("filament_used_mm",           EACH,   FLOAT, -1e9,    1e9,         LIVE,

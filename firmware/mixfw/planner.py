@@ -145,8 +145,9 @@ class Planner:
             self.prev_unit = None
             self.prev_nominal = 0.0
 
-    def set_mix(self, mix_id, weights):
-        """The mix for E moves queued from now on (already normalised weights)."""
+    def set_mix(self, mix_id, weights, tool=-1):
+        """The mix for E moves queued from now on (already normalised weights). The
+        tool it belongs to matters only to Transitions in front of the planner."""
         self.mix_id = mix_id & 0x3FFFFFFF
         self.tool_mix = tuple(weights)
 

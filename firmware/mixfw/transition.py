@@ -4,19 +4,30 @@
 # wait here until L0 of printing extrusion follows them; a change applies to the
 # waiting moves within L0 of it, splitting the move that crosses that point exactly.
 # Only positive extrusion on moves that also move X, Y or Z counts, as in `advance`.
+# A tool pair may have its own L1 and L2 (transition_pairs); other changes use the
+# defaults.
+
+
+def l0_mm(l1_mm, l2_mm):
+    """Ovenbird's advance: a change shows half-blended L1 + L2/2 after it is made."""
+    return l1_mm + l2_mm / 2
 
 
 class Transitions:
-    def __init__(self, planner, l0_mm, reply):
+    def __init__(self, planner, default_l0_mm, pairs, reply):
+        """pairs: (from_tool, to_tool, l1_mm, l2_mm) each; (0, 0, ...) slots are empty."""
         self.planner = planner
-        self.l0_mm = l0_mm
+        self.default_l0_mm = default_l0_mm
+        self.pair_l0_mm = {(a, b): l0_mm(l1, l2) for a, b, l1, l2 in pairs if a != b}
+        # Moves wait for the longest advance any change may need.
+        self.l0_mm = max([default_l0_mm] + list(self.pair_l0_mm.values()))
+        self.tool = -1
         self.reply = reply
         # Each waiting move: [start_xyz, target_xyz, e_mm, feed_mm_s, dir_masks, mix, replay]
         self.pending = []
         self.pending_printing_mm = 0.0
         self.mix_id = planner.mix_id
         self.tool_mix = planner.tool_mix
-        planner.before_sync.append(self.flush)
 
     def __getattr__(self, name):
         # Everything else (synchronize, drive_steps_per_mm, ...) is the planner's.
@@ -62,12 +73,17 @@ class Transitions:
         self.pending = []
         self.pending_printing_mm = 0.0
 
-    def set_mix(self, mix_id, weights):
-        """A mix change: it reaches back over the last L0 of printing extrusion."""
+    def set_mix(self, mix_id, weights, tool=-1):
+        """A mix change: it reaches back over the last L0 of printing extrusion, the
+        pair's own if it has one (tool: the virtual tool selected, -1 for a mix change
+        within a tool, such as a gradient's)."""
         self.mix_id = mix_id
         self.tool_mix = tuple(weights)
         mix = (mix_id, self.tool_mix)
-        need = self.l0_mm
+        l0 = self.pair_l0_mm.get((self.tool, tool), self.default_l0_mm)
+        if tool >= 0:
+            self.tool = tool
+        need = l0
         k = len(self.pending)
         while k > 0 and need > 0:
             move = self.pending[k - 1]
@@ -80,7 +96,7 @@ class Transitions:
         else:
             if need > 1e-9:
                 self.reply("echo:transition advanced %.3f of %.3f mm: too little extrusion "
-                           "queued before the change" % (self.l0_mm - need, self.l0_mm))
+                           "queued before the change" % (l0 - need, l0))
         for move in self.pending[k:]:
             move[5] = mix
 
