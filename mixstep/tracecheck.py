@@ -1,0 +1,743 @@
+"""`mixstep trace check`: does a STEP/DIR trace do what a G-code file asks?
+
+The trace is any VCD (the simulation's, the board's own capture pulled with `mixstep
+trace pull`, or a logic analyser's, any $timescale) or a sigrok `.sr` capture, which
+`sigrok-cli` converts to VCD first. Only 1-bit signals are read; vectors, reals, scopes
+and x/z values are ignored, and a signal's first value is its starting level, not an
+edge. Signals are named as on the board (`x_step x_dir ... e5_step e5_dir`); `--map
+x_step=D0,x_dir=D1` names a logic analyser's channels.
+
+Checks
+    steps_<axis>   net steps of X, Y, Z (their final position from the G-code, rounded
+                   half away from zero; the trace must start where the firmware counts
+                   0, i.e. at home, as the simulation does) and of every drive
+                   (round(drive_mm * steps_per_mm_E), drive_mm summing each E move's
+                   share by the active tool's weights). Exact: the firmware plans every
+                   drive from its absolute position the same way.
+    moves          the drive steps follow the G-code's E moves in order: each move
+                   takes every drive monotonically to its planned step, no drive
+                   steps outside its move. Fails at the first step that does not fit.
+    mix            within each stretch of constant mix, every window of `window`
+                   drive steps gives each drive its weight share of the window's net
+                   steps within `mix_tolerance` steps. The firmware's mixer is a
+                   divisor schedule, so counts stay within about a step of ideal.
+    pulse_high_us, step_low_us
+                   the shortest STEP high and low times, at least `step_pulse_us`.
+    dir_setup_us   the shortest time from a DIR change to the next rising STEP on that
+                   axis, at least `dir_setup_us`.
+    rate_<axis>    the fastest run of RATE_RUN steps, at most max_feed_mm_s *
+                   steps_per_mm, with `rate_margin` and two step-loop ticks of slack
+                   (steps fall on ticks).
+
+Not modelled (reported as `unmodelled` when the G-code uses them; counts may then
+differ): gradients (M166, M169), palettes and mixtures of mixtures (M168, M567 U),
+firmware-side transitions (transition_l1_mm/l2_mm), retract_policy 1 and 2, firmware
+retraction G10/G11, M92 and per-drive steps/mm options, soft limits, and moves the
+firmware would refuse. DIR high means forward unless the board lists the axis in
+`invert_dir`. At a logic analyser's sample rate, times are only as exact as a sample.
+
+The trace is streamed in chunks parsed with numpy, so memory stays bounded whatever
+its size; the expected moves are held in memory (they grow with the G-code only).
+"""
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+from mixstep import paths
+
+# mixfw's pure modules import on CPython: one implementation of parsing, mixing and
+# step rounding, shared with the firmware.
+from mixfw import cmd_config, cmd_files, cmd_mixing
+from mixfw.gcode import GcodeError, Parser
+from mixfw.mixer import MixError, default_tool_mixes, normalize
+from mixfw.planner import steps_from_mm
+
+AXES = ("x", "y", "z")
+RATE_RUN = 20  # steps over which the step rate is measured
+CHUNK_BYTES = 1 << 20  # larger chunks are no faster, and numpy's temporaries grow with them
+_MARLIN_LETTERS = "ABCDHI"
+_UNITS_S = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "ps": 1e-12, "fs": 1e-15}
+
+
+class TraceError(Exception):
+    """Input that cannot be read: the command exits with status 2."""
+
+
+# --- Expected: what the G-code asks ------------------------------------------------
+
+def expected_from_gcode(gcode_path, settings):
+    """Net steps per axis and drive, and the E moves in order, from a G-code file.
+
+    Returns {"steps": {axis: n}, "moves": [(line, weights, drive_steps)], "unmodelled":
+    {command: first line}}: drive_steps are every drive's absolute planned steps after
+    the move, weights the mix it prints with. Modal state follows the firmware's
+    cmd_motion and cmd_mixing; the arithmetic is the planner's, in the same order, so
+    rounding is identical."""
+    drives = settings["drives"]
+    spm = settings["steps_per_mm"]
+    mixes = list(default_tool_mixes(drives, settings.get("virtual_tools", 16)))
+    parser = Parser(cmd_config.RAW_COMMANDS + cmd_files.RAW_COMMANDS
+                    + cmd_mixing.RAW_COMMANDS)
+    pos = [0.0] * 4
+    off = [0.0] * 4
+    absolute = absolute_e = True
+    tool = 0
+    collector = [0.0] * drives
+    drive_mm = [0.0] * drives
+    drive_steps = [0] * drives
+    moves = []
+    unmodelled = {}
+    with open(gcode_path, "rb") as f:
+        for number, raw in enumerate(f, 1):
+            try:
+                ln = parser.parse(raw, len(raw))
+            except GcodeError:
+                continue  # the firmware answers Error: and does not run it
+            cmd = "%s%d" % (ln.letter, ln.number) if ln.letter else ""
+            try:
+                if cmd in ("G0", "G1"):
+                    target = list(pos)
+                    for i, ch in enumerate("XYZE"):
+                        if ln.has_value(ch):
+                            rel = not (absolute_e if i == 3 else absolute)
+                            target[i] = target[i] + ln.float(ch) if rel else ln.float(ch)
+                    e_mm = target[3] - pos[3]
+                    if e_mm:
+                        w = mixes[tool]
+                        total = sum(w)
+                        drive_mm = [drive_mm[i] + e_mm * w[i] / total for i in range(drives)]
+                        now = [steps_from_mm(drive_mm[i], spm[3]) for i in range(drives)]
+                        if now != drive_steps:
+                            moves.append((number, w, tuple(now)))
+                            drive_steps = now
+                    pos = target
+                elif cmd == "G92":
+                    named = [i for i in range(4) if ln.has("XYZE"[i])]
+                    for i in named or range(4):
+                        v = ln.float("XYZE"[i], 0.0)
+                        off[i] += pos[i] - v
+                        pos[i] = v
+                elif cmd == "G28":
+                    for i in [i for i in range(3) if ln.has("XYZ"[i])] or range(3):
+                        pos[i] = off[i] = 0.0
+                elif cmd in ("G90", "G91"):
+                    absolute = absolute_e = cmd == "G90"
+                elif cmd in ("M82", "M83"):
+                    absolute_e = cmd == "M82"
+                elif ln.letter == "T":
+                    if ln.number < len(mixes):
+                        tool = ln.number
+                elif cmd == "M163":
+                    collector[ln.int("S")] = ln.float("P")
+                elif cmd == "M164":
+                    mixes[ln.int("S", tool)] = normalize(collector, drives)
+                elif cmd == "M165" and not ln.has("R"):
+                    mixes[tool] = normalize([ln.float(ch, 0.0) for ch in _MARLIN_LETTERS[:drives]],
+                                            drives)
+                elif cmd == "M567":
+                    words = dict((w[:1].upper(), w[1:]) for w in ln.args_text.split())
+                    if "U" in words:
+                        unmodelled.setdefault("M567 U", number)
+                    else:
+                        mixes[int(words["P"])] = normalize(
+                            [float(v) for v in words["E"].split(":")], drives)
+                elif cmd in ("M166", "M168", "M169", "M92", "G10", "G11"):
+                    unmodelled.setdefault(cmd, number)
+            except (GcodeError, MixError, ValueError, KeyError, IndexError):
+                continue  # refused by the firmware as well
+    steps = {a: steps_from_mm(pos[i] + off[i], spm[i]) for i, a in enumerate(AXES)}
+    steps.update({"e%d" % d: drive_steps[d] for d in range(drives)})
+    return {"steps": steps, "moves": moves, "unmodelled": unmodelled}
+
+
+# --- Reading: VCD (or .sr via sigrok-cli), streamed ---------------------------------
+
+class VcdReader:
+    """A VCD file's 1-bit signals, streamed as chunks of (time, signal, value) arrays.
+
+    names: the signal names wanted; `mapping` gives the VCD name of any of them that
+    the file calls differently. `signals` lists the wanted names found, in the order
+    their indices appear in the chunks; `timescale_s` is one time unit in seconds."""
+
+    def __init__(self, path, names, mapping=None, chunk_bytes=CHUNK_BYTES):
+        self.path = path
+        self.chunk_bytes = chunk_bytes
+        self.bytes_read = 0
+        self.lines = 0
+        try:
+            self._f = open(path, "rb")
+        except OSError as e:
+            raise TraceError("cannot read %s: %s" % (path, e.strerror))
+        header, self._rest = self._read_header()
+        self.timescale_s, vars_ = _parse_header(header, path)
+        mapping = mapping or {}
+        by_vcd_name = {}
+        for ident, name in vars_:
+            by_vcd_name.setdefault(name, []).append(ident)
+        self.signals = []
+        self._ids = {}  # VCD identifier -> signal index
+        for name in names:
+            idents = by_vcd_name.get(mapping.get(name, name))
+            if idents:
+                for ident in idents:
+                    self._ids.setdefault(ident, len(self.signals))
+                self.signals.append(name)
+        if not self.signals:
+            raise TraceError("%s has none of the signals %s (name them with --map)"
+                             % (path, ", ".join(mapping.get(n, n) for n in names[:4]) + ", ..."))
+        self._by_len = {}
+        for ident, sig in self._ids.items():
+            if len(ident) <= 8:
+                self._by_len.setdefault(len(ident), {})[_id_code(ident)] = sig
+        self._long_ids = {i: s for i, s in self._ids.items() if len(i) > 8}
+        self._time = 0
+        self._in_comment = False
+
+    def close(self):
+        self._f.close()
+
+    def _read_header(self):
+        buf = b""
+        while True:
+            block = self._f.read(1 << 16)
+            buf += block
+            self.bytes_read += len(block)
+            at = buf.find(b"$enddefinitions")
+            if at >= 0:
+                end = buf.find(b"$end", at + len(b"$enddefinitions"))
+                if end >= 0:
+                    return buf[:at], buf[end + 4:]
+            if not block or len(buf) > 64 << 20:
+                raise TraceError("%s is not a VCD file: no $enddefinitions" % self.path)
+
+    def chunks(self):
+        """Yield (times int64, signals int32, values int8) for every scalar change of a
+        wanted signal, in file order, with `times` in units of the timescale."""
+        rest = self._rest
+        while True:
+            block = self._f.read(self.chunk_bytes)
+            self.bytes_read += len(block)
+            buf = rest + block
+            if block:
+                cut = buf.rfind(b"\n") + 1
+                if cut == 0:
+                    rest = buf
+                    continue
+                buf, rest = buf[:cut], buf[cut:]
+            else:
+                rest = b""
+            if buf:
+                self.lines += buf.count(b"\n")
+                out = self._parse(buf)
+                if out is not None:
+                    yield out
+            if not block:
+                return
+
+    def _parse(self, buf):
+        a = np.frombuffer(buf, np.uint8)
+        space = a <= 32
+        word = ~space
+        edge = (np.flatnonzero(word[1:] != word[:-1]) + 1).astype(np.int32)
+        starts = edge[word[edge]]
+        ends = edge[space[edge]]
+        if word[0]:
+            starts = np.concatenate(([0], starts))
+        if word[-1]:
+            ends = np.concatenate((ends, [len(a)]))
+        first = a[starts]
+        keep = np.ones(len(starts), bool)
+        # A vector or real value's identifier is the next word: not a change.
+        vec = np.flatnonzero((first == 98) | (first == 66) | (first == 114) | (first == 82))
+        keep[vec] = False
+        keep[vec[vec + 1 < len(keep)] + 1] = False
+        dollar = np.flatnonzero(first == 36)
+        if len(dollar) or self._in_comment:
+            self._skip_comments(buf, starts, ends, dollar, keep)
+        is_time = (first == 35) & keep
+        is_change = ((first == 48) | (first == 49)) & keep
+        t_idx = np.flatnonzero(is_time)
+        c_idx = np.flatnonzero(is_change)
+        times = _decimal(a, starts[t_idx] + 1, ends[t_idx])
+        sig = self._lookup(a, starts[c_idx], ends[c_idx], buf)
+        mine = sig >= 0
+        c_idx = c_idx[mine]
+        last = np.searchsorted(t_idx, c_idx) - 1
+        t_all = np.concatenate(([self._time], times))
+        if len(times):
+            self._time = int(times[-1])
+        if not len(c_idx):
+            return None
+        return (t_all[last + 1], sig[mine].astype(np.int32),
+                (first[c_idx] - 48).astype(np.int8))
+
+    def _skip_comments(self, buf, starts, ends, dollar, keep):
+        """$dumpvars/$dumpall/$dumpon/$dumpoff and $end only bracket value changes;
+        whatever is inside $comment ... $end is dropped."""
+        if self._in_comment:
+            stop = [i for i in dollar if buf[starts[i]:ends[i]] == b"$end"]
+            upto = stop[0] + 1 if stop else len(keep)
+            keep[:upto] = False
+            self._in_comment = not stop
+            dollar = dollar[dollar >= upto]
+        keep[dollar] = False
+        open_at = None
+        for i in dollar.tolist():
+            word = buf[starts[i]:ends[i]]
+            if open_at is None and word in (b"$comment", b"$var", b"$scope", b"$upscope"):
+                open_at = i
+            elif open_at is not None and word == b"$end":
+                keep[open_at:i + 1] = False
+                open_at = None
+        if open_at is not None:
+            keep[open_at:] = False
+            self._in_comment = True
+
+    def _lookup(self, a, starts, ends, buf):
+        """Signal index of each change word's identifier, -1 for signals not wanted."""
+        sig = np.full(len(starts), -1, np.int64)
+        length = ends - starts - 1
+        for n, table in self._by_len.items():
+            sel = np.flatnonzero(length == n)
+            if not len(sel):
+                continue
+            code = np.zeros(len(sel), np.uint64)
+            for j in range(n):
+                code |= a[starts[sel] + 1 + j].astype(np.uint64) << np.uint64(8 * j)
+            keys = np.array(sorted(table), np.uint64)
+            vals = np.array([table[k] for k in sorted(table)], np.int64)
+            at = np.minimum(np.searchsorted(keys, code), len(keys) - 1)
+            hit = keys[at] == code
+            sig[sel[hit]] = vals[at[hit]]
+        for i in np.flatnonzero(length > 8).tolist() if self._long_ids else ():
+            sig[i] = self._long_ids.get(buf[starts[i] + 1:ends[i]].decode("ascii", "replace"), -1)
+        return sig
+
+
+def _id_code(ident):
+    code = 0
+    for j, b in enumerate(ident.encode("ascii")):
+        code |= b << (8 * j)
+    return code
+
+
+def _decimal(a, starts, ends):
+    """Unsigned decimal numbers a[starts:ends] -> int64, vectorised."""
+    if not len(starts):
+        return np.zeros(0, np.int64)
+    width = int((ends - starts).max())
+    if width > 18:
+        raise TraceError("time stamp too long: %d digits" % width)
+    value = np.zeros(len(starts), np.int64)
+    last = len(a) - 1
+    for j in range(width):  # one digit column at a time keeps memory at a few vectors
+        at = starts + j
+        more = at < ends
+        digit = a[np.minimum(at, last)].astype(np.int64) - 48
+        if ((digit[more] < 0) | (digit[more] > 9)).any():
+            raise TraceError("malformed time stamp in the VCD")
+        value = np.where(more, value * 10 + digit, value)
+    return value
+
+
+def _parse_header(header, path):
+    text = header.decode("ascii", "replace")
+    words = text.split()
+    timescale_s = None
+    vars_ = []
+    i = 0
+    while i < len(words):
+        w = words[i]
+        if w == "$timescale":
+            j = words.index("$end", i)
+            spec = "".join(words[i + 1:j])
+            digits = spec.rstrip("abcdefghijklmnopqrstuvwxyz")
+            unit = spec[len(digits):]
+            if unit not in _UNITS_S or digits not in ("1", "10", "100"):
+                raise TraceError("%s: unreadable $timescale %r" % (path, spec))
+            timescale_s = int(digits) * _UNITS_S[unit]
+            i = j
+        elif w == "$var":
+            j = words.index("$end", i)
+            parts = words[i + 1:j]
+            if len(parts) >= 4 and parts[1] == "1":
+                vars_.append((parts[2], parts[3]))
+            i = j
+        i += 1
+    if timescale_s is None:
+        timescale_s = 1e-9  # the VCD standard's default is 1 ns... but say nothing else
+    if not vars_:
+        raise TraceError("%s declares no 1-bit signals" % path)
+    return timescale_s, vars_
+
+
+def sigrok_to_vcd(sr_path, vcd_path):
+    """A sigrok session file -> VCD, with sigrok-cli."""
+    try:
+        proc = subprocess.run(["sigrok-cli", "-i", str(sr_path), "-O", "vcd", "-o", str(vcd_path)],
+                              capture_output=True, text=True)
+    except FileNotFoundError:
+        raise TraceError("reading .sr captures needs sigrok-cli (apt-get install sigrok-cli)")
+    if proc.returncode != 0 or not os.path.exists(vcd_path):
+        raise TraceError("sigrok-cli could not read %s: %s" % (sr_path, proc.stderr.strip()))
+
+
+# --- Checking ------------------------------------------------------------------------
+
+class _Axis:
+    """Streaming state of one axis or drive: edges carry over between chunks."""
+
+    def __init__(self, name, forward_level):
+        self.name = name
+        self.forward_level = forward_level
+        self.step_level = -1
+        self.dir_level = -1
+        self.dir_change = None  # time of the last DIR edge
+        self.last_edge = None  # time of the last STEP edge
+        self.net = 0
+        self.rises = 0
+        self.recent = np.zeros(0, np.int64)  # last RATE_RUN rising times
+        self.min_high = self.min_low = self.min_setup = self.min_run = None
+        self.at_high = self.at_low = self.at_setup = self.at_run = None
+
+
+def _track_min(ax, field, values, times):
+    if len(values):
+        k = int(np.argmin(values))
+        old = getattr(ax, "min_" + field)
+        if old is None or values[k] < old:
+            setattr(ax, "min_" + field, int(values[k]))
+            setattr(ax, "at_" + field, int(times[k]))
+
+
+class Checker:
+    def __init__(self, signals, settings, expected, window, mix_tolerance):
+        self.signals = signals
+        index = {n: i for i, n in enumerate(signals)}
+        inverted = settings.get("invert_dir", ())
+        self.drives = ["e%d" % d for d in range(settings["drives"])]
+        self.axes = {}
+        self.sig = {}
+        for name in list(AXES) + self.drives:
+            if name + "_step" in index:
+                self.axes[name] = _Axis(name, 0 if name in inverted else 1)
+                self.sig[name] = (index[name + "_step"], index.get(name + "_dir", -1))
+        self.walk = _MoveWalk(expected["moves"], settings["drives"], window, mix_tolerance) \
+            if all(d in self.axes for d in self.drives) else None
+
+    def feed(self, times, sig, vals):
+        e_events = []
+        for name, ax in self.axes.items():
+            step, dirs = self.sig[name]
+            sel = np.flatnonzero((sig == step) | (sig == dirs))
+            if not len(sel):
+                continue
+            t, s, v = times[sel], sig[sel], vals[sel]
+            is_dir = s == dirs
+            # Only real edges: the first value, and repeats of the level, are not.
+            dir0 = ax.dir_level
+            prev = np.empty_like(v)
+            for mask, attr in ((is_dir, "dir_level"), (~is_dir, "step_level")):
+                idx = np.flatnonzero(mask)
+                if len(idx):
+                    prev[idx[0]] = getattr(ax, attr)
+                    prev[idx[1:]] = v[idx[:-1]]
+                    setattr(ax, attr, int(v[idx[-1]]))
+            edge = (prev != v) & (prev >= 0)
+            # DIR level and last DIR edge time in force at every record.
+            last_dir = np.maximum.accumulate(np.where(is_dir, np.arange(len(s)), -1))
+            dir_level = np.where(last_dir >= 0, v[np.maximum(last_dir, 0)], dir0)
+            dir_edge_at = np.where(is_dir & edge, np.arange(len(s)), -1)
+            last_dir_edge = np.maximum.accumulate(dir_edge_at)
+            dir_edge_time = np.where(last_dir_edge >= 0, t[np.maximum(last_dir_edge, 0)],
+                                     -1 if ax.dir_change is None else ax.dir_change)
+            if (dir_edge_at >= 0).any():
+                ax.dir_change = int(t[dir_edge_at[dir_edge_at >= 0][-1]])
+            step_edge = ~is_dir & edge
+            te, ve = t[step_edge], v[step_edge]
+            if len(te):
+                prev_t = np.concatenate(([ax.last_edge if ax.last_edge is not None else -1], te[:-1]))
+                width = te - prev_t
+                ok = prev_t >= 0
+                _track_min(ax, "high", width[ok & (ve == 0)], te[ok & (ve == 0)])
+                _track_min(ax, "low", width[ok & (ve == 1)], te[ok & (ve == 1)])
+                ax.last_edge = int(te[-1])
+            rise = step_edge & (v == 1)
+            rt = t[rise]
+            if not len(rt):
+                continue
+            sign = np.where(dir_level[rise] == ax.forward_level, 1, -1)
+            ax.net += int(sign.sum())
+            ax.rises += len(rt)
+            setup_t = dir_edge_time[rise]
+            has = setup_t >= 0
+            _track_min(ax, "setup", (rt - setup_t)[has], rt[has])
+            run = np.concatenate((ax.recent, rt))
+            if len(run) > RATE_RUN:
+                _track_min(ax, "run", run[RATE_RUN:] - run[:-RATE_RUN], run[RATE_RUN:])
+            ax.recent = run[-RATE_RUN:]
+            if self.walk and name in self.drives:
+                e_events.append((sel[rise], np.full(len(rt), self.drives.index(name)), sign, rt))
+        if self.walk and e_events:
+            order_in_chunk = np.concatenate([e[0] for e in e_events])
+            order = np.argsort(order_in_chunk, kind="stable")
+            self.walk.feed(np.concatenate([e[1] for e in e_events])[order].tolist(),
+                           np.concatenate([e[2] for e in e_events])[order].tolist(),
+                           np.concatenate([e[3] for e in e_events])[order].tolist())
+
+
+class _MoveWalk:
+    """Follows the drive steps through the G-code's E moves, one step at a time, and
+    checks the mix in windows of `window` steps within each stretch of one mix."""
+
+    def __init__(self, moves, drives, window, tolerance):
+        self.moves = moves
+        self.drives = drives
+        self.window = window
+        self.tolerance = tolerance
+        self.m = -1
+        self.pos = [0] * drives
+        self.target = [0] * drives
+        self.left = 0
+        self.error = None
+        self.windows = 0
+        self.worst = 0.0
+        self.worst_at = None
+        self.bad_windows = 0
+        self.steps = 0
+        self._counts = [0] * drives
+        self._n = 0
+        self._shares = None
+        self._next_move()
+
+    def _next_move(self):
+        while self.left == 0 and self.m + 1 < len(self.moves):
+            self.m += 1
+            line, weights, target = self.moves[self.m]
+            self.target = list(target)
+            self.left = sum(abs(target[d] - self.pos[d]) for d in range(self.drives))
+            total = sum(weights)
+            shares = [w / total for w in weights]
+            if shares != self._shares:
+                self._shares = shares
+                self._counts = [0] * self.drives
+                self._n = 0
+
+    def feed(self, drives, signs, times):
+        if self.error:
+            return
+        pos, target = self.pos, self.target
+        counts = self._counts
+        for d, s, t in zip(drives, signs, times):
+            want = target[d] - pos[d]
+            if self.left == 0 or want == 0 or (want > 0) != (s > 0):
+                where = ("after the last E move" if self.left == 0 else
+                         "in the E move of G-code line %d" % self.moves[self.m][0])
+                self.error = "e%d stepped %s at t=%d %s (drives at %s, move target %s)" % (
+                    d, "forward" if s > 0 else "back", t, where, pos, target)
+                return
+            pos[d] += s
+            self.left -= 1
+            self.steps += 1
+            counts[d] += s
+            self._n += 1
+            if self._n == self.window:
+                self._check_window(t)
+            if self.left == 0:
+                self._next_move()
+                target = self.target
+                counts = self._counts
+
+    def _check_window(self, t):
+        net = sum(self._counts)
+        for d in range(self.drives):
+            off = abs(self._counts[d] - self._shares[d] * net)
+            if off > self.worst:
+                self.worst, self.worst_at = off, (t, d)
+        if max(abs(self._counts[d] - self._shares[d] * net) for d in range(self.drives)) \
+                > self.tolerance:
+            self.bad_windows += 1
+        self.windows += 1
+        self._counts[:] = [0] * self.drives
+        self._n = 0
+
+    def finished(self):
+        return self.error is None and self.left == 0 and self.m + 1 >= len(self.moves)
+
+
+def check(trace_path, gcode_path, board="sim", mapping=None, step_pulse_us=None,
+          dir_setup_us=None, rate_margin=0.02, window=100, mix_tolerance=2.0,
+          chunk_bytes=CHUNK_BYTES):
+    """Check a trace (VCD or sigrok .sr) against a G-code file. Returns the report:
+    {"ok": bool, "checks": [{name, expected, measured, ok, detail}], ...}. Raises
+    TraceError for input that cannot be read."""
+    b = paths.load_board(board)
+    settings, pins = b["SETTINGS"], b["PINS"]
+    expected = expected_from_gcode(gcode_path, settings)
+    names = [n for n in pins if n.endswith(("_step", "_dir"))]
+    tmp = None
+    path = str(trace_path)
+    if path.endswith(".sr"):
+        tmp = tempfile.TemporaryDirectory(prefix="mixstep-trace-")
+        vcd_path = os.path.join(tmp.name, "capture.vcd")
+        sigrok_to_vcd(path, vcd_path)
+        path = vcd_path
+    wall0 = time.perf_counter()
+    try:
+        reader = VcdReader(path, names, mapping, chunk_bytes)
+        checker = Checker(reader.signals, settings, expected, window, mix_tolerance)
+        for times, sig, vals in reader.chunks():
+            checker.feed(times, sig, vals)
+        reader.close()
+    finally:
+        if tmp:
+            tmp.cleanup()
+    wall = time.perf_counter() - wall0
+    unit_us = reader.timescale_s * 1e6
+    pulse_us = settings.get("step_pulse_us", 0) if step_pulse_us is None else step_pulse_us
+    setup_us = settings.get("dir_setup_us", 0) if dir_setup_us is None else dir_setup_us
+    checks = _report_checks(checker, settings, expected, unit_us, pulse_us, setup_us,
+                            rate_margin, window, mix_tolerance)
+    return {
+        "ok": all(c["ok"] is not False for c in checks),
+        "trace": str(trace_path),
+        "gcode": str(gcode_path),
+        "board": board,
+        "signals": reader.signals,
+        "timescale_us": unit_us,
+        "unmodelled": expected["unmodelled"],
+        "checks": checks,
+        "input": {"bytes": reader.bytes_read, "lines": reader.lines,
+                  "seconds": round(wall, 3)},
+    }
+
+
+def _report_checks(ck, settings, expected, unit_us, pulse_us, setup_us, rate_margin,
+                   window, mix_tolerance):
+    checks = []
+
+    def add(name, want, got, ok, detail=""):
+        checks.append({"name": name, "expected": want, "measured": got, "ok": ok,
+                       "detail": detail})
+
+    for name, want in expected["steps"].items():
+        ax = ck.axes.get(name)
+        if ax is None:
+            add("steps_" + name, want, None, None, "not in the trace")
+        else:
+            add("steps_" + name, want, ax.net, ax.net == want,
+                "%d rising edges" % ax.rises)
+    walk = ck.walk
+    if walk is None:
+        add("moves", len(expected["moves"]), None, None, "not every drive is in the trace")
+    else:
+        done = walk.m + 1 if walk.finished() else walk.m
+        add("moves", len(expected["moves"]), done, walk.finished(),
+            walk.error or ("" if walk.finished() else "the trace ends inside the E move of "
+                           "G-code line %d" % walk.moves[walk.m][0]))
+        add("mix", "<= %g steps off" % mix_tolerance, round(walk.worst, 3),
+            walk.bad_windows == 0,
+            "%d windows of %d drive steps, %d over; worst %s" % (
+                walk.windows, window, walk.bad_windows,
+                "e%d at t=%d" % (walk.worst_at[1], walk.worst_at[0]) if walk.worst_at else "-"))
+
+    def worst(field):
+        best = None
+        for ax in ck.axes.values():
+            v = getattr(ax, "min_" + field)
+            if v is not None and (best is None or v < best[0]):
+                best = (v, ax.name, getattr(ax, "at_" + field))
+        return best
+
+    for field, name, limit in (("high", "pulse_high_us", pulse_us), ("low", "step_low_us", pulse_us),
+                               ("setup", "dir_setup_us", setup_us)):
+        w = worst(field)
+        if w is None:
+            add(name, ">= %g" % limit, None, None, "no edges measured")
+        else:
+            us = w[0] * unit_us
+            add(name, ">= %g" % limit, round(us, 6), us >= limit - 1e-9,
+                "%s at t=%g us" % (w[1], w[2] * unit_us))
+    tick_us = settings.get("tick_us", 0)
+    for name, ax in ck.axes.items():
+        if ax.min_run is None:
+            continue
+        i = min(list(AXES).index(name) if name in AXES else 3, 3)
+        limit = settings["max_feed_mm_s"][i] * settings["steps_per_mm"][i] * (1 + rate_margin)
+        rate = RATE_RUN / ((ax.min_run * unit_us + 2 * tick_us) * 1e-6)
+        add("rate_" + name, "<= %.0f steps/s" % limit, round(rate, 1), rate <= limit,
+            "fastest %d steps at t=%g us" % (RATE_RUN, ax.at_run * unit_us))
+    return checks
+
+
+def format_report(report):
+    lines = ["trace %s against %s (board %s)" % (report["trace"], report["gcode"], report["board"])]
+    for c in report["checks"]:
+        status = {True: "pass", False: "FAIL", None: "skip"}[c["ok"]]
+        lines.append("  %-4s %-15s expected %-22s measured %-12s %s" % (
+            status, c["name"], c["expected"], c["measured"], c["detail"]))
+    for cmd, line in sorted(report["unmodelled"].items()):
+        lines.append("  note: %s (first at line %d) is not modelled; counts may differ"
+                     % (cmd, line))
+    lines.append("OK: the trace does what the G-code asks" if report["ok"] else
+                 "FAILED: the trace disagrees with the G-code")
+    return "\n".join(lines)
+
+
+def parse_map(text):
+    """'x_step=D0,x_dir=D1' -> {'x_step': 'D0', 'x_dir': 'D1'}."""
+    mapping = {}
+    for item in (text or "").split(","):
+        if item.strip():
+            name, sep, channel = item.partition("=")
+            if not sep:
+                raise TraceError("--map wants name=channel, got %r" % item)
+            mapping[name.strip()] = channel.strip()
+    return mapping
+
+
+def add_parser(sub):
+    p = sub.add_parser("check", help="check a trace (VCD or sigrok .sr) against G-code")
+    p.add_argument("trace", help="VCD file, or sigrok .sr capture")
+    p.add_argument("--gcode", required=True, help="the G-code the trace should show")
+    p.add_argument("--board", default="sim", help="board whose pins and settings apply")
+    p.add_argument("--json", metavar="OUT", help="write the report as JSON here ('-': stdout)")
+    p.add_argument("--map", metavar="NAME=CHANNEL,...",
+                   help="VCD names of signals, e.g. x_step=D0,x_dir=D1")
+    p.add_argument("--step-pulse-us", type=float, help="minimum STEP high/low time "
+                   "(default: the board's step_pulse_us)")
+    p.add_argument("--dir-setup-us", type=float, help="minimum DIR-to-STEP time "
+                   "(default: the board's dir_setup_us)")
+    p.add_argument("--rate-margin", type=float, default=0.02,
+                   help="allowed fraction over the axis's maximum step rate")
+    p.add_argument("--window", type=int, default=100, help="drive steps per mix window")
+    p.add_argument("--mix-tolerance", type=float, default=2.0,
+                   help="allowed steps off a drive's share in a mix window")
+    p.set_defaults(run=_run)
+
+
+def _run(args):
+    try:
+        report = check(args.trace, args.gcode, args.board, parse_map(args.map),
+                       args.step_pulse_us, args.dir_setup_us, args.rate_margin, args.window,
+                       args.mix_tolerance)
+    except TraceError as e:
+        print("mixstep trace check: %s" % e, file=sys.stderr)
+        return 2
+    except OSError as e:
+        print("mixstep trace check: %s" % e, file=sys.stderr)
+        return 2
+    text = json.dumps(report, indent=2) + "\n"
+    if args.json == "-":
+        sys.stdout.write(text)
+    else:
+        print(format_report(report))
+        if args.json:
+            with open(args.json, "w") as f:
+                f.write(text)
+    return 0 if report["ok"] else 1
