@@ -44,6 +44,8 @@ def main(argv=None):
         tool.add_parser(sub)
     from mixstep import advance  # `mixstep advance`: tool changes moved earlier by the purge
     advance.add_parser(sub)
+    from mixstep import trace  # `mixstep trace check|pull`
+    trace.add_parser(sub)
     args = parser.parse_args(argv)
     return args.run(args)
 

@@ -64,3 +64,12 @@ def net_steps(edges_path, board="sim"):
         rising = (~is_dir) & (lv == 1) & (t > 0)
         result[axis] = int(np.sum(np.where(level_at[rising] == 1, 1, -1)))
     return result
+
+
+def add_parser(sub):
+    """`mixstep trace check` and `mixstep trace pull`."""
+    from mixstep import tracecheck, tracepull
+    p = sub.add_parser("trace", help="check a STEP/DIR trace against G-code; pull a board's capture")
+    tsub = p.add_subparsers(dest="trace_command", required=True)
+    tracecheck.add_parser(tsub)
+    tracepull.add_parser(tsub)
