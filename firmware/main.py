@@ -15,7 +15,7 @@ from mixfw.config import Config
 from mixfw.files import Files
 from mixfw.thermal import Thermal
 from mixfw.transition import Transitions, l0_mm
-from mixfw import cmd_motion, cmd_mixing, cmd_thermal, cmd_report, cmd_config, cmd_files
+from mixfw import cmd_motion, cmd_mixing, cmd_thermal, cmd_report, cmd_config, cmd_files, cmd_trace
 
 # Commands whose arguments are text, not numbers.
 RAW_COMMANDS = cmd_config.RAW_COMMANDS + cmd_files.RAW_COMMANDS + cmd_mixing.RAW_COMMANDS
@@ -42,7 +42,9 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     pin_map = pin_map or board.PINS
     tick_us = settings["tick_us"]
     # Step-loop memory: one array for state, mixer, pin masks and the block ring.
-    mem = array("i", bytes(4 * st.mem_words(settings["queue_blocks"])))
+    capture = settings.get("trace_records", 0)
+    mem = array("i", bytes(4 * st.mem_words(settings["queue_blocks"], capture)))
+    st.init_capture(mem, settings["queue_blocks"], capture)
     mem[st.S_PULSE_TICKS] = _ticks(settings["step_pulse_us"], tick_us)
     mem[st.S_DIR_TICKS] = _ticks(settings["dir_setup_us"], tick_us)
     mem[st.MIX_BASE + mixer.M_N] = settings["drives"]
@@ -52,8 +54,14 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
         mem[st.MASK_BASE + i] = m
     for i, m in enumerate(pins.dir_masks):
         mem[st.DIR_MASK_BASE + i] = m
+    out = pins.out
+    if pins.registers:
+        out, offsets = pins.registers
+        for i, word in enumerate(offsets):
+            mem[st.S_REG_SET + i] = word
     printer = Printer(settings["line_buffer_bytes"], machine.idle, RAW_COMMANDS)
     planner = Planner(mem, settings, printer.idle, machine.disable_irq, machine.enable_irq)
+    planner.dir_invert_mask = pins.dir_invert_mask
     motion = cmd_motion.Motion(planner, pins, settings, printer.reply)
     # A halt stops motion before anything is reported.
     printer.on_halt.append(planner.abort)
@@ -75,6 +83,7 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     cmd_thermal.register(printer, thermal, motion)
     cmd_report.register(printer, cmd_report.Reports(printer, motion, planner, board.NAME))
     cmd_config.register(printer, config)
+    cmd_trace.register(printer, cmd_trace.Trace(mem, settings, printer.reply))
     config.appliers.append(motion.apply)
     config.appliers.append(thermal.apply)
     config.appliers.append(mixing.apply)
@@ -87,20 +96,33 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     printer.pins = pins
     printer.motion = motion
     printer.thermal = thermal
-    printer.irq = st.make_irq(mem, pins.out, pins.endstops)
+    printer.irq = st.make_irq(mem, out, pins.endstops)
     return printer
 
 
+# rp2 timer callbacks can be hard (run in the interrupt) only since MicroPython 1.26;
+# a soft one waits for the interpreter and would make the step timing worthless.
+HARD_TIMER_SINCE = (1, 26, 0)
+
+
+def check_timer_support(chip, version):
+    """Refuse to run the step loop on a MicroPython that can't time it properly."""
+    if chip in ("rp2040", "rp2350") and tuple(version[:3]) < HARD_TIMER_SINCE:
+        raise RuntimeError("mixstep needs MicroPython %d.%d or newer on %s for a hard "
+                           "machine.Timer; this is %d.%d.%d: flash a newer MicroPython"
+                           % (HARD_TIMER_SINCE[:2] + (chip,) + tuple(version[:3])))
+
+
 def start_timer(printer, tick_us):
-    # The timer owns the step loop. A hard callback where the port has one (rp2 since
-    # MicroPython 1.26); ESP32 timers are soft only.
+    """The timer owns the step loop: hard on rp2; soft on ESP32, whose timers have no
+    hard callbacks (see the README for the jitter that gives)."""
+    chip = printer.settings.get("chip", "sim")
+    check_timer_support(chip, sys.implementation.version)
     freq = 1000000 // tick_us
-    try:
-        return machine.Timer(-1, mode=machine.Timer.PERIODIC, freq=freq,
-                             callback=printer.irq, hard=True)
-    except (TypeError, ValueError):
-        return machine.Timer(-1, mode=machine.Timer.PERIODIC, freq=freq,
-                             callback=printer.irq)
+    if chip == "esp32":
+        return machine.Timer(0, mode=machine.Timer.PERIODIC, freq=freq, callback=printer.irq)
+    return machine.Timer(-1, mode=machine.Timer.PERIODIC, freq=freq, callback=printer.irq,
+                         hard=True)
 
 
 def board_consoles(settings):

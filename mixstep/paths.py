@@ -24,7 +24,8 @@ def micropython():
 
 def micropython_env(board="sim"):
     env = dict(os.environ)
-    env["MICROPYPATH"] = os.pathsep.join([str(FIRMWARE), str(BOARDS / board)])
+    # The board's own board.py first; the simulated chip from boards/sim after it.
+    env["MICROPYPATH"] = os.pathsep.join([str(FIRMWARE), str(BOARDS / board), str(BOARDS / "sim")])
     return env
 
 

@@ -10,8 +10,14 @@ SIM_MAIN = paths.BOARDS / "sim" / "sim_main.py"
 
 class SimPrinter:
     def __init__(self, edges_path=None, heap_lock=False, heap_size="2M", board="sim",
-                 config_path=None, files_dir=None):
+                 config_path=None, files_dir=None, settings=None):
+        """board: whose pin map and settings (the chip is simulated); settings: board
+        settings to override, e.g. {"pin_writer": "registers"}."""
         cmd = [paths.micropython(), "-X", "heapsize=" + heap_size, str(SIM_MAIN)]
+        for key, value in (settings or {}).items():
+            if isinstance(value, (tuple, list)):
+                value = ",".join(str(v) for v in value) + ","
+            cmd += ["--set", "%s=%s" % (key, value)]
         if config_path:
             cmd += ["--config", str(config_path)]
         if files_dir:

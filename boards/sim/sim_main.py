@@ -1,7 +1,7 @@
 # Runs the firmware on the unix port against the simulated chip. Usage:
 #   micropython sim_main.py [--edges FILE] [--heap-lock] [--quantum-us N]
 #                           [--tcp HOST:PORT] [--no-stdio] [--realtime FACTOR]
-#                           [--config FILE] [--files DIR]
+#                           [--config FILE] [--files DIR] [--set KEY=VALUE ...]
 # By default it takes G-code on stdin and answers on stdout like a serial printer, in
 # lockstep (virtual time passes only when the firmware waits). With --tcp it also
 # serves TCP connections; --realtime paces virtual time against the wall clock (0:
@@ -9,6 +9,8 @@
 # `//sim {json}` line reports the run. --config is the simulated flash file of the
 # configuration (M500/M501); without it the printer has no configuration storage.
 # --files is the simulated flash folder for printing from flash (M20-M32).
+# --set overrides a board setting before the machine is assembled, e.g.
+# --set pin_writer=registers (VALUE: a number, a comma-separated tuple, or text).
 import sys
 import gc
 import json
@@ -22,13 +24,16 @@ sys.modules["time"] = simtime
 
 def _args(argv):
     opts = {"edges": None, "heap_lock": False, "quantum_us": 1000, "tcp": None,
-            "stdio": True, "realtime": None, "config": None, "files": None}
+            "stdio": True, "realtime": None, "config": None, "files": None, "set": []}
     i = 1
     while i < len(argv):
         a = argv[i]
         if a in ("--edges", "--quantum-us", "--tcp", "--realtime", "--config", "--files"):
             i += 1
             opts[a[2:].replace("-", "_")] = argv[i]
+        elif a == "--set":
+            i += 1
+            opts["set"].append(argv[i].split("=", 1))
         elif a == "--heap-lock":
             opts["heap_lock"] = True
         elif a == "--no-stdio":
@@ -39,11 +44,26 @@ def _args(argv):
     return opts
 
 
+def _value(text):
+    if "," in text:
+        return tuple(_value(w) for w in text.split(",") if w)
+    if text[:1] not in "0123456789+-.":
+        return text  # MicroPython's float() would take "e0" for 0.0
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
 def main():
     opts = _args(sys.argv)
     import board
+    for key, text in opts["set"]:
+        board.SETTINGS[key] = _value(text)
     names = ["x", "y", "z"] + ["e%d" % i for i in range(board.SETTINGS["drives"])]
-    simmachine.attach_world(board.PINS, names)
+    simmachine.attach_world(board.PINS, names, board.SETTINGS.get("invert_dir", ()))
     simmachine.quantum_us = int(opts["quantum_us"])
     if opts["edges"]:
         simmachine.record_to(opts["edges"])

@@ -57,13 +57,18 @@ positions = array("i", bytes(4 * 16))  # steps per STEP pin index
 step_names = []
 
 
-def attach_world(pin_map, step_names_in_order):
-    """Tell the model which pins are STEP, DIR and endstops (names as in board.PINS)."""
+_dir_forward = bytearray(GPIO_COUNT)  # STEP pin -> DIR level that moves it forward
+
+
+def attach_world(pin_map, step_names_in_order, inverted=()):
+    """Tell the model which pins are STEP, DIR and endstops (names as in board.PINS);
+    inverted: motors wired the other way round, moving forward with DIR low."""
     for i, name in enumerate(step_names_in_order):
         step_names.append(name)
         g = pin_map[name + "_step"]
         _role[g] = 1 + i
         _dir_of[g] = pin_map[name + "_dir"]
+        _dir_forward[g] = 0 if name in inverted else 1
     for axis, name in enumerate(("x", "y", "z")):
         _endstop_axis[pin_map[name + "_min"]] = 1 + axis
 
@@ -90,12 +95,65 @@ def close():
         _out.close()
 
 
+# The chip's GPIO set/clear registers, as a RAM bank the firmware writes with ptr32
+# (pin_writer "registers"). After every timer callback the bank's writes become pin
+# levels, in the same order and at the same virtual time as Pin.value writes would.
+_bank = None
+_bank_words = array("i", [0, 0, 0, 0])  # set, clear, hi set, hi clear word offsets
+
+
+def register_bank(chip):
+    """A bank laid out like the chip's registers; the firmware gets its address."""
+    global _bank
+    from mixfw.pins import REGISTERS
+    _, set_at, clr_at, hi_set_at, hi_clr_at = REGISTERS[chip]
+    for i, at in enumerate((set_at, clr_at, hi_set_at, hi_clr_at)):
+        _bank_words[i] = at // 4
+    _bank = array("I", bytes(4 * 16))
+    return _bank
+
+
+def _apply_bank():
+    bank = _bank
+    w = _bank_words
+    for k in (0, 2):
+        if k and not w[2]:
+            break
+        s = bank[w[k]]
+        c = bank[w[k + 1]]
+        if s | c:
+            bank[w[k]] = 0
+            bank[w[k + 1]] = 0
+            first = 32 if k else 0
+            m = s | c
+            bit = 0
+            while m:
+                if m & 1:
+                    _set_level(first + bit, (s >> bit) & 1)
+                m >>= 1
+                bit += 1
+
+
 def _record(gpio, level):
     global _n
     _edges[_n] = (now_us << 8) | (gpio << 1) | level
     _n += 1
     if _n >= _CAPACITY:  # a flush outside idle() would be a bug: drop nothing, stop
         raise RuntimeError("edge buffer overflow")
+
+
+def _set_level(g, v):
+    if _levels[g] != v:
+        _levels[g] = v
+        _record(g, v)
+        idx = _role[g]
+        if idx and v:
+            if _levels[_dir_of[g]] == _dir_forward[g]:
+                positions[idx - 1] += 1
+            else:
+                positions[idx - 1] -= 1
+    elif now_us == 0:
+        _record(g, v)  # every signal gets a value at #0
 
 
 class Pin:
@@ -122,18 +180,7 @@ class Pin:
             if axis:
                 return 1 if positions[axis - 1] <= 0 else 0
             return _levels[g]
-        v = 1 if v else 0
-        if _levels[g] != v:
-            _levels[g] = v
-            _record(g, v)
-            idx = _role[g]
-            if idx and v:
-                if _levels[_dir_of[g]]:
-                    positions[idx - 1] += 1
-                else:
-                    positions[idx - 1] -= 1
-        elif now_us == 0:
-            _record(g, v)  # every signal gets a value at #0
+        _set_level(g, 1 if v else 0)
 
     def on(self):
         self.value(1)
@@ -191,6 +238,8 @@ def idle():
                 now_us = nxt
                 micropython.heap_lock()
                 cb(t)
+                if _bank is not None:
+                    _apply_bank()
                 micropython.heap_unlock()
                 nxt += per
                 if _n > _FLUSH_AT:
@@ -199,6 +248,8 @@ def idle():
             while nxt <= end:
                 now_us = nxt
                 cb(t)
+                if _bank is not None:
+                    _apply_bank()
                 nxt += per
                 if _n > _FLUSH_AT:
                     flush()

@@ -28,6 +28,7 @@ FIRMWARE_DEFAULTS = {
     "transition_l1_mm": 0.0,
     "transition_l2_mm": 0.0,
     "transition_pairs": ((0, 0, 0.0, 0.0),) * 8,
+    "trace_records": 512,
 }
 
 
@@ -140,6 +141,8 @@ SCHEMA = (
      "filament this drive has fed, net of retractions (M167 reports, M167 R clears)"),
     ("tool_mixes",                 EACH,   MIX,   0,       0,           LIVE,
      "mix of this virtual tool, drive weights w0:w1:... (M164/M165/M567 set it)"),
+    ("trace_records",              "",     INT,   0,       100000,      RESTART,
+     "step events the on-board trace ring holds (M7300/M7301), 12 bytes each"),
     ("console_uart",               "",     INT,   -1,      4,           RESTART,
      "UART id of a serial console besides USB, -1 for none"),
     ("console_baud",               "",     INT,   300,     4000000,     RESTART,

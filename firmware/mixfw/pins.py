@@ -1,9 +1,27 @@
-# Pins: turns the step loop's GPIO masks into pin writes, and owns the ENABLE and
-# endstop pins. This is the portable Pin.value path; chips with set/clear registers
-# get a faster writer with the same out(set_mask, clr_mask) signature.
+# Pins: how the step loop's GPIO masks reach the pins, and the ENABLE and endstop
+# pins. With pin_writer "registers" the step loop writes the chip's set/clear
+# registers itself (see stepper._emit); "pin" is the portable Pin.value path.
 from mixfw.compat import micropython, ptr32
 
 AXIS_NAMES = ("x", "y", "z")
+# Per chip: register block address, and byte offsets of the GPIO output set and clear
+# registers, then of the set and clear registers for GPIO 32+ (0: none).
+REGISTERS = {
+    "rp2040": (0xD0000000, 0x014, 0x018, 0, 0),  # SIO GPIO_OUT_SET / GPIO_OUT_CLR
+    "rp2350": (0xD0000000, 0x018, 0x020, 0, 0),  # SIO GPIO_OUT_SET / GPIO_OUT_CLR
+    "esp32": (0x3FF44000, 0x008, 0x00C, 0x014, 0x018),  # GPIO_OUT_W1TS/W1TC, OUT1_W1TS/W1TC
+}
+# GPIOs the step path can drive: masks are 30 bits wide (31-bit small ints on the
+# chips), and ESP32's GPIO 32/33 ride on bits 28/29, as it has no GPIO 28..31.
+STEP_GPIOS = {
+    "rp2040": tuple(range(30)), "rp2350": tuple(range(30)), "sim": tuple(range(30)),
+    "esp32": tuple(g for g in range(34) if g not in (20, 24, 28, 29, 30, 31)),
+}
+
+
+def mask_bit(chip, gpio):
+    """The bit of a GPIO in step-loop masks."""
+    return gpio - 4 if chip == "esp32" and gpio >= 32 else gpio
 
 
 @micropython.viper
@@ -20,6 +38,7 @@ def _write(pins, gpio_top: int, set_mask: int, clr_mask: int):
 class Pins:
     def __init__(self, machine, pin_map, settings):
         self.drives = settings["drives"]
+        self.chip = settings.get("chip", "sim")
         Pin = machine.Pin
         self.by_gpio = [None] * 32
         self.step_masks = []  # X Y Z then drives
@@ -46,6 +65,15 @@ class Pins:
             _write(by_gpio, top, set_mask, clr_mask)
 
         self.out = out
+        # The register path: where the step loop writes, and the word offsets it uses.
+        self.registers = None
+        if settings.get("pin_writer", "pin") == "registers":
+            self.registers = self._register_block(machine)
+        inverted = settings.get("invert_dir", ())
+        self.dir_invert_mask = 0
+        for i, name in enumerate(names):
+            if name in inverted:
+                self.dir_invert_mask |= self.dir_masks[i]
         e0, e1, e2 = self.endstop_pins
         lvl = self.endstop_level
 
@@ -55,12 +83,24 @@ class Pins:
 
         self.endstops = endstops
 
+    def _register_block(self, machine):
+        if self.chip not in REGISTERS:
+            raise ValueError("pin_writer registers: no set/clear registers known for chip %r"
+                             % self.chip)
+        base, set_at, clr_at, hi_set_at, hi_clr_at = REGISTERS[self.chip]
+        # The simulated chip offers a RAM bank laid out like this chip's registers.
+        bank = getattr(machine, "register_bank", None)
+        address = bank(self.chip) if bank else base
+        return address, (set_at // 4, clr_at // 4, hi_set_at // 4, hi_clr_at // 4)
+
     def _out(self, Pin, pin_map, name, level):
         gpio = pin_map[name]
-        if not 0 <= gpio < 30:
-            raise ValueError("%s on GPIO %d: the step path drives GPIO 0..29" % (name, gpio))
-        self.by_gpio[gpio] = Pin(gpio, Pin.OUT, value=level)
-        return 1 << gpio
+        if gpio not in STEP_GPIOS.get(self.chip, ()):
+            raise ValueError("%s on GPIO %d: the step path of a %s drives GPIO %s" % (
+                name, gpio, self.chip, STEP_GPIOS.get(self.chip)))
+        bit = mask_bit(self.chip, gpio)
+        self.by_gpio[bit] = Pin(gpio, Pin.OUT, value=level)
+        return 1 << bit
 
     def axis_dir_masks(self):
         """DIR masks per planner axis: X Y Z, and E = every drive's DIR pin."""

@@ -96,6 +96,7 @@ class Planner:
         self.drive_mm = [0.0] * self.drives
         self.drive_steps = [0] * self.drives
         self.before_sync = []  # fn() each: moves held before the planner are handed over
+        self.dir_invert_mask = 0  # DIR pins of motors wired the other way round
         # For retract_policy 2: the latest extrusion as stretches [start, end) of block
         # schedules (weights, start, end), newest last, and what retractions took back
         # from it, taken-first first. See _replay_counts.
@@ -337,6 +338,9 @@ class Planner:
                 dclr |= mask
             else:
                 dset |= mask
+        inv = self.dir_invert_mask
+        if inv:
+            dset, dclr = (dset & ~inv) | (dclr & inv), (dclr & ~inv) | (dset & inv)
         if homing_axes:
             flags |= st.F_HOMING | (homing_axes << st.F_HOME_SHIFT)
         m[b + st.B_FLAGS] = flags

@@ -1,8 +1,10 @@
 # The step loop: one viper function, run from machine.Timer on a board and from the
 # virtual clock in the simulation. It reads the integer block records the planner
 # prepared, walks a fixed-point velocity ramp per tick, spreads minor-axis steps
-# with Bresenham, hands E steps to the mixer, and writes STEP/DIR edges through
-# `out(set_mask, clr_mask)` in GPIO-number space.
+# with Bresenham, hands E steps to the mixer, and writes STEP/DIR edges in
+# GPIO-number space: straight into the chip's set/clear registers (out is then the
+# register block's address), or through `out(set_mask, clr_mask)` (Pin.value).
+# While recording, every write is also kept in a ring with its tick (M7300/M7301).
 #
 # Every word the loop compares is kept non-negative: ptr32 loads zero-extend on the
 # 64-bit unix port, so a stored -1 would read back as 4294967295 there.
@@ -45,12 +47,29 @@ S_QUEUE = const(26)  # block slots
 S_HOME_STOP = const(27)  # axes stopped by their endstop in this homing block
 S_TICKS = const(28)  # tick counter, wraps at 2**30
 S_BLOCKS_DONE = const(29)  # blocks finished, wraps at 2**30
-S_WORDS = const(32)
+# Register writes: word offsets of the set and clear registers from the address
+# passed as out; 0 for the Pin.value path. The HI pair is ESP32's register for
+# GPIO 32..39, whose pins 32 and 33 use mask bits 28 and 29 (ESP32 has no GPIO 28-31).
+S_REG_SET = const(30)
+S_REG_CLR = const(31)
+S_REG_HI_SET = const(32)
+S_REG_HI_CLR = const(33)
+# Trace capture: a ring of (tick since start, set mask, clear mask) records after the
+# block ring. The interrupt writes at HEAD while there is room and counts what it had
+# to drop in LOST; the main loop reads from TAIL (M7301).
+S_CAP_ON = const(34)
+S_CAP_BASE = const(35)
+S_CAP_SIZE = const(36)  # records
+S_CAP_HEAD = const(37)
+S_CAP_TAIL = const(38)
+S_CAP_LOST = const(39)
+S_CAP_T0 = const(40)  # S_TICKS when recording started
+S_WORDS = const(48)
 
-MIX_BASE = const(32)  # mixer section, mixer.M_WORDS long
-MASK_BASE = const(48)  # STEP pin masks: X Y Z then the drives (9 words)
-DIR_MASK_BASE = const(57)  # DIR pin masks in the same order (9 words)
-BLOCK_BASE = const(72)
+MIX_BASE = const(48)  # mixer section, mixer.M_WORDS long
+MASK_BASE = const(64)  # STEP pin masks: X Y Z then the drives (9 words)
+DIR_MASK_BASE = const(73)  # DIR pin masks in the same order (9 words)
+BLOCK_BASE = const(88)
 
 # Block record words.
 B_N = const(0)  # lead-axis steps (step events)
@@ -78,8 +97,53 @@ F_HOME_SHIFT = const(8)  # homing axis mask (X=1, Y=2, Z=4) << F_HOME_SHIFT
 assert mixer.M_ID == 0  # the step loop reads the loaded mix id at MIX_BASE
 
 
-def mem_words(queue_blocks):
-    return BLOCK_BASE + queue_blocks * B_WORDS
+CAP_WORDS = const(3)  # per capture record
+HI_SHIFT = const(28)  # ESP32: GPIO 32, 33 travel as mask bits 28, 29
+LO_MASK = const(0x0FFFFFFF)
+
+
+def mem_words(queue_blocks, capture_records=0):
+    return BLOCK_BASE + queue_blocks * B_WORDS + capture_records * CAP_WORDS
+
+
+def init_capture(mem, queue_blocks, capture_records):
+    mem[S_CAP_BASE] = BLOCK_BASE + queue_blocks * B_WORDS
+    mem[S_CAP_SIZE] = capture_records
+
+
+@micropython.viper
+def _emit(mem: ptr32, out, set_mask: int, clr_mask: int):
+    """Write STEP/DIR levels: set_mask pins high, clr_mask pins low."""
+    if mem[S_CAP_ON]:
+        head = mem[S_CAP_HEAD]
+        nxt = head + 1
+        if nxt >= mem[S_CAP_SIZE]:
+            nxt = 0
+        if nxt == mem[S_CAP_TAIL]:
+            mem[S_CAP_LOST] += 1
+        else:
+            r = mem[S_CAP_BASE] + head * CAP_WORDS
+            mem[r] = (mem[S_TICKS] - mem[S_CAP_T0]) & 0x3FFFFFFF
+            mem[r + 1] = set_mask
+            mem[r + 2] = clr_mask
+            mem[S_CAP_HEAD] = nxt
+    at = mem[S_REG_SET]
+    if at == 0:
+        out(set_mask, clr_mask)
+        return
+    regs = ptr32(out)
+    hi = mem[S_REG_HI_SET]
+    if hi:
+        if set_mask >> HI_SHIFT:
+            regs[hi] = set_mask >> HI_SHIFT
+        if clr_mask >> HI_SHIFT:
+            regs[mem[S_REG_HI_CLR]] = clr_mask >> HI_SHIFT
+        set_mask = set_mask & LO_MASK
+        clr_mask = clr_mask & LO_MASK
+    if set_mask:
+        regs[at] = set_mask
+    if clr_mask:
+        regs[mem[S_REG_CLR]] = clr_mask
 
 
 @micropython.viper
@@ -136,17 +200,17 @@ def tick(mem: ptr32, out, endstops) -> int:
     if mem[S_ACTIVE] == 0:
         if mem[S_TAIL] == mem[S_HEAD]:
             if clr:
-                out(0, clr)
+                _emit(mem, out, 0, clr)
             return 0
         changed = int(_start(mem, b))
         if changed:
-            out(mem[S_DIR] & changed, clr | (changed & (0 - 1 - mem[S_DIR])))
+            _emit(mem, out, mem[S_DIR] & changed, clr | (changed & (0 - 1 - mem[S_DIR])))
             return 0
     wait = mem[S_WAIT]
     if wait > 0:
         mem[S_WAIT] = wait - 1
         if clr:
-            out(0, clr)
+            _emit(mem, out, 0, clr)
         if wait == 1 and (mem[b + B_FLAGS] & F_DWELL):
             _finish(mem)
         return 0
@@ -154,7 +218,7 @@ def tick(mem: ptr32, out, endstops) -> int:
     if flags & F_DWELL:  # a zero-length dwell
         _finish(mem)
         if clr:
-            out(0, clr)
+            _emit(mem, out, 0, clr)
         return 0
     # Velocity ramp, per tick so speed is linear in time.
     event = mem[S_EVENT]
@@ -175,7 +239,7 @@ def tick(mem: ptr32, out, endstops) -> int:
     if phase < ONE or left != 0 or clr != 0:
         mem[S_PHASE] = phase
         if clr:
-            out(0, clr)
+            _emit(mem, out, 0, clr)
         return 0
     mem[S_PHASE] = phase - ONE
     stopped = 0
@@ -186,7 +250,7 @@ def tick(mem: ptr32, out, endstops) -> int:
         if stopped == homing:
             _finish(mem)
             if clr:
-                out(0, clr)
+                _emit(mem, out, 0, clr)
             return 0
     n = mem[b + B_N]
     step = 0
@@ -216,9 +280,9 @@ def tick(mem: ptr32, out, endstops) -> int:
     if step:
         mem[S_PULSE_MASK] = step
         mem[S_PULSE_LEFT] = mem[S_PULSE_TICKS]
-        out(step, clr)
+        _emit(mem, out, step, clr)
     elif clr:
-        out(0, clr)
+        _emit(mem, out, 0, clr)
     event += 1
     mem[S_EVENT] = event
     if event >= n:

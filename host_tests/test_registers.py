@@ -1,0 +1,119 @@
+"""The register path: the step loop writes the chip's GPIO set/clear registers with
+viper ptr32, here into the simulated chip's register bank laid out like each chip's.
+Its trace must be identical to the Pin.value path's. Also the on-board trace capture
+(M7300/M7301), inverted DIR pins, and the hard-timer version check."""
+import itertools
+
+import numpy as np
+import pytest
+
+from mixstep import paths, trace
+from mixstep.simprinter import SimPrinter
+
+# Real slicer output: the start of the example print, with two tool changes.
+GCODE = paths.ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
+LINES = [l.rstrip("\n") for l in itertools.islice(open(GCODE), 1200)]
+
+
+def run(tmp_path, name, settings, lines=LINES, heap_lock=True):
+    edges = tmp_path / (name + ".edges")
+    p = SimPrinter(edges_path=edges, heap_lock=heap_lock, settings=settings)
+    for line in lines:
+        reply = p.send(line)
+        assert not [r for r in reply if r.startswith("Error")], (line, reply)
+    return p, edges
+
+
+@pytest.fixture(scope="module")
+def pin_path(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("pins")
+    p, edges = run(tmp, "pin", {})
+    return p.finish()["steps"], edges.read_bytes()
+
+
+@pytest.mark.parametrize("chip", ["rp2040", "rp2350", "esp32"])
+def test_register_writes_give_the_same_trace_as_pin_writes(tmp_path, pin_path, chip):
+    p, edges = run(tmp_path, chip, {"pin_writer": "registers", "chip": chip})
+    steps = p.finish()["steps"]
+    assert steps == pin_path[0]
+    assert steps["e0"] > 0 and steps["e2"] > 0
+    assert edges.read_bytes() == pin_path[1]
+
+
+def test_trace_capture_records_every_step_loop_write(tmp_path, board):
+    p, edges = run(tmp_path, "capture", {"trace_records": 30000}, LINES[:40] + ["M7300 S1"])
+    records = []
+    # The host drains the ring after every line while the print goes on.
+    for line in LINES[40:300] + ["M400", None]:
+        if line:
+            p.send(line)
+        dump = p.send("M7301")
+        head = dump[0].split()
+        assert head[0] == "trace:begin" and head[1] == "tick_us=20" and head[3] == "overrun=0"
+        assert dump[-2:] == ["trace:end", "ok"] and len(dump) == int(head[2][8:]) + 3
+        records += [tuple(int(v) for v in l[len("trace:"):].split(",")) for l in dump[1:-2]]
+    assert p.send("M7300 S0")[-1] == "ok"
+    p.finish()
+    # Every STEP rise the chip made while recording is in the records, at the same
+    # tick spacing: recording stopped after the last move, so the two end together.
+    step_bits = {gpio for name, gpio in board["PINS"].items() if name.endswith("_step")}
+    captured = [(tick * 20, bit) for tick, s, c in records for bit in sorted(step_bits)
+                if (s >> bit) & 1]
+    t, g, v = trace.read_edges(edges)
+    rising = (v == 1) & (t > 0) & np.isin(g, list(step_bits))
+    chip = list(zip(t[rising].tolist(), g[rising].tolist()))[-len(captured):]
+    assert len(captured) > 1000 and len(chip) == len(captured)
+    assert [b for _, b in captured] == [b for _, b in chip]
+    assert [w - captured[0][0] for w, _ in captured] == [w - chip[0][0] for w, _ in chip]
+
+
+def test_trace_capture_without_a_ring_is_refused():
+    p = SimPrinter(settings={"trace_records": 0})
+    assert p.send("M7300 S1")[0].startswith("Error:no trace ring")
+    assert p.send("M7301")[0].startswith("Error:no trace ring")
+    p.finish()
+
+
+def test_inverted_dir_pins_drive_the_motor_the_same_way(tmp_path, board):
+    lines = ["M302 P1", "G1 X10 Y5 E3 F3000", "G1 X2 E1", "M400"]
+    p, plain = run(tmp_path, "plain", {}, lines)
+    plain_steps = p.finish()["steps"]
+    p, inverted = run(tmp_path, "inverted", {"invert_dir": ("x", "e0")}, lines)
+    assert p.finish()["steps"] == plain_steps  # the simulated motors are wired reversed
+    pins = board["PINS"]
+
+    def dir_levels(edges, name):
+        """The DIR level in force at each STEP rise of the axis."""
+        t, g, v = trace.read_edges(edges)
+        level = 0
+        levels = []
+        for gpio, lv in zip(g.tolist(), v.tolist()):
+            if gpio == pins[name + "_dir"]:
+                level = lv
+            elif gpio == pins[name + "_step"] and lv == 1:
+                levels.append(level)
+        return levels
+
+    for name in ("x", "e0"):
+        assert dir_levels(inverted, name) == [1 - v for v in dir_levels(plain, name)]
+        assert 0 in dir_levels(plain, name) and 1 in dir_levels(plain, name)
+    assert dir_levels(inverted, "y") == dir_levels(plain, "y") != []
+
+
+def test_rp2_needs_micropython_1_26_for_a_hard_timer(mp):
+    out = mp.json("""
+import json, main
+res = []
+for chip, version in (("rp2040", (1, 25, 0)), ("rp2350", (1, 24, 1)), ("rp2040", (1, 26, 0)),
+                      ("esp32", (1, 20, 0)), ("sim", (1, 0, 0))):
+    try:
+        main.check_timer_support(chip, version)
+        res.append("ok")
+    except RuntimeError as e:
+        res.append(str(e))
+print(json.dumps(res))
+""")
+    assert out[0] == ("mixstep needs MicroPython 1.26 or newer on rp2040 for a hard "
+                      "machine.Timer; this is 1.25.0: flash a newer MicroPython")
+    assert out[1].startswith("mixstep needs MicroPython 1.26 or newer on rp2350")
+    assert out[2:] == ["ok", "ok", "ok"]
