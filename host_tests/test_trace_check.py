@@ -1,0 +1,265 @@
+"""`mixstep trace check` and `mixstep trace pull` on real simulated prints: a true
+trace passes, and each kind of corruption fails with a non-zero exit."""
+import json
+import re
+import subprocess
+
+import numpy as np
+import pytest
+
+from mixstep import cli, paths, sim, trace, tracecheck, tracepull
+
+SAMPLES = paths.ROOT / "testdata"
+PRINT = SAMPLES / "part_3tool_prusaslicer_rel.gcode"
+
+
+@pytest.fixture(scope="module")
+def printed(tmp_path_factory):
+    """The whole example print, simulated once (about 30 s)."""
+    out = tmp_path_factory.mktemp("trace_print")
+    report = sim.run(PRINT, trace_path=out / "trace.vcd")
+    assert report["errors"] == []
+    return out / "trace.vcd"
+
+
+@pytest.fixture(scope="module")
+def snippet(tmp_path_factory):
+    """The print's first 400 lines with mixed tools (T0 1:2:3 by M567, T2 by
+    M163/M164), so the mix check sees several drives at once. Short, so sigrok's
+    constant-rate expansion stays small."""
+    out = tmp_path_factory.mktemp("trace_snippet")
+    lines = PRINT.read_text().splitlines(keepends=True)
+    mixes = ["M567 P0 E1:2:3\n", "M163 S0 P0.2\n", "M163 S1 P0.5\n", "M163 S4 P0.3\n",
+             "M164 S2\n"]
+    gcode = out / "snippet.gcode"
+    gcode.write_text("".join(lines[:21] + mixes + lines[21:400]))
+    report = sim.run(gcode, trace_path=out / "snippet.vcd", edges_path=out / "snippet.edges")
+    assert report["errors"] == []
+    return gcode, out / "snippet.vcd", out / "snippet.edges", report
+
+
+def _run_cli(*argv):
+    return cli.main(["trace", "check"] + [str(a) for a in argv])
+
+
+def _failed(report):
+    return sorted(c["name"] for c in report["checks"] if c["ok"] is False)
+
+
+def _ident(text, name):
+    return re.search(rb"\$var wire 1 (\S+) " + name.encode() + rb" \$end", text).group(1)
+
+
+# --- the true trace -------------------------------------------------------------------
+
+def test_the_simulated_print_passes_every_check(printed, capsys):
+    assert _run_cli(printed, "--gcode", PRINT) == 0
+    out = capsys.readouterr().out
+    assert "FAIL" not in out and "OK:" in out
+    assert _run_cli(printed, "--gcode", PRINT, "--json", "-") == 0
+    report = json.loads(capsys.readouterr().out)
+    by_name = {c["name"]: c for c in report["checks"]}
+    assert by_name["steps_e2"]["measured"] == by_name["steps_e2"]["expected"] > 0
+    assert by_name["moves"]["ok"] and by_name["moves"]["measured"] > 1000
+    for name in ("pulse_high_us", "step_low_us", "dir_setup_us", "rate_x", "rate_e0", "mix"):
+        assert by_name[name]["ok"] is True, by_name[name]
+
+
+def test_expected_counts_agree_with_the_independent_model(board):
+    from gcode_model import expected_steps
+    want = expected_steps(PRINT, board["SETTINGS"]["steps_per_mm"])
+    assert tracecheck.expected_from_gcode(PRINT, board["SETTINGS"])["steps"] == want
+
+
+def test_mixed_tools_pass_and_the_mix_check_sees_several_drives(snippet):
+    gcode, vcd_path, _, report = snippet
+    result = tracecheck.check(vcd_path, gcode)
+    assert _failed(result) == []
+    assert sum(1 for d in ("e0", "e1", "e2", "e4") if report["steps"][d] > 0) == 4
+    mix = next(c for c in result["checks"] if c["name"] == "mix")
+    assert mix["measured"] > 0  # several drives share windows: not trivially exact
+    assert mix["measured"] <= 1.5
+
+
+def test_small_chunks_give_the_same_report(snippet):
+    gcode, vcd_path, _, _ = snippet
+    whole = tracecheck.check(vcd_path, gcode)
+    pieces = tracecheck.check(vcd_path, gcode, chunk_bytes=4096)
+    assert pieces["checks"] == whole["checks"]
+
+
+def test_a_logic_analysers_names_are_mapped(snippet, tmp_path):
+    gcode, vcd_path, _, _ = snippet
+    renamed = tmp_path / "la.vcd"
+    text = vcd_path.read_bytes()
+    renamed.write_bytes(text.replace(b" e1_step $end", b" D0 $end").replace(b" e1_dir $end",
+                                                                            b" D1 $end"))
+    unmapped = tracecheck.check(renamed, gcode)
+    assert next(c for c in unmapped["checks"] if c["name"] == "steps_e1")["ok"] is None
+    assert _run_cli(renamed, "--gcode", gcode, "--map", "e1_step=D0,e1_dir=D1") == 0
+
+
+def test_a_sigrok_capture_reads_back_and_passes(snippet, tmp_path):
+    gcode, vcd_path, _, _ = snippet
+    sr = tmp_path / "capture.sr"
+    subprocess.run(["sigrok-cli", "-I", "vcd", "-i", str(vcd_path), "-o", str(sr)], check=True,
+                   capture_output=True, timeout=600)
+    result = tracecheck.check(sr, gcode)
+    assert _failed(result) == []
+    assert result["timescale_us"] == 1.0
+    assert _run_cli(sr, "--gcode", gcode) == 0
+
+
+# --- corrupted traces -----------------------------------------------------------------
+
+def test_a_dropped_step_pulse_fails(printed, tmp_path):
+    text = printed.read_bytes()
+    e1 = _ident(text, "e1_step")
+    rise = text.index(b"\n1" + e1 + b"\n", len(text) // 2)
+    fall = text.index(b"\n0" + e1 + b"\n", rise)
+    bad = tmp_path / "dropped.vcd"
+    bad.write_bytes(text[:rise] + text[rise + len(e1) + 2:fall] + text[fall + len(e1) + 2:])
+    report = tracecheck.check(bad, PRINT)
+    assert "steps_e1" in _failed(report) and "moves" in _failed(report)
+    assert _run_cli(bad, "--gcode", PRINT) == 1
+
+
+def test_a_too_short_pulse_fails(printed, tmp_path):
+    """One e1 pulse ends 1 us after it starts instead of a tick later."""
+    text = printed.read_bytes()
+    e1 = _ident(text, "e1_step")
+    rise = text.index(b"\n1" + e1 + b"\n", len(text) // 2)
+    stamp = text.rindex(b"\n#", 0, rise)
+    t_rise = int(text[stamp + 2:text.index(b"\n", stamp + 1)])
+    fall = text.index(b"\n0" + e1 + b"\n", rise)
+    next_stamp = text.index(b"\n#", rise)
+    early = b"\n#%d\n0" % (t_rise + 1) + e1
+    bad = tmp_path / "short.vcd"
+    bad.write_bytes(text[:next_stamp] + early + text[next_stamp:fall] + text[fall + len(e1) + 2:])
+    report = tracecheck.check(bad, PRINT)
+    assert _failed(report) == ["pulse_high_us"]
+    assert _run_cli(bad, "--gcode", PRINT) == 1
+
+
+def test_a_dir_change_too_close_to_step_fails(printed, tmp_path):
+    """An e1 DIR change moved from its place to the very time of the next e1 step:
+    every count still agrees, only the setup time is wrong."""
+    text = printed.read_bytes()
+    d1, e1 = _ident(text, "e1_dir"), _ident(text, "e1_step")
+    changes = re.compile(rb"\n[01]" + re.escape(d1) + rb"\n")
+    change = changes.search(text, len(text) // 2)
+    while True:  # one whose next e1 step comes before any other e1 DIR change
+        rise = text.index(b"\n1" + e1 + b"\n", change.end())
+        following = changes.search(text, change.end())
+        if following.start() > rise:
+            break
+        change = following
+    line = text[change.start() + 1:change.end()]
+    bad = tmp_path / "dir.vcd"
+    bad.write_bytes(text[:change.start()] + text[change.end() - 1:rise + 1] + line
+                    + text[rise + 1:])
+    report = tracecheck.check(bad, PRINT)
+    assert _failed(report) == ["dir_setup_us"]
+    assert _run_cli(bad, "--gcode", PRINT) == 1
+
+
+def test_the_trace_of_another_file_fails(printed):
+    report = tracecheck.check(printed, SAMPLES / "slic3r_part_3tool_abs.gcode")
+    assert "moves" in _failed(report) and any(n.startswith("steps_") for n in _failed(report))
+    assert _run_cli(printed, "--gcode", SAMPLES / "slic3r_part_3tool_abs.gcode") == 1
+
+
+def test_a_mix_that_bunches_its_steps_fails(tmp_path):
+    """A 1:1 mix whose drive steps come all e0 then all e1: the totals and the move are
+    right, but the windows are not."""
+    gcode = tmp_path / "mix.gcode"
+    gcode.write_text("M83\nM567 P0 E1:1\nT0\nG1 E1 F300\n")
+    spm_e = paths.load_board("sim")["SETTINGS"]["steps_per_mm"][3]
+    half = int(spm_e / 2 + 0.5)
+    edges = [("e0", t) for t in range(half)] + [("e1", half + t) for t in range(half)]
+    vcd_path = tmp_path / "bunched.vcd"
+    _write_steps(vcd_path, edges)
+    report = tracecheck.check(vcd_path, gcode)
+    assert _failed(report) == ["mix"]
+    # The same steps interleaved pass.
+    _write_steps(vcd_path, [("e%d" % (i % 2), i) for i in range(2 * half)])
+    assert _failed(tracecheck.check(vcd_path, gcode)) == []
+
+
+def _write_steps(path, steps):
+    """STEP pulses of 20 us every 100 us, DIR forward from the start."""
+    import vcd
+    with open(path, "w") as f, vcd.VCDWriter(f, timescale="1 us") as w:
+        var = {n: w.register_var("t", n, "wire", size=1, init=0)
+               for n in ("e0_step", "e0_dir", "e1_step", "e1_dir")}
+        w.change(var["e0_dir"], 10, 1)
+        w.change(var["e1_dir"], 10, 1)
+        for drive, k in steps:
+            w.change(var[drive + "_step"], 100 + 100 * k, 1)
+            w.change(var[drive + "_step"], 120 + 100 * k, 0)
+
+
+def test_unreadable_input_exits_2(tmp_path, capsys):
+    junk = tmp_path / "junk.vcd"
+    junk.write_text("not a trace\n")
+    assert _run_cli(junk, "--gcode", PRINT) == 2
+    assert _run_cli(tmp_path / "missing.vcd", "--gcode", PRINT) == 2
+    assert "junk.vcd" in capsys.readouterr().err
+
+
+# --- trace pull -----------------------------------------------------------------------
+
+def _dump_from_edges(edges_path, tick_us):
+    """The M7301 console reply a board would send for these edges."""
+    times, gpios, levels = trace.read_edges(edges_path)
+    assert (times % tick_us == 0).all()
+    records = []
+    for t in np.unique(times).tolist():
+        at = times == t
+        g, v = gpios[at], levels[at]
+        records.append("trace:%d,%d,%d" % (t // tick_us, int(np.bitwise_or.reduce(1 << g[v == 1], initial=0)),
+                                           int(np.bitwise_or.reduce(1 << g[v == 0], initial=0))))
+    return (["echo:capture stopped", "trace:begin tick_us=%d records=%d overrun=0"
+             % (tick_us, len(records))] + records + ["trace:end", "ok"])
+
+
+def _rises(vcd_path, name):
+    reader = tracecheck.VcdReader(vcd_path, [name])
+    times, levels = [], []
+    for t, _, v in reader.chunks():
+        times.append(t)
+        levels.append(v)
+    reader.close()
+    t, v = np.concatenate(times), np.concatenate(levels)
+    return t[1:][(v[1:] == 1) & (v[:-1] == 0)]
+
+
+def test_pull_turns_a_dump_into_a_vcd_with_the_same_steps(snippet, tmp_path, board):
+    gcode, vcd_path, edges, _ = snippet
+    log = tmp_path / "console.log"
+    log.write_text("\n".join(_dump_from_edges(edges, board["SETTINGS"]["tick_us"])) + "\n")
+    pulled = tmp_path / "pulled.vcd"
+    assert cli.main(["trace", "pull", "--log", str(log), "-o", str(pulled)]) == 0
+    for name in ("x_step", "e0_step", "e1_step", "e4_step"):
+        want = _rises(vcd_path, name)
+        assert len(want) > 0
+        assert np.array_equal(_rises(pulled, name), want), name
+    assert _failed(tracecheck.check(pulled, gcode)) == []
+
+
+def test_pull_maps_gpio_32_and_up_four_bits_down(monkeypatch):
+    monkeypatch.setattr(trace, "signal_names", lambda board: {27: "x_step", 33: "y_step",
+                                                              32: "y_dir"})
+    assert tracepull.mask_bits("esp32") == {27: "x_step", 29: "y_step", 28: "y_dir"}
+
+
+def test_pull_refuses_broken_dumps_and_reports_overrun(tmp_path):
+    log = tmp_path / "log"
+    out = tmp_path / "o.vcd"
+    log.write_text("trace:begin tick_us=20 records=2 overrun=0\ntrace:1,64,0\ntrace:end\nok\n")
+    assert cli.main(["trace", "pull", "--log", str(log), "-o", str(out)]) == 2
+    log.write_text("ok\n")
+    assert cli.main(["trace", "pull", "--log", str(log), "-o", str(out)]) == 2
+    log.write_text("trace:begin tick_us=20 records=1 overrun=5\ntrace:1,64,0\ntrace:end\nok\n")
+    assert cli.main(["trace", "pull", "--log", str(log), "-o", str(out)]) == 1
+    assert out.exists()
