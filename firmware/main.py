@@ -36,6 +36,21 @@ def load_config(path=CONFIG_PATH, warn=print):
     return config
 
 
+def _start_pio(mem, settings, pin_map):
+    """The step loop feeds a PIO state machine (rp2 only); returns what it calls."""
+    if settings.get("chip") not in ("rp2040", "rp2350"):
+        raise ValueError("step_backend pio needs an RP2040 or RP2350, not %r"
+                         % settings.get("chip"))
+    import rp2
+    from mixfw import pio
+    names = ["x", "y", "z"] + ["e%d" % i for i in range(settings["drives"])]
+    sm, first = pio.start(rp2, machine.Pin, pin_map, names, settings["tick_us"])
+    mem[st.S_PIO] = 1
+    mem[st.S_PIO_SHIFT] = first
+    mem[st.S_PIO_LATENCY] = pio.LATENCY_TICKS
+    return sm.put  # bound once: the interrupt must not look it up
+
+
 def build(config=None, pin_map=None, files_root=FILES_ROOT):
     config = config or Config(board.SETTINGS, None)
     settings = config.settings
@@ -55,7 +70,9 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     for i, m in enumerate(pins.dir_masks):
         mem[st.DIR_MASK_BASE + i] = m
     out = pins.out
-    if pins.registers:
+    if settings.get("step_backend", "timer") == "pio":
+        out = _start_pio(mem, settings, pin_map)
+    elif pins.registers:
         out, offsets = pins.registers
         for i, word in enumerate(offsets):
             mem[st.S_REG_SET + i] = word

@@ -117,3 +117,39 @@ print(json.dumps(res))
                       "machine.Timer; this is 1.25.0: flash a newer MicroPython")
     assert out[1].startswith("mixstep needs MicroPython 1.26 or newer on rp2350")
     assert out[2:] == ["ok", "ok", "ok"]
+
+
+def test_pio_output_is_the_register_trace_a_fixed_latency_later(tmp_path, pin_path):
+    """The step loop feeds a (simulated) PIO state machine one word of pin levels per
+    tick; every edge comes out exactly LATENCY_TICKS (4 x 20 us) after the register
+    path would have written it, and nothing else changes."""
+    p, edges = run(tmp_path, "pio", {"step_backend": "pio", "chip": "rp2040"})
+    assert p.finish()["steps"] == pin_path[0]
+    reg = tmp_path / "reg.edges"
+    reg.write_bytes(pin_path[1])
+    t0, g0, v0 = trace.read_edges(reg)
+    t1, g1, v1 = trace.read_edges(edges)
+    # The ENABLE pins are not in the state machine's range: they change at once.
+    step_path = g0 < 18
+    a = (t0 > 0) & step_path
+    b = (t1 > 0) & (g1 < 18)
+    assert np.array_equal(g0[a], g1[b]) and np.array_equal(v0[a], v1[b])
+    assert set((t1[b] - t0[a]).tolist()) == {80}
+    assert a.sum() > 10000
+
+
+def test_pio_needs_the_step_pins_in_one_run_of_gpios(mp):
+    out = mp.json("""
+import json
+from mixfw import pio
+names = ["x", "y"]
+ok = pio.out_range({"x_step": 4, "x_dir": 5, "y_step": 6, "y_dir": 7}, names)
+try:
+    pio.out_range({"x_step": 4, "x_dir": 5, "y_step": 6, "y_dir": 9}, names)
+    err = None
+except ValueError as e:
+    err = str(e)
+print(json.dumps([ok, err]))
+""")
+    assert out == [[4, 4], "step_backend pio needs the STEP/DIR pins on one run of GPIOs; "
+                           "they are on [4, 5, 6, 9]"]

@@ -89,6 +89,7 @@ def main():
     gc.collect()
     simmachine.heap_lock_ticks = opts["heap_lock"]
     firmware.run(consoles, listeners, printer, warnings)
+    simmachine.drain_pio()
     simmachine.close()
     gc.collect()
     pos = simmachine.positions

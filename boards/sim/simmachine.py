@@ -134,6 +134,73 @@ def _apply_bank():
                 bit += 1
 
 
+# The PIO state machine (boards/sim/rp2.py): words of pin levels waiting for their
+# output time, in a ring; the real FIFO holds 8. Times are kept modulo 2**31 in an
+# array('i'), as reading an array('q') would allocate under the heap lock.
+_PIO_SLOTS = 64
+_WRAP = 0x7FFFFFFF
+_pio_time = array("i", bytes(4 * _PIO_SLOTS))
+_pio_word = array("i", bytes(4 * _PIO_SLOTS))
+_pio_head = 0
+_pio_tail = 0
+_pio_base = 0  # first GPIO
+_pio_count = 0  # GPIOs
+_pio_period_us = 0  # one word's time
+_pio_next_us = 0  # earliest time the next word can come out
+pio_overflows = 0
+
+
+def attach_pio(base_gpio, count, period_us):
+    global _pio_base, _pio_count, _pio_period_us
+    _pio_base = base_gpio
+    _pio_count = count
+    _pio_period_us = period_us
+
+
+def pio_put(word):
+    global _pio_head, _pio_next_us, pio_overflows
+    head = _pio_head
+    nxt = head + 1 if head + 1 < _PIO_SLOTS else 0
+    if nxt == _pio_tail:
+        pio_overflows += 1
+        return
+    at = _pio_next_us if _pio_next_us > now_us else now_us
+    _pio_time[head] = at & _WRAP
+    _pio_word[head] = word
+    _pio_next_us = at + _pio_period_us
+    _pio_head = nxt
+
+
+def _pio_output(until_us):
+    """Output every word due by until_us, at its own time."""
+    global now_us, _pio_tail
+    tail = _pio_tail
+    if tail == _pio_head:
+        return
+    keep = now_us
+    while tail != _pio_head:
+        late = (until_us - _pio_time[tail]) & _WRAP
+        if late > 0x3FFFFFFF:  # not due yet
+            break
+        now_us = until_us - late
+        word = _pio_word[tail]
+        bit = 0
+        while bit < _pio_count:
+            _set_level(_pio_base + bit, (word >> bit) & 1)
+            bit += 1
+        tail = tail + 1 if tail + 1 < _PIO_SLOTS else 0
+    _pio_tail = tail
+    now_us = keep
+
+
+def drain_pio():
+    """Let the state machine output everything it holds (end of a run)."""
+    global now_us
+    if _pio_head != _pio_tail:
+        _pio_output(_pio_next_us)
+        now_us = max(now_us, _pio_next_us)
+
+
 def _record(gpio, level):
     global _n
     _edges[_n] = (now_us << 8) | (gpio << 1) | level
@@ -235,6 +302,7 @@ def idle():
         nxt = t._next
         if heap_lock_ticks:
             while nxt <= end:
+                _pio_output(nxt)
                 now_us = nxt
                 micropython.heap_lock()
                 cb(t)
@@ -246,6 +314,7 @@ def idle():
                     flush()
         else:
             while nxt <= end:
+                _pio_output(nxt)
                 now_us = nxt
                 cb(t)
                 if _bank is not None:
@@ -254,6 +323,7 @@ def idle():
                 if _n > _FLUSH_AT:
                     flush()
         t._next = nxt
+    _pio_output(end)
     now_us = end
     for hook in _world_hooks:
         hook(end)

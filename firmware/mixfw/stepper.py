@@ -64,6 +64,14 @@ S_CAP_HEAD = const(37)
 S_CAP_TAIL = const(38)
 S_CAP_LOST = const(39)
 S_CAP_T0 = const(40)  # S_TICKS when recording started
+# PIO output (see pio.py): out is the state machine's put; words are pin levels
+# shifted down by S_PIO_SHIFT. S_PIO_LEFT: ticks the current burst still runs.
+S_PIO = const(41)  # 1 for the PIO path
+S_PIO_SHIFT = const(42)
+S_PIO_LEFT = const(43)
+S_PIO_LATENCY = const(44)
+S_LEVELS = const(45)  # STEP/DIR levels written so far
+S_PIO_DRAIN = const(46)  # tick by which the state machine will have output every word
 S_WORDS = const(48)
 
 MIX_BASE = const(48)  # mixer section, mixer.M_WORDS long
@@ -112,6 +120,23 @@ def init_capture(mem, queue_blocks, capture_records):
 
 
 @micropython.viper
+def _pio_ahead(mem: ptr32) -> int:
+    """Ticks of words the state machine still holds."""
+    ahead = (mem[S_PIO_DRAIN] - mem[S_TICKS]) & 0x3FFFFFFF
+    return 0 if ahead > 0x1FFFFFFF else ahead
+
+
+@micropython.viper
+def _pio_put(mem: ptr32, out, count: int):
+    """Hand the state machine count words of the current levels, one tick each."""
+    word = mem[S_LEVELS] >> mem[S_PIO_SHIFT]
+    mem[S_PIO_DRAIN] = (mem[S_TICKS] + int(_pio_ahead(mem)) + count) & 0x3FFFFFFF
+    while count > 0:
+        out(word)
+        count -= 1
+
+
+@micropython.viper
 def _emit(mem: ptr32, out, set_mask: int, clr_mask: int):
     """Write STEP/DIR levels: set_mask pins high, clr_mask pins low."""
     if mem[S_CAP_ON]:
@@ -127,6 +152,16 @@ def _emit(mem: ptr32, out, set_mask: int, clr_mask: int):
             mem[r + 1] = set_mask
             mem[r + 2] = clr_mask
             mem[S_CAP_HEAD] = nxt
+    if mem[S_PIO]:
+        if mem[S_PIO_LEFT] == 0:
+            # A burst starts: old levels until the latency is queued, so this
+            # tick's levels come out exactly LATENCY ticks from now.
+            fill = mem[S_PIO_LATENCY] - int(_pio_ahead(mem))
+            if fill > 0:
+                _pio_put(mem, out, fill)
+        mem[S_LEVELS] = (mem[S_LEVELS] | set_mask) & (0 - 1 - clr_mask)
+        mem[S_PIO_LEFT] = mem[S_PIO_LATENCY] + 2
+        return
     at = mem[S_REG_SET]
     if at == 0:
         out(set_mask, clr_mask)
@@ -189,6 +224,15 @@ def _start(mem: ptr32, b: int) -> int:
 def tick(mem: ptr32, out, endstops) -> int:
     """One timer tick. Returns 1 if a step was taken."""
     mem[S_TICKS] = (mem[S_TICKS] + 1) & 0x3FFFFFFF
+    if mem[S_PIO]:
+        # The levels the last tick left, for the state machine; the burst goes on
+        # while there is work.
+        left = mem[S_PIO_LEFT]
+        if left > 0:
+            _pio_put(mem, out, 1)
+            if mem[S_ACTIVE] or mem[S_TAIL] != mem[S_HEAD] or mem[S_PULSE_LEFT]:
+                left = mem[S_PIO_LATENCY] + 2
+            mem[S_PIO_LEFT] = left - 1
     clr = 0
     left = mem[S_PULSE_LEFT]
     if left > 0:
