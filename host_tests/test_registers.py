@@ -3,6 +3,7 @@ viper ptr32, here into the simulated chip's register bank laid out like each chi
 Its trace must be identical to the Pin.value path's. Also the on-board trace capture
 (M7300/M7301), inverted DIR pins, and the hard-timer version check."""
 import itertools
+import json
 
 import numpy as np
 import pytest
@@ -153,3 +154,28 @@ print(json.dumps([ok, err]))
 """)
     assert out == [[4, 4], "step_backend pio needs the STEP/DIR pins on one run of GPIOs; "
                            "they are on [4, 5, 6, 9]"]
+
+
+def test_capture_pull_and_check_a_real_print_end_to_end(tmp_path):
+    """The on-board path: record from power-up, drain M7301 into a console log while
+    the print runs, `mixstep trace pull --log` it into a VCD, and `mixstep trace check`
+    that VCD against the G-code: it must pass, step for step."""
+    from mixstep import cli
+    snippet = tmp_path / "snippet.gcode"
+    snippet.write_text("\n".join(LINES[:400]) + "\n")
+    p = SimPrinter(settings={"trace_records": 60000})
+    log = [] + p.send("M7300 S1")
+    for line in LINES[:400] + ["M400"]:
+        p.send(line)
+        log += p.send("M7301")
+    p.finish()
+    assert all("overrun=0" in l for l in log if l.startswith("trace:begin"))
+    (tmp_path / "console.log").write_text("\n".join(log) + "\n")
+    vcd = tmp_path / "pulled.vcd"
+    assert cli.main(["trace", "pull", "--log", str(tmp_path / "console.log"), "-o", str(vcd)]) == 0
+    assert cli.main(["trace", "check", str(vcd), "--gcode", str(snippet),
+                     "--json", str(tmp_path / "check.json")]) == 0
+    report = json.loads((tmp_path / "check.json").read_text())
+    assert report["ok"] is True
+    names = {c["name"] for c in report["checks"]}
+    assert {"steps_e0", "steps_x", "moves", "pulse_high_us", "dir_setup_us"} <= names

@@ -32,8 +32,11 @@ class PullError(Exception):
 
 
 def parse_dump(lines):
-    """Console lines -> {"tick_us", "overrun", "records": [(tick, set, clr)]}."""
+    """Console lines -> {"tick_us", "overrun", "records": [(tick, set, clr)]}. A host
+    may drain the ring with M7301 again and again while the board records; the dumps
+    of one recording follow each other, so their records are joined in order."""
     head = None
+    dumps = []
     records = []
     for raw in lines:
         line = raw.strip()
@@ -43,6 +46,8 @@ def parse_dump(lines):
             m = _BEGIN.match(line)
             if not m:
                 raise PullError("malformed header %r" % line)
+            if head is not None:
+                raise PullError("trace:begin inside a dump: %r" % line)
             head = [int(v) for v in m.groups()]
             records = []
         elif line == "trace:end":
@@ -50,14 +55,22 @@ def parse_dump(lines):
                 raise PullError("trace:end without trace:begin")
             if len(records) != head[1]:
                 raise PullError("header says %d records, got %d" % (head[1], len(records)))
-            return {"tick_us": head[0], "overrun": head[2], "records": records}
+            dumps.append((head, records))
+            head = None
         else:
             m = _RECORD.match(line)
             if head is None or not m:
                 raise PullError("unexpected line %r" % line)
             records.append(tuple(int(v) for v in m.groups()))
-    raise PullError("no complete dump (trace:begin ... trace:end) in the input"
-                    if head is None else "the dump ends before trace:end")
+    if head is not None:
+        raise PullError("the dump ends before trace:end")
+    if not dumps:
+        raise PullError("no complete dump (trace:begin ... trace:end) in the input")
+    if len({h[0] for h, _ in dumps}) != 1:
+        raise PullError("dumps with different tick_us: not one recording")
+    joined = [r for _, recs in dumps for r in recs]
+    return {"tick_us": dumps[0][0][0], "overrun": max(h[2] for h, _ in dumps),
+            "records": joined}
 
 
 def mask_bits(board="sim"):
