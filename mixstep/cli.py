@@ -46,6 +46,8 @@ def main(argv=None):
     advance.add_parser(sub)
     from mixstep import trace  # `mixstep trace check|pull`
     trace.add_parser(sub)
+    from mixstep import boards  # `mixstep boards check`: pin-map validation
+    boards.add_parser(sub)
     args = parser.parse_args(argv)
     return args.run(args)
 
