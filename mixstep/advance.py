@@ -72,6 +72,8 @@ import math
 import sys
 from collections import deque
 
+from mixstep import gcodeio
+
 _SNAP_MM = 5e-6     # a split closer than this to a move's end is not worth a new line
 _E_EPS_MM = 1e-7    # retraction debt below this is rounding, not filament
 _DEFAULT_MAX_BUFFER_LINES = 200000
@@ -168,68 +170,28 @@ def _split_code(line):
     return stripped, code[len(stripped):] + rest
 
 
-def _arc_centre(x0, y0, x1, y1, words, clockwise):
-    """Centre of a G2/G3 arc from I/J or from R (Marlin's rule for R)."""
-    if "I" in words or "J" in words:
-        return x0 + float(words.get("I", 0.0)), y0 + float(words.get("J", 0.0))
-    r = float(words["R"])
-    dx, dy = x1 - x0, y1 - y0
-    d = math.hypot(dx, dy)
-    if d == 0:
-        raise ValueError("R arc with the same start and end")
-    h = math.sqrt(max(r * r - d * d / 4.0, 0.0))
-    e = -1.0 if (clockwise != (r < 0)) else 1.0
-    return (x0 + x1) / 2.0 + e * h * (-dy / d), (y0 + y1) / 2.0 + e * h * (dx / d)
-
-
-def _arc_sweep(x0, y0, x1, y1, cx, cy, clockwise):
-    """Signed angle of the arc in radians: negative for G2, positive for G3."""
-    ax, ay = x0 - cx, y0 - cy
-    bx, by = x1 - cx, y1 - cy
-    a = math.atan2(ax * by - ay * bx, ax * bx + ay * by)
-    if a < 0:
-        a += 2 * math.pi
-    if clockwise:
-        a -= 2 * math.pi
-    if abs(x1 - x0) < 1e-9 and abs(y1 - y0) < 1e-9:
-        a = -2 * math.pi if clockwise else 2 * math.pi
-    return a
-
-
 def _split_move(ent, t_mm):
     """Split a buffered printing move at printing extrusion t_mm.
 
     Returns (first_text, point, e_first, second_entry) or None when it can't be split
     (an arc with P turns)."""
-    s_end, line, s_start, x0, y0, z0, e0, repay, flags, lineno = ent
+    s_end, line, s_start, start, code, words, repay, flags, lineno = ent
     rel_xyz, rel_e = flags & 1, flags & 2
-    code, rest = _split_code(line)
-    nl = "\r\n" if line.endswith("\r\n") else "\n"
-    parts = code.split()
-    cmd = parts[0]
-    words = {}
-    order = []
-    for w in parts[1:]:
-        words[w[0]] = w[1:]
-        order.append(w[0])
-    if "P" in words and cmd in ("G2", "G3"):
+    if "P" in words and code in gcodeio.ARCS:
         return None
-    x1 = (x0 + float(words["X"]) if rel_xyz else float(words["X"])) if "X" in words else x0
-    y1 = (y0 + float(words["Y"]) if rel_xyz else float(words["Y"])) if "Y" in words else y0
-    z1 = (z0 + float(words["Z"]) if rel_xyz else float(words["Z"])) if "Z" in words else z0
-    de = float(words["E"]) if rel_e else float(words["E"]) - e0
+    _, rest = _split_code(line)
+    nl = "\r\n" if line.endswith("\r\n") else "\n"
+    x0, y0, z0, e0 = start
+    (x1, y1, z1, _), de = gcodeio.move_end(start, words, rel_xyz, rel_e)
     e_first = round(repay + (t_mm - s_start), 5)
     if not rel_e:   # the E word written is rounded: measure the split from it
         e_first = round(e0 + e_first, 5) - e0
     f = e_first / de
-    arc = cmd in ("G2", "G3")
+    arc = code in gcodeio.ARCS
     if arc:
-        clockwise = cmd == "G2"
-        cx, cy = _arc_centre(x0, y0, x1, y1, words, clockwise)
-        sweep = _arc_sweep(x0, y0, x1, y1, cx, cy, clockwise)
-        a0 = math.atan2(y0 - cy, x0 - cx) + f * sweep
-        r0 = math.hypot(x0 - cx, y0 - cy)
-        xm, ym = cx + r0 * math.cos(a0), cy + r0 * math.sin(a0)
+        cx, cy, r0, a0, sweep = gcodeio.arc(start, (x1, y1), words, code == "G2")
+        a_mid = a0 + f * sweep
+        xm, ym = cx + r0 * math.cos(a_mid), cy + r0 * math.sin(a_mid)
     else:
         xm, ym = x0 + f * (x1 - x0), y0 + f * (y1 - y0)
     zm = z0 + f * (z1 - z0)
@@ -240,8 +202,8 @@ def _split_move(ent, t_mm):
             return _fmt(v_mid - v0 if first else v1 - v_mid, 4)
         return _fmt(v_mid, 4) if first else words[letter]
 
-    first = [cmd]
-    second = [cmd]
+    first = [code]
+    second = {}
     mids = {"X": (xm, x0, x1), "Y": (ym, y0, y1), "Z": (zm, z0, z1)}
     for letter in ("X", "Y", "Z"):
         if letter in words or (arc and letter != "Z"):
@@ -255,24 +217,23 @@ def _split_move(ent, t_mm):
     first.append("E" + _fmt(e_first if rel_e else e0 + e_first, 5))
     if "F" in words:
         first.append("F" + words["F"])
-    for letter in order:
+    for letter, value in words.items():
         if letter in "XYZ":
-            second.append(letter + axis(letter, *mids[letter], False))
+            second[letter] = axis(letter, *mids[letter], False)
         elif letter == "E":
-            second.append("E" + (_fmt(de - e_first, 5) if rel_e else words["E"]))
-        elif letter in "IJRF":
-            continue
-        else:
-            second.append(letter + words[letter])
+            second["E"] = _fmt(de - e_first, 5) if rel_e else value
+        elif letter not in "IJRF":
+            second[letter] = value
     if arc:
         if "X" not in words:
-            second.append("X" + _fmt(x1 if not rel_xyz else x1 - xm, 4))
+            second["X"] = _fmt(x1 if not rel_xyz else x1 - xm, 4)
         if "Y" not in words:
-            second.append("Y" + _fmt(y1 if not rel_xyz else y1 - ym, 4))
-        second.append("I" + _fmt(cx - xm, 4))
-        second.append("J" + _fmt(cy - ym, 4))
+            second["Y"] = _fmt(y1 if not rel_xyz else y1 - ym, 4)
+        second["I"] = _fmt(cx - xm, 4)
+        second["J"] = _fmt(cy - ym, 4)
     s_mid = s_start + (e_first - repay)
-    second_ent = (s_end, " ".join(second) + rest, s_mid, xm, ym, zm, e0 + e_first, 0.0,
+    second_text = " ".join([code] + [k + v for k, v in second.items()]) + rest
+    second_ent = (s_end, second_text, s_mid, (xm, ym, zm, e0 + e_first), code, second, 0.0,
                   flags, lineno)
     return " ".join(first) + nl, (xm, ym, zm), s_mid, second_ent
 
@@ -337,7 +298,7 @@ class _Advancer:
         if purge_mm > 0:
             while i >= 0:
                 ent = buf[i]
-                if len(ent) == 10:
+                if len(ent) == 9:    # a printing move
                     if ent[0] < t - _SNAP_MM:
                         stop = None
                         break
@@ -356,24 +317,24 @@ class _Advancer:
             if ent[0] <= t + _SNAP_MM:
                 new_s = ent[0]
                 buf.insert(cand + 1, (new_s, change))
-                how = "after line %d" % ent[9]
+                how = "after line %d" % ent[8]
             elif ent[2] >= t - _SNAP_MM:
                 new_s = ent[2]
                 buf.insert(cand, (new_s, change))
-                how = "before line %d" % ent[9]
+                how = "before line %d" % ent[8]
             else:
                 split = _split_move(ent, t)
                 if split is None:   # an arc with P turns: go after it
                     new_s = ent[0]
                     buf.insert(cand + 1, (new_s, change))
-                    how = "after line %d (arc with P not split)" % ent[9]
+                    how = "after line %d (arc with P not split)" % ent[8]
                 else:
                     first_text, point, new_s, second = split
                     buf[cand] = second
                     buf.insert(cand, (new_s, change))
                     buf.insert(cand, (new_s, first_text))
-                    how = "splits line %d" % ent[9]
-                    rec["split_line"] = ent[9]
+                    how = "splits line %d" % ent[8]
+                    rec["split_line"] = ent[8]
                     rec["split_point"] = list(point)
         rec["placed"] = how
         rec["s_mm"] = round(s_mm, 6)
@@ -416,137 +377,60 @@ def advance(lines_in, write, purge_for, max_purge_mm=None,
     buf = adv.buf
     append = buf.append
     flush_to = adv.flush_to
-    x = y = z = e = 0.0         # logical position, E in the current G92 frame
-    rel_xyz = rel_e = False
+    moves = gcodeio.MOVES
+    reader = gcodeio.Reader(lines_in)
     s = 0.0                     # printing extrusion so far, mm
     tool = None                 # the input's tool (the slicer's view)
     last_purge = None
     debt = {}                   # retracted mm per slicer tool
-    wipe = False
     n = 0
     limit = -math.inf
     cap = max_buffer_lines
-    for line in lines_in:
-        n += 1
-        c = line[:1]
-        if c == "G":
-            try:
-                semi = line.find(";")
-                parts = (line if semi < 0 else line[:semi]).split()
-                cmd = parts[0]
-                if cmd in ("G1", "G0", "G2", "G3"):
-                    x0, y0, z0, e0 = x, y, z, e
-                    de = 0.0
-                    has_e = False
-                    for w in parts[1:]:
-                        k = w[0]
-                        if k == "X":
-                            x = x + float(w[1:]) if rel_xyz else float(w[1:])
-                        elif k == "Y":
-                            y = y + float(w[1:]) if rel_xyz else float(w[1:])
-                        elif k == "E":
-                            has_e = True
-                            if rel_e:
-                                de = float(w[1:])
-                                e += de
-                            else:
-                                v = float(w[1:])
-                                de = v - e
-                                e = v
-                        elif k == "Z":
-                            z = z + float(w[1:]) if rel_xyz else float(w[1:])
-                    if has_e and de > 0:
-                        owed = debt.get(tool, 0.0)
-                        if owed > 0:
-                            if de <= owed + _E_EPS_MM:
-                                debt[tool] = owed - de if owed - de > _E_EPS_MM else 0.0
-                                append((s, line))
-                                continue
-                            debt[tool] = 0.0
-                        else:
-                            owed = 0.0
-                        if wipe or not (x != x0 or y != y0 or z != z0 or cmd in ("G2", "G3")):
-                            append((s, line))
-                            continue
-                        s0 = s
-                        s += de - owed
-                        append((s, line, s0, x0, y0, z0, e0, owed,
-                                (1 if rel_xyz else 0) | (2 if rel_e else 0), n))
-                        limit = s - max_purge_mm - 2 * _SNAP_MM
-                        if buf[0][0] < limit:
-                            flush_to(limit)
+    for n, line, code, words, start, _, de, printing, _, error in reader:
+        if code in moves:
+            if de > 0:
+                owed = debt.get(tool, 0.0)
+                if owed > 0:
+                    if de <= owed + _E_EPS_MM:
+                        debt[tool] = owed - de if owed - de > _E_EPS_MM else 0.0
+                        append((s, line))
                         continue
-                    if has_e and de < 0:
-                        debt[tool] = debt.get(tool, 0.0) - de
-                elif cmd == "G92":
-                    axes = [w for w in parts[1:] if w[0] in "XYZE"]
-                    if not axes:
-                        x = y = z = e = 0.0
-                    for w in axes:
-                        v = float(w[1:]) if len(w) > 1 else 0.0
-                        if w[0] == "E":
-                            e = v
-                        elif w[0] == "X":
-                            x = v
-                        elif w[0] == "Y":
-                            y = v
-                        else:
-                            z = v
-                elif cmd == "G90":
-                    rel_xyz = rel_e = False
-                elif cmd == "G91":
-                    rel_xyz = rel_e = True
-                elif cmd == "G28":
-                    named = [w[0] for w in parts[1:] if w[0] in "XYZ"]
-                    if not named or "X" in named:
-                        x = 0.0
-                    if not named or "Y" in named:
-                        y = 0.0
-                    if not named or "Z" in named:
-                        z = 0.0
-            except (ValueError, IndexError):
-                adv.warnings.append({"line": n, "message": "could not read: " + line.strip()})
-        elif c == "M":
-            if line.startswith("M83") and not line[3:4].isdigit():
-                rel_e = True
-            elif line.startswith("M82") and not line[3:4].isdigit():
-                rel_e = False
-        elif c == "T":
-            semi = line.find(";")
-            parts = (line if semi < 0 else line[:semi]).split()
-            new_tool = None
-            if parts and parts[0][1:].isdigit():
-                new_tool = int(parts[0][1:])
-            if new_tool is not None:
-                if tool is None and s == 0.0:
-                    tool = new_tool
-                    append((s, _Change(line, {"line": n, "initial": True})))
+                    debt[tool] = 0.0
+                if not printing or reader.wipe:
+                    append((s, line))
                     continue
-                from_tool = 0 if tool is None else tool
-                if new_tool == from_tool and last_purge is not None:
-                    purge = last_purge
-                else:
-                    purge = float(purge_for(from_tool, new_tool))
-                if purge > max_purge_mm + 1e-9:
-                    raise ValueError("purge %g mm for T%d -> T%d exceeds max_purge_mm %g"
-                                     % (purge, from_tool, new_tool, max_purge_mm))
-                last_purge = purge
-                adv.place(line, n, s, from_tool, new_tool, purge)
-                tool = new_tool
-                if len(buf) > adv.max_buffered:
-                    adv.max_buffered = len(buf)
+                s0 = s
+                s += de - owed
+                append((s, line, s0, start, code, words, owed,
+                        (1 if reader.rel_xyz else 0) | (2 if reader.rel_e else 0), n))
+                limit = s - max_purge_mm - 2 * _SNAP_MM
+                if buf[0][0] < limit:
+                    flush_to(limit)
                 continue
-        elif c == ";":
-            if line.startswith(";WIPE_"):
-                if line.startswith(";WIPE_START"):
-                    wipe = True
-                elif line.startswith(";WIPE_END"):
-                    wipe = False
-        elif c == " " or c == "\t":
-            stripped = line.lstrip(" \t")
-            if stripped[:1] in ("G", "M", "T"):
-                adv.warnings.append({"line": n, "message": "indented command not read: "
-                                     + line.strip()})
+            if de < 0:
+                debt[tool] = debt.get(tool, 0.0) - de
+        elif code[:1] == "T" and code[1:].isdigit():
+            new_tool = int(code[1:])
+            if tool is None and s == 0.0:
+                tool = new_tool
+                append((s, _Change(line, {"line": n, "initial": True})))
+                continue
+            from_tool = 0 if tool is None else tool
+            if new_tool == from_tool and last_purge is not None:
+                purge = last_purge
+            else:
+                purge = float(purge_for(from_tool, new_tool))
+            if purge > max_purge_mm + 1e-9:
+                raise ValueError("purge %g mm for T%d -> T%d exceeds max_purge_mm %g"
+                                 % (purge, from_tool, new_tool, max_purge_mm))
+            last_purge = purge
+            adv.place(line, n, s, from_tool, new_tool, purge)
+            tool = new_tool
+            if len(buf) > adv.max_buffered:
+                adv.max_buffered = len(buf)
+            continue
+        elif error is not None:
+            adv.warnings.append({"line": n, "message": "could not read: " + line.strip()})
         append((s, line))
         if len(buf) > cap:
             adv.force_flush()
