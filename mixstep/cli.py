@@ -48,6 +48,8 @@ def main(argv=None):
     trace.add_parser(sub)
     from mixstep import boards  # `mixstep boards check`: pin-map validation
     boards.add_parser(sub)
+    from mixstep import deploy  # `mixstep deploy|freeze|board-check`: onto a board
+    deploy.add_parser(sub)
     args = parser.parse_args(argv)
     return args.run(args)
 

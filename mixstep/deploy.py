@@ -1,0 +1,303 @@
+"""`mixstep deploy`, `mixstep freeze`, `mixstep board-check`: the firmware onto a board.
+
+deploy compiles every module of firmware/mixfw with mpy-cross for the board's chip
+into build/<board>/, checks that the board's MicroPython loads that .mpy version,
+copies the files with mpremote and resets the board. main.py and board.py stay
+source: MicroPython runs main.py at boot only as a .py file, and board.py is the file
+one edits on the board (pins, settings) without a host.
+"""
+import json
+import shlex
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+from mixstep import boards, paths
+
+# mpy-cross -march per chip: viper and native code are machine code for this core.
+MARCH = {"rp2040": "armv6m", "rp2350": "armv7emsp", "esp32": "xtensawin"}
+# Native architecture numbers in .mpy headers and sys.implementation._mpy, in the
+# order of mpy-cross's -march list.
+ARCH_NAMES = ("none", "x86", "x64", "armv6", "armv6m", "armv7m", "armv7em", "armv7emsp",
+              "armv7emdp", "xtensa", "xtensawin", "rv32imc", "rv64imc")
+# Oldest MicroPython per chip: rp2 timers have hard callbacks only since 1.26; the
+# .mpy v6.3 files of this mpy-cross load from 1.23 on.
+MIN_VERSION = {"rp2040": (1, 26, 0), "rp2350": (1, 26, 0), "esp32": (1, 23, 0)}
+PLATFORM = {"rp2040": "rp2", "rp2350": "rp2", "esp32": "esp32"}
+# MicroPython port and board to build a frozen image with.
+PORT_BOARD = {"rp2040": ("rp2", "RPI_PICO"), "rp2350": ("rp2", "RPI_PICO2"),
+              "esp32": ("esp32", "ESP32_GENERIC")}
+SOURCE_FILES = ("main.py", "board.py")
+
+# Run on the board: what MicroPython it is, as one JSON line.
+INFO_CODE = ("import sys, json; i = sys.implementation; print(json.dumps({"
+             "'version': list(i.version[:3]), 'mpy': getattr(i, '_mpy', None), "
+             "'platform': sys.platform, 'machine': getattr(i, '_machine', '')}))")
+# Run on the board: remove the previous mixfw package, so no stale module survives
+# (a left-over .py would even win over the new .mpy). /mixstep.cfg stays.
+REMOVE_CODE = ("import os\n"
+               "def rm(p):\n"
+               "    try:\n"
+               "        mode = os.stat(p)[0]\n"
+               "    except OSError:\n"
+               "        return\n"
+               "    if mode & 0x4000:\n"
+               "        for n in os.listdir(p):\n"
+               "            rm(p + '/' + n)\n"
+               "        os.rmdir(p)\n"
+               "    else:\n"
+               "        os.remove(p)\n"
+               "rm('mixfw')\n")
+
+
+class DeployError(Exception):
+    """A reason not to touch the board, said so the user can act on it."""
+
+
+def _tool(name):
+    """A command installed next to this Python (.venv/bin) or on PATH."""
+    local = Path(sys.executable).parent / name
+    if local.exists():
+        return str(local)
+    found = shutil.which(name)
+    if not found:
+        raise DeployError("%s not found: run `make setup` (it installs %s into .venv)"
+                          % (name, name))
+    return found
+
+
+def board_chip(board):
+    """The board's chip, after its pin map passes `mixstep boards check`."""
+    problems = boards.check_board(board)
+    if problems:
+        raise DeployError("board %s has pin-map problems; fix them first:\n  %s"
+                          % (board, "\n  ".join(problems)))
+    chip = paths.load_board(board)["SETTINGS"]["chip"]
+    if chip not in MARCH:
+        raise DeployError("board %s is chip %r, which runs on the host, not on a "
+                          "MicroPython board (boards with a chip: %s)" % (
+                              board, chip, ", ".join(n for n in boards.board_names()
+                                                     if n != "sim")))
+    return chip
+
+
+def build(board, out_dir=None):
+    """Compile the firmware for the board's chip into build/<board>/; returns the dir."""
+    chip = board_chip(board)
+    out = Path(out_dir) if out_dir else paths.ROOT / "build" / board
+    if out.exists():
+        shutil.rmtree(out)
+    (out / "mixfw").mkdir(parents=True)
+    cross = _tool("mpy-cross")
+    for src in sorted((paths.FIRMWARE / "mixfw").glob("*.py")):
+        dst = out / "mixfw" / (src.stem + ".mpy")
+        cmd = [cross, "-march=" + MARCH[chip], "-s", "mixfw/" + src.name, "-o", str(dst),
+               str(src)]
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+        if proc.returncode != 0:
+            raise DeployError("mpy-cross failed on %s:\n%s" % (src.name, proc.stderr.strip()))
+    shutil.copy(paths.FIRMWARE / "main.py", out / "main.py")
+    shutil.copy(paths.BOARDS / board / "board.py", out / "board.py")
+    return out
+
+
+def mpy_header(path):
+    """(mpy version, sub-version, native arch number) from a .mpy file's header."""
+    head = Path(path).read_bytes()[:4]
+    if len(head) < 4 or head[0] != ord("M"):
+        raise DeployError("%s is not a .mpy file" % path)
+    return head[1], head[2] & 3, head[2] >> 2
+
+
+def check_mpy_compatible(board_mpy, headers):
+    """Refuse unless the board loads every file: the same .mpy version, and for files
+    with native (viper) code the same sub-version and architecture.
+    board_mpy: the board's sys.implementation._mpy (None if it has none);
+    headers: mpy_header() of each compiled file."""
+    if board_mpy is None:
+        raise DeployError("the board's MicroPython has no sys.implementation._mpy, so it "
+                          "predates the .mpy files mpy-cross writes here: flash a newer "
+                          "MicroPython")
+    ver, sub, arch = board_mpy & 0xFF, (board_mpy >> 8) & 3, board_mpy >> 10
+    for f_ver, f_sub, f_arch in sorted(set(headers)):
+        if f_ver != ver:
+            raise DeployError(
+                "mpy version mismatch: mpy-cross writes .mpy v%d, the board's MicroPython "
+                "loads v%d. Flash a MicroPython that matches mpy-cross (or pin mpy-cross "
+                "to the board's version in pyproject.toml)" % (f_ver, ver))
+        if f_arch and f_sub != sub:
+            raise DeployError("mpy sub-version mismatch: native code compiled as v%d.%d, "
+                              "the board's MicroPython loads v%d.%d" % (f_ver, f_sub, ver, sub))
+        if f_arch and f_arch != arch:
+            raise DeployError(
+                "architecture mismatch: the viper code is compiled for %s, the board's "
+                "MicroPython runs %s: is --board right for this board?" % (
+                    _arch_name(f_arch), _arch_name(arch)))
+
+
+def _arch_name(number):
+    return ARCH_NAMES[number] if number < len(ARCH_NAMES) else "arch %d" % number
+
+
+def check_board_info(info, chip):
+    """Refuse a board that runs another platform or too old a MicroPython."""
+    if info.get("platform") != PLATFORM[chip]:
+        raise DeployError("the board reports platform %r, but this board definition is "
+                          "for %s (%s)" % (info.get("platform"), chip, PLATFORM[chip]))
+    version = tuple(info.get("version", ()))[:3]
+    if version < MIN_VERSION[chip]:
+        raise DeployError("the board runs MicroPython %s; mixstep on %s needs %s or newer%s"
+                          % (".".join(map(str, version)), chip,
+                             ".".join(map(str, MIN_VERSION[chip])),
+                             " (hard machine.Timer callbacks)" if chip != "esp32" else ""))
+
+
+def _connect(port):
+    return [_tool("mpremote"), "connect", port]
+
+
+def _show(cmd):
+    print(" ".join(shlex.quote(str(c)) for c in cmd))
+
+
+def _json_line(text):
+    for line in reversed(text.splitlines()):
+        if line.startswith("{"):
+            return json.loads(line)
+    raise DeployError("no JSON line in the board's answer:\n%s" % text)
+
+
+def _run(cmd, capture=False):
+    proc = subprocess.run([str(c) for c in cmd], capture_output=capture, text=True)
+    if proc.returncode != 0:
+        raise DeployError("`%s` failed (status %d)%s" % (
+            " ".join(map(str, cmd[:4])), proc.returncode,
+            ":\n" + (proc.stderr or proc.stdout).strip() if capture else ""))
+    return proc.stdout
+
+
+def deploy_commands(out, port):
+    """The mpremote commands that put build dir `out` onto the board."""
+    c = _connect(port)
+    return [c + ["exec", REMOVE_CODE],
+            c + ["cp"] + [out / name for name in SOURCE_FILES] + [":"],
+            c + ["cp", "-r", out / "mixfw", ":"],
+            c + ["reset"]]
+
+
+def deploy(board, port, dry_run=False):
+    chip = board_chip(board)
+    out = build(board)
+    headers = [mpy_header(p) for p in sorted((out / "mixfw").glob("*.mpy"))]
+    info_cmd = _connect(port) + ["exec", INFO_CODE]
+    commands = deploy_commands(out, port)
+    if dry_run:
+        print("# built %s (%d modules, -march=%s); on the board this would run:"
+              % (out, len(headers), MARCH[chip]))
+        print("# check the board's MicroPython (version, .mpy ABI) before copying:")
+        for cmd in [info_cmd] + commands:
+            _show(cmd)
+        return 0
+    info = _json_line(_run(info_cmd, capture=True))
+    check_board_info(info, chip)
+    check_mpy_compatible(info.get("mpy"), headers)
+    for cmd in commands:
+        _run(cmd)
+    print("deployed %s to %s (MicroPython %s)" % (board, port, ".".join(map(str, info["version"]))))
+    return 0
+
+
+def freeze_text(board):
+    """How to build a MicroPython image with the firmware frozen in."""
+    chip = board_chip(board)
+    port, mp_board = PORT_BOARD[chip]
+    manifest = (paths.BOARDS / board / "manifest.py").resolve()
+    need = ".".join(map(str, MIN_VERSION[chip]))
+    lines = [
+        "# %s (%s): MicroPython %s or newer%s." % (
+            board, chip, need, ", for hard machine.Timer callbacks" if port == "rp2" else ""),
+        "git clone --depth 1 --branch v%s https://github.com/micropython/micropython"
+        % need + "   # or any newer release tag",
+        "cd micropython",
+        "make -C mpy-cross",
+    ]
+    if port == "esp32":
+        lines.append("# needs ESP-IDF in the version ports/esp32/README.md names: "
+                     ". $IDF_PATH/export.sh")
+    lines += [
+        "make -C ports/%s BOARD=%s submodules" % (port, mp_board),
+        "make -C ports/%s BOARD=%s FROZEN_MANIFEST=%s" % (port, mp_board, manifest),
+    ]
+    if port == "rp2":
+        lines.append("# flash: hold BOOTSEL while plugging in, then copy "
+                     "ports/rp2/build-%s/firmware.uf2 onto the RP2 drive" % mp_board)
+    else:
+        lines.append("# flash: esptool.py --chip esp32 --port PORT write_flash -z 0x1000 "
+                     "ports/esp32/build-%s/firmware.bin" % mp_board)
+    lines.append("# A board.py on the board's flash overrides the frozen one (the "
+                 "filesystem comes first on sys.path), so pins stay editable.")
+    return "\n".join(lines)
+
+
+def evaluate_check(report):
+    """Problems in a board_check.py report; empty if the board is fit to print."""
+    problems = list(report.get("errors", ()))
+    if report.get("stuck"):
+        problems.append("pins that did not follow the output (shorted or loaded?): %s"
+                        % ", ".join(report["stuck"]))
+    target, achieved = report.get("target_hz"), report.get("achieved_hz")
+    if achieved is not None and target and achieved < 0.98 * target:
+        problems.append("the timer reaches %d Hz of %d Hz: raise tick_us" % (achieved, target))
+    cost = report.get("step_call_us")
+    if cost is not None and cost >= report.get("tick_us", 0) / 2:
+        problems.append("one step-loop call takes %.1f us, over half the %d us tick: raise "
+                        "tick_us" % (cost, report["tick_us"]))
+    return problems
+
+
+def board_check(board, port, dry_run=False):
+    board_chip(board)
+    c = _connect(port)
+    push = c + ["cp", paths.BOARDS / board / "board.py", ":board.py"]
+    run = c + ["run", paths.BOARDS / "board_check.py"]
+    if dry_run:
+        for cmd in (push, run):
+            _show(cmd)
+        return 0
+    _run(push)
+    report = _json_line(_run(run, capture=True))
+    print(json.dumps(report))
+    problems = evaluate_check(report)
+    for p in problems:
+        print("%s: %s" % (board, p), file=sys.stderr)
+    print("%s: %s" % (board, "ok" if not problems else "%d problem(s)" % len(problems)))
+    return 1 if problems else 0
+
+
+def _guard(fn, *args):
+    try:
+        return fn(*args)
+    except DeployError as e:
+        print("error: %s" % e, file=sys.stderr)
+        return 2
+
+
+def add_parser(sub):
+    p = sub.add_parser("deploy", help="compile the firmware for a board and copy it on")
+    p.add_argument("--board", required=True, help="board name (boards/<NAME>)")
+    p.add_argument("--port", required=True, help="the board's serial port, e.g. /dev/ttyACM0")
+    p.add_argument("--dry-run", action="store_true",
+                   help="build, then print the mpremote commands instead of running them")
+    p.set_defaults(run=lambda a: _guard(deploy, a.board, a.port, a.dry_run))
+    p = sub.add_parser("freeze", help="print how to build a MicroPython image with the "
+                                      "firmware frozen in")
+    p.add_argument("--board", required=True, help="board name (boards/<NAME>)")
+    p.set_defaults(run=lambda a: _guard(lambda b: print(freeze_text(b)) or 0, a.board))
+    p = sub.add_parser("board-check", help="check pins, timer rate and step-loop cost on "
+                                           "a connected board")
+    p.add_argument("--board", required=True, help="board name (boards/<NAME>)")
+    p.add_argument("--port", required=True, help="the board's serial port")
+    p.add_argument("--dry-run", action="store_true",
+                   help="print the mpremote commands instead of running them")
+    p.set_defaults(run=lambda a: _guard(board_check, a.board, a.port, a.dry_run))
