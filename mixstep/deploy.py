@@ -240,6 +240,11 @@ def freeze_text(board):
     return "\n".join(lines)
 
 
+def freeze(board):
+    print(freeze_text(board))
+    return 0
+
+
 def evaluate_check(report):
     """Problems in a board_check.py report; empty if the board is fit to print."""
     problems = list(report.get("errors", ()))
@@ -293,7 +298,7 @@ def add_parser(sub):
     p = sub.add_parser("freeze", help="print how to build a MicroPython image with the "
                                       "firmware frozen in")
     p.add_argument("--board", required=True, help="board name (boards/<NAME>)")
-    p.set_defaults(run=lambda a: _guard(lambda b: print(freeze_text(b)) or 0, a.board))
+    p.set_defaults(run=lambda a: _guard(freeze, a.board))
     p = sub.add_parser("board-check", help="check pins, timer rate and step-loop cost on "
                                            "a connected board")
     p.add_argument("--board", required=True, help="board name (boards/<NAME>)")
