@@ -21,9 +21,11 @@ does not grow with the file.
 import os
 import re
 
-_CODE = re.compile(rb"^\s*([GMTgmt])\s*(\d+)")
+from mixstep import gcodeio
+
+_COMMAND = re.compile(rb"\s*[A-Za-z]\s*[\d.]*")
 _TOOL_WORD = re.compile(rb"[Tt]\s*(\d+)")
-_TEMPERATURE_MCODES = (104, 109)
+_TEMPERATURE_MCODES = ("M104", "M109")
 MAX_TOOLS = 16  # the firmware's T0..T15
 
 
@@ -58,22 +60,13 @@ def parse_matrix(text):
     return matrix
 
 
-def _code(raw):
-    """('T', 1) / ('M', 104) / None for a line, ignoring its comment."""
-    m = _CODE.match(raw.split(b";", 1)[0])
-    if not m:
-        return None
-    return m.group(1).upper().decode(), int(m.group(2))
-
-
 def tools_used(path):
     """The tools a file selects, in order of first use."""
     used = []
     with open(path, "rb") as f:
-        for raw in f:
-            code = _code(raw)
-            if code and code[0] == "T" and code[1] not in used:
-                used.append(code[1])
+        for ln in gcodeio.Reader(f):
+            if ln.code[:1] == "T" and ln.tool not in used and ln.code[1:].isdigit():
+                used.append(ln.tool)
     return used
 
 
@@ -88,16 +81,19 @@ def header(matrix, tools, newline=b"\n"):
     return newline.join(lines) + newline
 
 
-def _temperature_line(raw, active_tool):
-    """The line to write for an M104/M109 that may name a tool."""
-    code_part, sep, comment = raw.partition(b";")
-    word = _TOOL_WORD.search(code_part, _CODE.match(code_part).end())
-    if word is None:
+def _temperature_line(raw, tool, active_tool):
+    """The line to write for an M104/M109 that names tool (None: names none)."""
+    if tool is None:
         return raw
-    if int(word.group(1)) != active_tool:
+    if tool != active_tool:
         body = raw.rstrip(b"\r\n")
         return (b"; mixstep detool: dropped, one hot end and T%d is in use: " % active_tool
                 + body + raw[len(body):])
+    code_part, sep, comment = raw.partition(b";")
+    # Cut the T word out of the raw bytes, so the rest of the line stays as it was.
+    word = _TOOL_WORD.search(code_part, _COMMAND.match(code_part).end())
+    if word is None:
+        return raw
     start, end = word.span()
     if start > 0 and code_part[start - 1:start].isspace():
         start -= 1  # take the space before the word with it
@@ -118,18 +114,19 @@ def detool(in_path, out_path, matrix):
     converted = dropped = 0
     header_done = False
     with open(in_path, "rb") as fin, open(out_path, "wb") as fout:
-        for raw in fin:
+        for ln in gcodeio.Reader(fin):
+            raw = ln.raw
             if not header_done:
                 stripped = raw.strip()
                 if stripped and not stripped.startswith(b";"):
                     newline = b"\r\n" if raw.endswith(b"\r\n") else b"\n"
                     fout.write(header(matrix, tools, newline))
                     header_done = True
-            code = _code(raw)
-            if code and code[0] == "T":
-                active = code[1]
-            elif code and code[0] == "M" and code[1] in _TEMPERATURE_MCODES:
-                new = _temperature_line(raw, active)
+            if ln.tool is not None:
+                active = ln.tool
+            if ln.code in _TEMPERATURE_MCODES:
+                named = ln.words.get("T", "")
+                new = _temperature_line(raw, int(named) if named.isdigit() else None, active)
                 if new is not raw:
                     if new.startswith(b"; mixstep detool: dropped"):
                         dropped += 1

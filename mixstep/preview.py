@@ -22,17 +22,19 @@ Conventions:
 - "Blend" marks where r is more than BLEND_TOLERANCE away from every tool mix the file
   uses: the mixture-of-mixtures zones where colours bleed.
 
-The file is read one line at a time. A top view keeps only the drawn layer in memory.
+The file is read one line at a time (by `mixstep.gcodeio`, whose modal rules are the
+firmware's). A top view keeps only the drawn layer in memory.
 """
 import math
 import re
 
 import numpy as np
 
+from mixstep import gcodeio
+
 DEFAULT_COLORS = "#e03030,#30a0e0,#f0d020,#40c040,#a050d0,#f0f0f0"
 EXTRUDATE_WIDTH_MM = 0.45  # drawn line width; slicers' usual width for a 0.4 mm nozzle
 BLEND_TOLERANCE = 0.05  # 5 % of a filament: below what a viewer can tell apart
-_WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+))")
 _ARC_CHORD_MM = 0.5  # arcs are drawn as chords at most this long
 
 
@@ -90,6 +92,12 @@ def moving_average(x_mm, changes, l1_mm, l2_mm):
     return history.outgoing(x_mm, l1_mm, l2_mm)
 
 
+def _number(words, letter, default):
+    """A word's value as a number; default when absent or bare."""
+    value = words.get(letter)
+    return float(value) if value else default
+
+
 def parse_colors(text):
     colors = []
     for c in text.split(","):
@@ -136,40 +144,22 @@ class Toolpath:
 
     def pieces(self, path):
         """Yield (layer, z_mm, points (k+1, 2), fed mix (n,), outgoing mixes (k, n))."""
-        pos = [0.0, 0.0, 0.0]
-        e_mm = 0.0           # the E coordinate as the G-code sees it
         fed_mm = 0.0         # net filament fed, across G92 resets
         outflow_mm = 0.0     # x of the model: the highest fed_mm so far
-        absolute = absolute_e = True
         tool = None
         history = None
         collector = np.zeros(self.drives)
         layer, layer_z = -1, None
         pending_label = None
         with open(path, "r", encoding="ascii", errors="replace") as f:
-            for raw in f:
-                code = raw.split(";", 1)[0].strip()
-                if not code:
-                    continue
-                words = _WORD.findall(code)
-                if not words:
-                    continue
-                cmd = words[0][0].upper() + str(int(float(words[0][1])))
-                p = {k.upper(): float(v) for k, v in words[1:]}
-                if cmd in ("G0", "G1", "G2", "G3"):
-                    target = list(pos)
-                    for i, a in enumerate("XYZ"):
-                        if a in p:
-                            target[i] = p[a] if absolute else pos[i] + p[a]
-                    de_mm = 0.0
-                    if "E" in p:
-                        de_mm = p["E"] - e_mm if absolute_e else p["E"]
-                        e_mm += de_mm
-                    fed_mm += de_mm
+            for ln in gcodeio.Reader(f):
+                code, words = ln.code, ln.words
+                if code in gcodeio.MOVES:
+                    fed_mm += ln.de_mm
                     x0_mm, x1_mm = outflow_mm, max(outflow_mm, fed_mm)
                     outflow_mm = x1_mm
-                    points = self._path(cmd, pos, target, p)
-                    pos = target
+                    target = ln.end
+                    points = self._path(code, ln.start, target, words)
                     moved_xy = any(abs(points[-1][i] - points[0][i]) > 1e-9 for i in (0, 1)) \
                         or len(points) > 2
                     if x1_mm <= x0_mm or not moved_xy:
@@ -189,59 +179,33 @@ class Toolpath:
                     history.change(x0_mm, mix)
                     yield self._cut(layer, target[2], points, x0_mm, x1_mm, mix, history)
                     history.forget_before(x0_mm - self.l1_mm - self.l2_mm)
-                elif cmd[0] == "T":
-                    new_tool = int(cmd[1:])
-                    if history is not None and new_tool != tool:
-                        pending_label = "T%d" % new_tool  # marked where it next extrudes
-                    tool = new_tool
+                elif code[:1] == "T" and code[1:].isdigit():
+                    if history is not None and ln.tool != tool:
+                        pending_label = "T%d" % ln.tool  # marked where it next extrudes
+                    tool = ln.tool
                     self._use(self.tool_mix(tool))
-                elif cmd == "G92":
-                    if "E" in p or not any(a in p for a in "XYZ"):
-                        e_mm = p.get("E", 0.0)
-                    for i, a in enumerate("XYZ"):
-                        if a in p:
-                            pos[i] = p[a]
-                elif cmd == "G90":
-                    absolute = absolute_e = True
-                elif cmd == "G91":
-                    absolute = absolute_e = False
-                elif cmd == "M82":
-                    absolute_e = True
-                elif cmd == "M83":
-                    absolute_e = False
-                elif cmd == "M163":
-                    collector[int(p.get("S", 0))] = p.get("P", 0.0)
-                elif cmd == "M164":
-                    t = int(p.get("S", tool or 0))
+                elif code == "M163":
+                    collector[int(_number(words, "S", 0))] = _number(words, "P", 0.0)
+                elif code == "M164":
+                    t = int(_number(words, "S", tool or 0))
                     self.tools[t] = self._normalise(collector)
                     if t == tool and history is not None:
                         pending_label = "T%d mix" % t
                     self._use(self.tools[t])
-                elif cmd == "M567":
-                    m = re.search(r"E([\d.:]+)", code, re.I)
-                    t = int(p.get("P", 0))
-                    if m:
-                        self.tools[t] = self._normalise([float(v) for v in m.group(1).split(":")])
-                        self._use(self.tools[t])
+                elif code == "M567" and words.get("E"):
+                    t = int(_number(words, "P", 0))
+                    self.tools[t] = self._normalise([float(v) for v in words["E"].split(":")])
+                    self._use(self.tools[t])
 
     def _use(self, mix):
         if not any(np.allclose(mix, u) for u in self.used_mixes):
             self.used_mixes.append(mix)
 
-    def _path(self, cmd, start, end, p):
-        """Points of a move in XY; arcs (I J form) as chords."""
-        if cmd in ("G0", "G1") or not ("I" in p or "J" in p):
+    def _path(self, code, start, end, words):
+        """Points of a move in XY; arcs as chords."""
+        if code not in gcodeio.ARCS or not ("I" in words or "J" in words or "R" in words):
             return [start[:2], end[:2]]
-        cx, cy = start[0] + p.get("I", 0.0), start[1] + p.get("J", 0.0)
-        a0 = math.atan2(start[1] - cy, start[0] - cx)
-        a1 = math.atan2(end[1] - cy, end[0] - cx)
-        radius = math.hypot(start[0] - cx, start[1] - cy)
-        sweep = a1 - a0
-        if cmd == "G2":  # clockwise
-            if sweep >= -1e-12:
-                sweep -= 2 * math.pi
-        elif sweep <= 1e-12:
-            sweep += 2 * math.pi
+        cx, cy, radius, a0, sweep = gcodeio.arc(start, end, words, code == "G2")
         n = max(2, int(math.ceil(abs(sweep) * radius / _ARC_CHORD_MM)))
         angles = a0 + sweep * np.linspace(0, 1, n + 1)
         pts = [[cx + radius * math.cos(a), cy + radius * math.sin(a)] for a in angles]
