@@ -1,0 +1,139 @@
+"""Step timing error: every step the simulated printer took against the ideal time of
+that step in the trapezoid planned for its block.
+
+Method
+    1. bench/step_times_sim.py runs a G-code snippet on the simulated printer (the
+       firmware unchanged, MicroPython unix port) with every GPIO edge recorded. It
+       wraps the timer callback and, for each block the step loop starts, keeps the
+       block record as the step loop runs it (lead-axis steps n, steps per axis, and
+       the fixed-point rates per tick B_RATE_INIT, B_RATE_NOM, B_RATE_FINAL, B_ACCEL,
+       RATE_SHIFT 28) and the block's origin: one tick before its velocity ramp
+       starts (after the DIR setup ticks when DIR changed), where the lead axis stands
+       at the phase carried over from the block before (a fraction of a step).
+    2. The planned trapezoid of a block, in steps and microseconds: entry speed
+       v0 = RATE_INIT, nominal vn = RATE_NOM, exit v1 = RATE_FINAL (steps per tick /
+       tick_us), acceleration a = ACCEL (steps per tick per tick / tick_us^2);
+       accelerate from v0 to vn, cruise, decelerate to v1 at step n. When the ramps
+       meet before vn, the peak is where they meet. The lead-axis position is
+       s(t) = phase + distance(t), so the k-th lead step's ideal time t(k) solves
+       s(t) = k: under constant acceleration t = (sqrt(v0^2 + 2 a d) - v0) / a for a
+       distance d into the ramp, d / vn while cruising, and the mirror of the first
+       form while decelerating.
+    3. The edges are split into blocks by the block origins. In each block, the k-th
+       rising STEP edge of the lead axis (for E: of any mixing drive) is the k-th
+       lead step; its error is its edge time minus origin + t(k). Every other axis is
+       compared at the lead step where Bresenham puts its steps (the j-th of m steps
+       at lead step floor((j n - ceil(n/2)) / m) + 1, as the step loop counts), so
+       that figure adds nothing for Bresenham's own rounding, only timing.
+    Homing and dwell blocks are left out (homing stops at the endstop, a dwell has
+    no steps). A block whose edge count differs from its record fails the
+    measurement.
+
+Errors come from ticks (a step falls on the next tick: up to tick_us late), from
+the per-tick rate update (speed changes once per tick, not continuously), from the
+STEP high/low time holding a step back, and from rounding in the planner's
+integer records.
+"""
+import json
+
+import numpy as np
+
+ONE = 1 << 28
+F_DWELL = 1
+F_HOMING = 2
+E_AXIS = 3
+
+
+def ideal_times_us(k, phase, n, v0, vn, v1, a):
+    """Ideal time (from the block origin) of lead-axis positions k (array, steps) in a
+    trapezoid from v0 through vn to v1 over n steps at acceleration a."""
+    d_acc = max(0.0, (vn * vn - v0 * v0) / (2 * a))
+    d_dec = max(0.0, (vn * vn - v1 * v1) / (2 * a))
+    if d_acc + d_dec > n:  # nominal never reached: the ramps meet at the peak
+        peak2 = max(v0 * v0, v1 * v1, a * n + (v0 * v0 + v1 * v1) / 2)
+        vn = np.sqrt(peak2)
+        d_acc = max(0.0, min(float(n), (peak2 - v0 * v0) / (2 * a)))
+        d_dec = n - d_acc
+    d_cruise = n - d_acc - d_dec
+    s = np.asarray(k, dtype=float) - phase
+    s = np.clip(s, 0.0, None)
+    t_acc_end = (vn - v0) / a
+    t_cruise_end = t_acc_end + d_cruise / vn
+    t = np.empty_like(s)
+    acc = s < d_acc
+    t[acc] = (np.sqrt(v0 * v0 + 2 * a * s[acc]) - v0) / a
+    cruise = (~acc) & (s < d_acc + d_cruise)
+    t[cruise] = t_acc_end + (s[cruise] - d_acc) / vn
+    dec = ~(acc | cruise)
+    d = s[dec] - d_acc - d_cruise
+    t[dec] = t_cruise_end + (vn - np.sqrt(np.clip(vn * vn - 2 * a * d, 0.0, None))) / a
+    return t
+
+
+def read_blocks(path):
+    blocks = []
+    with open(path) as f:
+        for line in f:
+            (origin, phase, flags, n, sx, sy, sz, se, r0, rn, r1, acc,
+             accel_until, decel_after) = json.loads(line)
+            blocks.append({"origin_us": origin, "phase": phase / ONE, "flags": flags, "n": n,
+                           "steps": (sx, sy, sz, se), "r0": r0, "rn": rn, "r1": r1, "acc": acc})
+    return blocks
+
+
+def analyse(edges_path, blocks_path, tick_us, pins):
+    """Timing errors (us) of lead-axis steps and of all axes' steps. pins: the board's
+    pin map; E is every mixing drive's STEP pin."""
+    from mixstep import trace
+    times, gpios, levels = trace.read_edges(edges_path)
+    rising = (levels == 1) & (times > 0)
+    axis_pins = [[pins["x_step"]], [pins["y_step"]], [pins["z_step"]],
+                 [g for name, g in pins.items() if name.startswith("e") and name.endswith("_step")]]
+    axis_times = [np.sort(times[rising & np.isin(gpios, p)]).astype(np.int64) for p in axis_pins]
+    blocks = read_blocks(blocks_path)
+    lead_err = []
+    all_err = []
+    checked = 0
+    for i, b in enumerate(blocks):
+        start = b["origin_us"]
+        end = blocks[i + 1]["origin_us"] if i + 1 < len(blocks) else np.iinfo(np.int64).max
+        in_block = [t[(t > start) & (t <= end)] for t in axis_times]
+        if b["flags"] & (F_DWELL | F_HOMING):
+            continue
+        n = b["n"]
+        v0, vn, v1 = (b[r] / ONE / tick_us for r in ("r0", "rn", "r1"))
+        a = b["acc"] / ONE / (tick_us * tick_us)
+        lead = int(np.argmax(b["steps"]))
+        for axis in range(4):
+            m = b["steps"][axis]
+            got = in_block[axis]
+            if len(got) != m:
+                raise RuntimeError("block %d (origin %d us): axis %d has %d steps in the trace, "
+                                   "%d in its record" % (i, start, axis, len(got), m))
+            if m == 0:
+                continue
+            j = np.arange(1, m + 1, dtype=np.int64)
+            k = (j * n - (n - n // 2)) // m + 1  # Bresenham's lead step for each step
+            err = got - (start + ideal_times_us(k, b["phase"], n, v0, vn, v1, a))
+            all_err.append(err)
+            if axis == lead:
+                lead_err.append(err)
+        checked += 1
+    lead_abs = np.abs(np.concatenate(lead_err))
+    all_abs = np.abs(np.concatenate(all_err))
+    return {
+        "step_time_error_max_us": float(lead_abs.max()),
+        "step_time_error_p99_us": float(np.percentile(lead_abs, 99)),
+        "step_time_error_mean_signed_us": float(np.concatenate(lead_err).mean()),
+        "step_time_error_all_axes_max_us": float(all_abs.max()),
+        "step_time_error_all_axes_p99_us": float(np.percentile(all_abs, 99)),
+        "step_time_blocks": checked,
+        "step_time_lead_steps": int(len(lead_abs)),
+    }
+
+
+if __name__ == "__main__":
+    import sys
+    from mixstep import paths
+    pins = paths.load_board("sim")["PINS"]
+    print(json.dumps(analyse(sys.argv[1], sys.argv[2], float(sys.argv[3]), pins), indent=2))
