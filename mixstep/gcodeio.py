@@ -156,9 +156,9 @@ class Reader:
                         v = w[1:]
                         words[k] = v
                         if k == "X":
-                            x = x + float(v) if rel_xyz else float(v)
+                            x = x0 + float(v) if rel_xyz else float(v)
                         elif k == "Y":
-                            y = y + float(v) if rel_xyz else float(v)
+                            y = y0 + float(v) if rel_xyz else float(v)
                         elif k == "E":
                             if rel_e:
                                 de = float(v)
@@ -167,7 +167,7 @@ class Reader:
                                 e = float(v)
                                 de = e - e0
                         elif k == "Z":
-                            z = z + float(v) if rel_xyz else float(v)
+                            z = z0 + float(v) if rel_xyz else float(v)
                         elif k == "F":
                             self.feed_mm_min = float(v)
                         elif k.islower():
