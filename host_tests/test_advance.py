@@ -1,5 +1,5 @@
 """`mixstep advance` on real slicer output (PrusaSlicer relative and absolute E, Slic3r
-1.3 absolute E).
+1.3 absolute E, Cura 4.13 absolute E with its 16 mm switch retraction).
 
 The checks read the output with their own small G-code reader, not the module's: it
 counts as printing extrusion the positive E of moves that move X, Y or Z, outside
@@ -18,8 +18,9 @@ from mixstep import advance as adv
 from mixstep import cli
 
 TESTDATA = os.path.join(os.path.dirname(__file__), "..", "testdata")
+CURA = "cura_part_3tool.gcode"
 FILES = ["part_3tool_prusaslicer_rel.gcode", "part_3tool_prusaslicer_abs.gcode",
-         "slic3r_part_3tool_abs.gcode"]
+         "slic3r_part_3tool_abs.gcode", CURA]
 TOL_MM = 1e-4
 
 
@@ -305,6 +306,49 @@ def test_arc_split_exactly_on_the_arc():
     x, y, _ = c["split_point"]
     assert abs(math.hypot(x + 10, y - 10) - 10) < 1e-3
     assert abs(math.atan2(y - 10, x + 10) - (-math.pi / 2) * 0.25) < 1e-4
+
+
+def e_moves(lines):
+    """(line number, E delta) of every E-only move (no X, Y, Z), absolute E as Cura."""
+    e = 0.0
+    moves = []
+    for n, line in enumerate(lines, 1):
+        code = line.split(";")[0].split()
+        if code[:1] == ["G92"]:
+            e = next((float(w[1:]) for w in code if w[0] == "E"), e)
+        elif code[:1] in (["G0"], ["G1"]) and any(w[0] == "E" for w in code):
+            v = next(float(w[1:]) for w in code if w[0] == "E")
+            if not any(w[0] in "XYZ" for w in code[1:]):
+                moves.append((n, v - e))
+            e = v
+    return moves
+
+
+def test_cura_switch_retraction_is_paid_back_not_printed():
+    """Cura retracts the old tool 16 mm before each change (switch_extruder_retraction_
+    amount) and pushes that back, E only, when the tool comes back: no printing, so
+    every change still moves by exactly the purge, in front of that retraction."""
+    lines = read_lines(CURA)
+    assert "M82 ;absolute extrusion mode\n" in lines
+    assert sum(ln.startswith(";LAYER:") for ln in lines) == 20
+    ts = changes_in(lines)
+    assert len(ts) == 41 and {t for _, t, _ in ts} == {0, 1, 2}
+    retractions = {n for n, de in e_moves(lines) if abs(de + 16) < 1e-4}
+    for n, _, _ in ts[1:]:
+        assert any(n - 5 < r < n for r in retractions), n     # just before each change
+    out, report = run(lines, 2.5)
+    advanced = check_output(lines, out, report)
+    assert not report["warnings"] and len(advanced) == 40
+    assert all(abs(mm - 2.5) < TOL_MM for mm in advanced.values())
+    # In the output each change comes before the old tool's last printing and its
+    # switch retraction, which stay where they were.
+    t_out = changes_in(out)[1:]
+    out_retractions = sorted(n for n, de in e_moves(out) if abs(de + 16) < 1e-4)
+    assert len(out_retractions) == len(retractions)
+    printed_mm = [s for s, _, _ in walk(out)]
+    for n_out, _, _ in t_out:
+        after = [r for r in out_retractions if r > n_out]
+        assert after and printed_mm[after[0] - 1] > printed_mm[n_out - 1]
 
 
 def test_cli_l1_l2_and_report(tmp_path, capsys):
