@@ -6,6 +6,7 @@ from mixstep import cli, detool, paths, sim
 from gcode_model import expected_steps
 
 EXAMPLE = paths.ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
+CURA = paths.ROOT / "testdata" / "cura_part_3tool.gcode"
 # Invertible, so matching the three drive totals pins down every tool's share.
 MATRIX = "0.7,0.3,0;0,0.5,0.5;0.2,0.3,0.5"
 
@@ -60,10 +61,11 @@ def test_unknown_tool_is_refused(tmp_path):
         detool.detool(src, tmp_path / "o.gcode", detool.parse_matrix("1,0;0,1"))
 
 
-def test_example_lines_unchanged_except_the_header(tmp_path):
+@pytest.mark.parametrize("example", [EXAMPLE, CURA], ids=["prusaslicer", "cura"])
+def test_example_lines_unchanged_except_the_header(tmp_path, example):
     out = tmp_path / "out.gcode"
-    cli.main(["detool", str(EXAMPLE), "-o", str(out), "--matrix", MATRIX])
-    original = EXAMPLE.read_bytes().splitlines(keepends=True)
+    cli.main(["detool", str(example), "-o", str(out), "--matrix", MATRIX])
+    original = example.read_bytes().splitlines(keepends=True)
     converted = out.read_bytes().splitlines(keepends=True)
     start = converted.index(b"; mixstep detool: slicer tool T<n> is virtual tool T<n>, "
                             b"mix = matrix row n\n")

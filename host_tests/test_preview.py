@@ -6,6 +6,7 @@ import pytest
 from mixstep import cli, paths, preview
 
 EXAMPLE = paths.ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
+CURA = paths.ROOT / "testdata" / "cura_part_3tool.gcode"
 A, B = [1.0, 0.0], [0.0, 1.0]
 
 
@@ -73,6 +74,24 @@ def test_matrix_tools_and_mcodes_in_the_file(tmp_path):
     tp = preview.Toolpath(3, 1.0, 1.5, matrix=[[1, 0, 0], [0, 0, 1]])
     out = list(tp.pieces(g))[0][4]
     assert out[0] == pytest.approx([0.25, 0.75, 0])  # the file's M164 wins
+
+
+def test_r_arcs_are_drawn_on_their_circle(tmp_path):
+    g = tmp_path / "arc.gcode"
+    g.write_text("M83\nT0\nG1 X10 Y0 Z0.2\nG2 X0 Y-10 R10 E2\n")
+    (_, _, xy, _, _), = preview.Toolpath(3, 1.0, 1.5).pieces(g)
+    assert len(xy) > 10
+    assert np.hypot(xy[:, 0], xy[:, 1]) == pytest.approx(10.0, abs=1e-6)
+
+
+def test_cura_file_layers_and_changes():
+    """Cura's output: every layer drawn, two changes in each layer after the first."""
+    tp = preview.Toolpath(3, 1.0, 1.5)
+    layers = {piece[0] for piece in tp.pieces(CURA)}
+    assert layers == set(range(20))
+    assert len(tp.tool_changes) == 40
+    assert {c[4] for c in tp.tool_changes} == {"T0", "T1", "T2"}
+    assert all(sum(c[0] == n for c in tp.tool_changes) == 2 for n in range(20))
 
 
 def _png_colours(path):
