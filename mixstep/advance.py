@@ -34,12 +34,14 @@ Where a change goes
     before it, so it can never re-select a stale tool.
 
 Conventions handled
-    M82/M83 and G90/G91 (G90/G91 set E too, as in Marlin and this firmware), `G92`
-    (with or without axes), `G28`, F-only lines, comments, CR/LF endings. PrusaSlicer
-    (`T<n>` then `G92 E0`; `;WIPE_START`/`;WIPE_END`), Slic3r 1.3 (`G92 E0` around the
-    change, wipes as retracting moves) and Cura (`;LAYER:n`, absolute E, switch
-    retraction of 16 mm before `T<n>`) need nothing special beyond these rules. Words
-    must be separated by spaces, as every slicer writes them.
+    The file is read by `mixstep.gcodeio`, which keeps the modal state as the firmware
+    does: M82/M83 and G90/G91 (G90/G91 set E too), `G92` (with or without axes), `G28`,
+    F-only lines, comments, CR/LF endings. PrusaSlicer (`T<n>` then `G92 E0`;
+    `;WIPE_START`/`;WIPE_END`), Slic3r 1.3 (`G92 E0` around the change, wipes as
+    retracting moves) and Cura (`;LAYER:n`, absolute E, a switch retraction of 16 mm
+    before `T<n>`, paid back E-only when the tool returns) need nothing special beyond
+    these rules. A split line is written with one space between words, whatever the
+    spacing or case it was read with.
 
 Output
     Every line that is not moved or split comes out byte for byte. A moved `T` line is
