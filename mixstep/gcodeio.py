@@ -149,6 +149,7 @@ class Reader:
                 x0, y0, z0, e0 = pos
                 x, y, z, e = pos
                 de = 0.0
+                feed = None
                 words = {}
                 try:
                     for w in parts[1:]:
@@ -169,12 +170,14 @@ class Reader:
                         elif k == "Z":
                             z = z0 + float(v) if rel_xyz else float(v)
                         elif k == "F":
-                            self.feed_mm_min = float(v)
+                            feed = float(v)
                         elif k.islower():
                             raise ValueError(k)
                 except ValueError:
                     code = None     # glued words or a bad number: read it the slow way
                 else:
+                    if feed is not None:
+                        self.feed_mm_min = feed
                     end = (x, y, z, e)
                     printing = de > 0 and (x != x0 or y != y0 or z != z0 or code == "G2"
                                            or code == "G3")
@@ -211,7 +214,7 @@ class Reader:
     def _move(self, pos, words):
         end, de = move_end(pos, words, self.rel_xyz, self.rel_e)
         if "F" in words:
-            self.feed_mm_min = float(words["F"])
+            self.feed_mm_min = float(words["F"])     # after move_end: a bad line sets nothing
         return end, de
 
     def _set_position(self, pos, words):
