@@ -16,9 +16,9 @@ GCODE = paths.ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
 LINES = [l.rstrip("\n") for l in itertools.islice(open(GCODE), 1200)]
 
 
-def run(tmp_path, name, settings, lines=LINES, heap_lock=True):
+def run(tmp_path, name, settings, lines=LINES, heap_lock=True, board="sim"):
     edges = tmp_path / (name + ".edges")
-    p = SimPrinter(edges_path=edges, heap_lock=heap_lock, settings=settings)
+    p = SimPrinter(edges_path=edges, heap_lock=heap_lock, settings=settings, board=board)
     for line in lines:
         reply = p.send(line)
         assert not [r for r in reply if r.startswith("Error")], (line, reply)
@@ -32,13 +32,17 @@ def pin_path(tmp_path_factory):
     return p.finish()["steps"], edges.read_bytes()
 
 
-@pytest.mark.parametrize("chip", ["rp2040", "rp2350", "esp32"])
-def test_register_writes_give_the_same_trace_as_pin_writes(tmp_path, pin_path, chip):
-    p, edges = run(tmp_path, chip, {"pin_writer": "registers", "chip": chip})
+# Each chip's register layout, through real boards' pin maps: the SKR Pico drives
+# GPIO 28/29, the ESP32 boards GPIO 32/33 through the second register pair.
+@pytest.mark.parametrize("board", ["pico", "pico2", "skr_pico", "esp32_devkit", "fysetc_e4"])
+def test_register_writes_give_the_same_trace_as_pin_writes(tmp_path, board):
+    p, pin_edges = run(tmp_path, "pin", {"pin_writer": "pin"}, board=board)
+    pin_steps = p.finish()["steps"]
+    p, reg_edges = run(tmp_path, "reg", {"pin_writer": "registers"}, board=board)
     steps = p.finish()["steps"]
-    assert steps == pin_path[0]
-    assert steps["e0"] > 0 and steps["e2"] > 0
-    assert edges.read_bytes() == pin_path[1]
+    assert steps == pin_steps
+    assert steps["e0"] > 0 and steps["x"] != 0
+    assert reg_edges.read_bytes() == pin_edges.read_bytes()
 
 
 def test_trace_capture_records_every_step_loop_write(tmp_path, board):
@@ -120,22 +124,23 @@ print(json.dumps(res))
     assert out[2:] == ["ok", "ok", "ok"]
 
 
-def test_pio_output_is_the_register_trace_a_fixed_latency_later(tmp_path, pin_path):
-    """The step loop feeds a (simulated) PIO state machine one word of pin levels per
-    tick; every edge comes out exactly LATENCY_TICKS (4 x 20 us) after the register
-    path would have written it, and nothing else changes."""
-    p, edges = run(tmp_path, "pio", {"step_backend": "pio", "chip": "rp2040"})
-    assert p.finish()["steps"] == pin_path[0]
-    reg = tmp_path / "reg.edges"
-    reg.write_bytes(pin_path[1])
+def test_pio_output_is_the_register_trace_a_fixed_latency_later(tmp_path):
+    """On the Pico the step loop feeds a (simulated) PIO state machine one word of pin
+    levels per tick; every edge comes out exactly LATENCY_TICKS (4 ticks of 50 us)
+    after the register path would have written it, and nothing else changes."""
+    p, reg = run(tmp_path, "reg", {"step_backend": "timer"}, board="pico")
+    reg_steps = p.finish()["steps"]
+    p, pio = run(tmp_path, "pio", {"step_backend": "pio"}, board="pico")
+    assert p.finish()["steps"] == reg_steps
+    pins = paths.load_board("pico")["PINS"]
+    step_path = [g for name, g in pins.items() if name.endswith(("_step", "_dir"))]
     t0, g0, v0 = trace.read_edges(reg)
-    t1, g1, v1 = trace.read_edges(edges)
-    # The ENABLE pins are not in the state machine's range: they change at once.
-    step_path = g0 < 18
-    a = (t0 > 0) & step_path
-    b = (t1 > 0) & (g1 < 18)
+    t1, g1, v1 = trace.read_edges(pio)
+    # The ENABLE pins are not the state machine's: they change at once.
+    a = (t0 > 0) & np.isin(g0, step_path)
+    b = (t1 > 0) & np.isin(g1, step_path)
     assert np.array_equal(g0[a], g1[b]) and np.array_equal(v0[a], v1[b])
-    assert set((t1[b] - t0[a]).tolist()) == {80}
+    assert set((t1[b] - t0[a]).tolist()) == {4 * 50}
     assert a.sum() > 10000
 
 

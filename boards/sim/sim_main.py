@@ -12,6 +12,10 @@
 # --set overrides a board setting before the machine is assembled, e.g.
 # --set pin_writer=registers (VALUE: a number, a comma-separated tuple, or text).
 import sys
+
+# The script's own folder comes first on the path; board.py must be the board's from
+# MICROPYPATH (boards/<name> before boards/sim), so look here last.
+sys.path.append(sys.path.pop(0))
 import gc
 import json
 import simmachine
@@ -62,6 +66,8 @@ def main():
     import board
     for key, text in opts["set"]:
         board.SETTINGS[key] = _value(text)
+    # The simulated chip is the board's: its GPIOs, its register layout.
+    simmachine.set_chip(board.SETTINGS.get("chip", "sim"))
     names = ["x", "y", "z"] + ["e%d" % i for i in range(board.SETTINGS["drives"])]
     simmachine.attach_world(board.PINS, names, board.SETTINGS.get("invert_dir", ()))
     simmachine.quantum_us = int(opts["quantum_us"])
@@ -86,6 +92,9 @@ def main():
     config.boot()
     printer = firmware.build(config, files_root=opts["files"])
     simthermal.install(simmachine, board, printer)
+    # The last STEP pulse ends a few ticks after the queue empties, and a PIO state
+    # machine still holds its last words: let the chip finish them before stopping.
+    printer.finish.append(simmachine.idle)
     gc.collect()
     simmachine.heap_lock_ticks = opts["heap_lock"]
     firmware.run(consoles, listeners, printer, warnings)

@@ -14,6 +14,19 @@ import micropython
 import time as walltime  # the real clock; firmware sees simtime instead
 
 GPIO_COUNT = 40  # 0..29 like an RP2040 for the step path, more for heaters and fans
+# The chip being simulated (set_chip): which GPIOs exist and which can drive a pin.
+# "sim" is the simulated board's own chip: every GPIO 0..39 exists.
+_CHIP_GPIOS = {
+    "rp2040": tuple(range(30)), "rp2350": tuple(range(30)),
+    "esp32": tuple(g for g in range(40) if g not in (20, 24, 28, 29, 30, 31)),
+}
+_INPUT_ONLY = {"esp32": (34, 35, 36, 37, 38, 39)}
+chip = "sim"
+
+
+def set_chip(name):
+    global chip
+    chip = name
 _CAPACITY = 8192
 _FLUSH_AT = _CAPACITY - 256  # one tick writes far fewer edges than this
 
@@ -231,8 +244,10 @@ class Pin:
     PULL_DOWN = 2
 
     def __init__(self, gpio, mode=-1, pull=-1, value=None):
-        if not 0 <= gpio < GPIO_COUNT:
-            raise ValueError("GPIO %d does not exist (0..%d)" % (gpio, GPIO_COUNT - 1))
+        if not 0 <= gpio < GPIO_COUNT or gpio not in _CHIP_GPIOS.get(chip, range(GPIO_COUNT)):
+            raise ValueError("GPIO %d does not exist on the %s" % (gpio, chip))
+        if mode == Pin.OUT and gpio in _INPUT_ONLY.get(chip, ()):
+            raise ValueError("GPIO %d of the %s is input-only" % (gpio, chip))
         self.gpio = gpio
         self.mode = mode
         if value is not None:
