@@ -75,18 +75,24 @@ def micropython(script, *args, heap="2M"):
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def child_usage(cmd, stdout=subprocess.DEVNULL):
+# Started between the bench and a tool so the tool's peak RSS is its own: a child
+# forked straight from this (large) process would start out with its RSS.
+_LAUNCHER = ("import resource, subprocess, sys; code = subprocess.call(sys.argv[2:]); "
+             "open(sys.argv[1], 'w').write(str(resource.getrusage("
+             "resource.RUSAGE_CHILDREN).ru_maxrss)); sys.exit(code)")
+
+
+def child_usage(cmd):
     """Run cmd; returns (wall seconds, peak RSS in MB) of that child alone."""
+    peak_file = WORK / "peak_rss_kib"
     t0 = time.perf_counter()
-    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=stdout, stderr=subprocess.PIPE)
-    err = proc.stderr.read()
-    _, status, usage = os.wait4(proc.pid, 0)
+    done = subprocess.run([sys.executable, "-c", _LAUNCHER, str(peak_file)] + [str(c) for c in cmd],
+                          cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     wall = time.perf_counter() - t0
-    proc.returncode = os.waitstatus_to_exitcode(status)
-    if proc.returncode != 0:
-        raise RuntimeError("%s failed (%d): %s" % (" ".join(map(str, cmd)), proc.returncode,
-                                                  err.decode(errors="replace")[-2000:]))
-    return wall, usage.ru_maxrss * 1024 / MB  # ru_maxrss is in KiB on Linux
+    if done.returncode != 0:
+        raise RuntimeError("%s failed (%d): %s" % (" ".join(map(str, cmd)), done.returncode,
+                                                  done.stderr.decode(errors="replace")[-2000:]))
+    return wall, int(peak_file.read_text()) * 1024 / MB  # ru_maxrss is in KiB on Linux
 
 
 def example_snippet():
