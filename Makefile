@@ -59,3 +59,9 @@ board-check: setup
 	$(VENV)/bin/mixstep board-check --board $(BOARD) --port $(PORT) $(if $(DRY_RUN),--dry-run)
 boards-check: setup
 	$(VENV)/bin/mixstep boards check $(BOARD)
+
+# Benchmarks: bench.json and a table of figures against their targets. QUICK=1 gives
+# the host tools ~100 MB inputs instead of 1 GB (generated under out/bench/).
+.PHONY: bench
+bench: setup
+	$(PY) bench/run.py $(if $(QUICK),--quick)
