@@ -379,7 +379,6 @@ def advance(lines_in, write, purge_for, max_purge_mm=None,
     buf = adv.buf
     append = buf.append
     flush_to = adv.flush_to
-    moves = gcodeio.MOVES
     reader = gcodeio.Reader(lines_in)
     s = 0.0                     # printing extrusion so far, mm
     tool = None                 # the input's tool (the slicer's view)
@@ -388,8 +387,8 @@ def advance(lines_in, write, purge_for, max_purge_mm=None,
     n = 0
     limit = -math.inf
     cap = max_buffer_lines
-    for n, line, code, words, start, _, de, printing, _, error in reader:
-        if code in moves:
+    for n, line, code, words, start, _, de, printing, _, error in reader.tuples():
+        if de:      # only moves have an E delta
             if de > 0:
                 owed = debt.get(tool, 0.0)
                 if owed > 0:
@@ -409,8 +408,7 @@ def advance(lines_in, write, purge_for, max_purge_mm=None,
                 if buf[0][0] < limit:
                     flush_to(limit)
                 continue
-            if de < 0:
-                debt[tool] = debt.get(tool, 0.0) - de
+            debt[tool] = debt.get(tool, 0.0) - de
         elif code[:1] == "T" and code[1:].isdigit():
             new_tool = int(code[1:])
             if tool is None and s == 0.0:
