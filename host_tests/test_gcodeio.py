@@ -179,3 +179,12 @@ def test_the_files_markers():
     assert {"WALL-OUTER", "WALL-INNER", "SKIN", "FILL"} <= seen["cura_part_3tool.gcode"][1]
     assert seen["part_3tool_prusaslicer_rel.gcode"][0] == 20
     assert "External perimeter" in seen["part_3tool_prusaslicer_rel.gcode"][1]
+
+
+def test_tuples_are_the_lines_unnamed():
+    with open(TESTDATA / FILES[0], newline="") as f:
+        named = list(gcodeio.Reader(f))
+    with open(TESTDATA / FILES[0], newline="") as f:
+        plain = list(gcodeio.Reader(f).tuples())
+    assert all(type(ln) is gcodeio.Line for ln in named)
+    assert [tuple(ln) for ln in named] == plain
