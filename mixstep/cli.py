@@ -9,7 +9,7 @@ from mixstep import paths
 def _sim(args):
     from mixstep import sim
     report = sim.run(args.gcode or paths.EXAMPLE_GCODE, args.trace, args.report,
-                     heap_lock=args.heap_lock)
+                     heap_lock=args.heap_lock, board=args.board)
     summary = {k: report[k] for k in ("lines", "sim_seconds", "wall_seconds", "steps")}
     summary["errors"] = len(report["errors"])
     print(json.dumps(summary, indent=2))
@@ -32,6 +32,8 @@ def main(argv=None):
     p.add_argument("--report", help="write the JSON report here")
     p.add_argument("--heap-lock", action="store_true",
                    help="lock the MicroPython heap around every step-loop call")
+    p.add_argument("--board", default="sim",
+                   help="run with this board's pin map and settings (boards/<name>)")
     p.set_defaults(run=_sim)
     p = sub.add_parser("serve", help="run the simulated printer for host software (TCP or PTY)")
     p.add_argument("--tcp", metavar="HOST:PORT", help="serve the TCP G-code console here")

@@ -9,13 +9,15 @@ from mixstep import trace
 from mixstep.simprinter import SimPrinter
 
 
-def run(gcode_path, trace_path=None, report_path=None, heap_lock=False, edges_path=None):
-    """edges_path keeps the raw edge records (see trace.read_edges) for analysis."""
+def run(gcode_path, trace_path=None, report_path=None, heap_lock=False, edges_path=None,
+        board="sim"):
+    """edges_path keeps the raw edge records (see trace.read_edges) for analysis; board:
+    whose pin map and settings, on a simulated chip of its kind."""
     gcode_path = Path(gcode_path)
     tmp = tempfile.TemporaryDirectory(prefix="mixstep-sim-")
     edges = Path(edges_path) if edges_path else Path(tmp.name) / "run.edges"
     wall0 = time.perf_counter()
-    printer = SimPrinter(edges_path=edges, heap_lock=heap_lock)
+    printer = SimPrinter(edges_path=edges, heap_lock=heap_lock, board=board)
     errors = []
     lines = 0
     with open(gcode_path, "r", encoding="ascii", errors="replace") as f:
@@ -28,11 +30,12 @@ def run(gcode_path, trace_path=None, report_path=None, heap_lock=False, edges_pa
     fw = printer.finish()
     sim_wall = time.perf_counter() - wall0
     if trace_path:
-        trace.write_vcd(edges, trace_path)
-    steps = trace.net_steps(edges)
+        trace.write_vcd(edges, trace_path, board)
+    steps = trace.net_steps(edges, board)
     wall = time.perf_counter() - wall0
     report = {
         "gcode": str(gcode_path),
+        "board": board,
         "lines": lines,
         "errors": errors,
         "steps": steps,

@@ -44,9 +44,12 @@ def _name_order(name):
 
 
 def net_steps(edges_path, board="sim"):
-    """Net steps per STEP signal, counted from rising edges and the DIR level then."""
+    """Net steps per STEP signal, counted from rising edges and the DIR level then
+    (DIR high is forward, low for the board's invert_dir motors)."""
     times, gpios, levels = read_edges(edges_path)
-    pins = paths.load_board(board)["PINS"]
+    spec = paths.load_board(board)
+    pins = spec["PINS"]
+    inverted = spec["SETTINGS"].get("invert_dir", ())
     result = {}
     for name, gpio in pins.items():
         if not name.endswith("_step"):
@@ -62,7 +65,8 @@ def net_steps(edges_path, board="sim"):
         dir_level = np.maximum.accumulate(np.where(is_dir, np.arange(len(g)), -1))
         level_at = np.where(dir_level >= 0, lv[np.maximum(dir_level, 0)], 0)
         rising = (~is_dir) & (lv == 1) & (t > 0)
-        result[axis] = int(np.sum(np.where(level_at[rising] == 1, 1, -1)))
+        forward = 0 if axis in inverted else 1
+        result[axis] = int(np.sum(np.where(level_at[rising] == forward, 1, -1)))
     return result
 
 
