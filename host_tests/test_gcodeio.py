@@ -188,3 +188,11 @@ def test_tuples_are_the_lines_unnamed():
         plain = list(gcodeio.Reader(f).tuples())
     assert all(type(ln) is gcodeio.Line for ln in named)
     assert [tuple(ln) for ln in named] == plain
+
+
+def test_single_lines_without_state():
+    assert gcodeio.parse(b"M104 T1 S150 ; standby\r\n") == ("M104", {"T": "1", "S": "150"})
+    assert gcodeio.parse("  t02 ; pick\n") == ("T2", {})
+    assert gcodeio.parse(";TYPE:FILL\n") == ("", {})
+    assert [gcodeio.tool_of(c) for c in ("T2", "T", "T-1", "M104", "")] == [2, None, None,
+                                                                              None, None]

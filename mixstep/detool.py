@@ -60,13 +60,26 @@ def parse_matrix(text):
     return matrix
 
 
+def _tool_lines(f):
+    """(raw, code, words) of every line of f, code and words read only for lines that
+    can select or name a tool: any other line ("", None) is copied unread, which keeps
+    detool as fast as copying the file."""
+    for raw in f:
+        if b"T" in raw or b"t" in raw:
+            code, words = gcodeio.parse(raw)
+            yield raw, code, words
+        else:
+            yield raw, "", None
+
+
 def tools_used(path):
     """The tools a file selects, in order of first use."""
     used = []
     with open(path, "rb") as f:
-        for ln in gcodeio.Reader(f):
-            if ln.code[:1] == "T" and ln.tool not in used and ln.code[1:].isdigit():
-                used.append(ln.tool)
+        for _, code, _ in _tool_lines(f):
+            tool = gcodeio.tool_of(code)
+            if tool is not None and tool not in used:
+                used.append(tool)
     return used
 
 
@@ -114,18 +127,21 @@ def detool(in_path, out_path, matrix):
     converted = dropped = 0
     header_done = False
     with open(in_path, "rb") as fin, open(out_path, "wb") as fout:
-        for ln in gcodeio.Reader(fin):
-            raw = ln.raw
+        for raw, code, words in _tool_lines(fin):
             if not header_done:
                 stripped = raw.strip()
                 if stripped and not stripped.startswith(b";"):
                     newline = b"\r\n" if raw.endswith(b"\r\n") else b"\n"
                     fout.write(header(matrix, tools, newline))
                     header_done = True
-            if ln.tool is not None:
-                active = ln.tool
-            if ln.code in _TEMPERATURE_MCODES:
-                named = ln.words.get("T", "")
+            if not code:
+                fout.write(raw)
+                continue
+            tool = gcodeio.tool_of(code)
+            if tool is not None:
+                active = tool
+            elif code in _TEMPERATURE_MCODES:
+                named = words.get("T", "")
                 new = _temperature_line(raw, int(named) if named.isdigit() else None, active)
                 if new is not raw:
                     if new.startswith(b"; mixstep detool: dropped"):

@@ -64,6 +64,10 @@ Other rules, as the firmware's: G92 with no axes zeroes all four; G28 with no ax
 X, Y and Z to 0. Mixing commands (M163, M164, M165, M166, M167, M168, M169, M567) and
 T are not interpreted beyond `tool`: they are there as codes and words.
 
+Single lines: `parse(line)` gives (code, words) of one line without any state, and
+`tool_of(code)` the tool a code selects, for tools that skip most lines unread (detool
+looks only at lines with a T in them).
+
 Arcs: `arc(start, end, words, clockwise)` gives the centre, radius, start angle and
 signed sweep of a G2/G3 from I/J or R, as the tools that split or draw arcs need it.
 """
@@ -106,6 +110,19 @@ def _tokens(body):
         return code, _NO_WORDS, ""
     words = {k.upper(): v for k, v in pairs[1:]}
     return code, words, _WORD.sub("", body).strip()
+
+
+def parse(line):
+    """(code, words) of one line, str or bytes, as Reader reads them, without state: for
+    tools that need only a few lines' commands and skip the rest unread."""
+    text = line.decode("latin-1") if line.__class__ is bytes else line
+    code, words, _ = _tokens(text.split(";", 1)[0])
+    return code, words
+
+
+def tool_of(code):
+    """The tool a `T<n>` code selects; None for any other code."""
+    return int(code[1:]) if code[:1] == "T" and code[1:].isdigit() else None
 
 
 class Reader:
@@ -207,8 +224,8 @@ class Reader:
                     rel_xyz = rel_e = self.rel_xyz = self.rel_e = code == "G91"
                 elif code == "M82" or code == "M83":
                     rel_e = self.rel_e = code == "M83"
-                elif code[:1] == "T" and code[1:].isdigit():
-                    tool = self.tool = int(code[1:])
+                elif tool_of(code) is not None:
+                    tool = self.tool = tool_of(code)
             except ValueError as err:
                 pos = start
                 code, words, de, error = "", no_words, 0.0, str(err)
