@@ -30,8 +30,9 @@ gives the same as plain tuples, for hot loops that unpack every line (advance).
     words     {letter: value text} of the command's other words, upper case letters,
               in the line's order: `G1 X10 E.5 F1800` gives {"X": "10", "E": ".5",
               "F": "1800"}; a bare letter gives "" (`G28 X`); M567's `E0.5:0.5` stays
-              "0.5:0.5". Shared with the reader's state: don't modify it. Commands whose
-              argument is text (M23, M28, M30, M32, M117, M118) have no words.
+              "0.5:0.5". Read only: lines without words share one empty mapping.
+              Commands whose argument is text (M23, M28, M30, M32, M117, M118) have
+              no words.
     start     (x, y, z, e) before the line and
     end       (x, y, z, e) after it: absolute (G91/M83 resolved), in the frame the
               G-code sees, i.e. after G92 offsets; the numbers an absolute-mode line
@@ -68,6 +69,8 @@ Single lines: `parse(line)` gives (code, words) of one line without any state, a
 `tool_of(code)` the tool a code selects, for tools that skip most lines unread (detool
 looks only at lines with a T in them).
 
+Moves: `move_end(start, words, rel_xyz, rel_e)` gives (end, de_mm) of a move's words
+from a start, the reader's own rule, for tools that rewrite moves (advance's splits).
 Arcs: `arc(start, end, words, clockwise)` gives the centre, radius, start angle and
 signed sweep of a G2/G3 from I/J or R, as the tools that split or draw arcs need it.
 """
