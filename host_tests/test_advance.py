@@ -351,6 +351,15 @@ def test_cura_switch_retraction_is_paid_back_not_printed():
         assert after and printed_mm[after[0] - 1] > printed_mm[n_out - 1]
 
 
+def test_odd_spellings_are_read_and_split():
+    # lower case, glued words, leading zeros, an indented T: read as slicers write them
+    lines = ["M83\n", "T0\n", "G1 Z0.2\n", "g01x10y0e4 ; odd\n", "   T1\n", "G1 X20 E1\n"]
+    out, report = run(lines, 1.0)
+    (c,) = report["changes"]
+    assert c["split_line"] == 4 and c["split_point"] == [7.5, 0.0, 0.2]
+    assert out[3:6] == ["G1 X7.5 Y0 E3\n", "   T1\n", "G1 X10 Y0 E1 ; odd\n"]
+
+
 def test_cli_l1_l2_and_report(tmp_path, capsys):
     src = os.path.join(TESTDATA, FILES[1])
     out_path, rep_path = tmp_path / "out.gcode", tmp_path / "report.json"
