@@ -226,7 +226,7 @@ print(json.dumps({"names": [o.name for o in c.options],
         "retract_feed_mm_s", "unretract_feed_mm_s", "transition_l1_mm", "transition_l2_mm",
         "drives", "virtual_tools", "queue_blocks",
         "line_buffer_bytes", "tick_us", "step_pulse_us", "dir_setup_us",
-        "enable_active_low", "endstop_active_high"]
+        "enable_active_low", "endstop_active_high", "endstop_pullup"]
     heater = ["beta", "r25_ohm", "pullup_ohm", "sh_a", "sh_b", "sh_c", "kp", "ki", "kd",
               "pwm_hz", "min_c", "max_c", "watch_s", "watch_rise_c", "runaway_c",
               "runaway_s"]

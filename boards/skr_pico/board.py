@@ -59,5 +59,6 @@ SETTINGS = dict(
     # Klipper's example: 16 microsteps, rotation_distance 40 (X/Y) and 8 (Z).
     steps_per_mm=(80.0, 80.0, 400.0, 415.0),
     endstop_active_high=True,  # Klipper reads them as ^gpioN: pulled up, high = hit
+    endstop_pullup=True,
     console_uart=-1,
 )

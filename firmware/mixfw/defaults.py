@@ -26,6 +26,9 @@ SETTINGS = {
     "travel_mm": (250.0, 250.0, 200.0),
     "homing_feed_mm_s": (50.0, 50.0, 5.0),
     "endstop_active_high": True,
+    # The chip's own pull-up on the endstop inputs, for switches that only pull low.
+    # ESP32 GPIO 34-39 have none: endstops there need external pull-ups.
+    "endstop_pullup": False,
     # Heaters: 100k NTC (Beta 3950) with a 4.7k pull-up. Steinhart-Hart replaces the
     # Beta model when any of *_sh_a/_sh_b/_sh_c is non-zero. PID gains act on a duty
     # of 0..1: kp per C of error, ki per C*s, kd per C/s of change.

@@ -113,6 +113,8 @@ SCHEMA = (
      "drivers are enabled by a low ENABLE pin"),
     ("endstop_active_high",        "",     BOOL,  0,       1,           RESTART,
      "endstop switches read high when hit"),
+    ("endstop_pullup",             "",     BOOL,  0,       1,           RESTART,
+     "enable the chip's pull-ups on the endstop inputs"),
 ) + _heater("hotend") + _heater("bed") + (
     ("min_extrude_c",              "",     FLOAT, 0.0,     500.0,       LIVE,
      "refuse extrusion below this hot end temperature"),

@@ -53,7 +53,8 @@ class Pins:
             gpio = pin_map[name + "_enable"]
             self.enable.append(Pin(gpio, Pin.OUT, value=1 - self.enable_level))
         endstop_high = settings["endstop_active_high"]
-        self.endstop_pins = [Pin(pin_map[a + "_min"], Pin.IN) for a in AXIS_NAMES]
+        pull = Pin.PULL_UP if settings.get("endstop_pullup") else None
+        self.endstop_pins = [Pin(pin_map[a + "_min"], Pin.IN, pull) for a in AXIS_NAMES]
         self.endstop_level = 1 if endstop_high else 0
         top = 0
         for g in range(32):
