@@ -455,6 +455,10 @@ def with_crc(body):
 
 def damaged_files(good):
     body = good[:good.rindex(b"\n", 0, -1) + 1]
+    # A body whose checksum has hex letters, so that capitals make a different line.
+    lettered = body
+    while b"%08x" % zlib.crc32(lettered) == b"%08X" % zlib.crc32(lettered):
+        lettered += b"# \n"
     flipped = bytearray(good)
     flipped[60] ^= 0x04
     return {
@@ -474,7 +478,7 @@ def damaged_files(good):
                          "line %d: expected name = value" % (body.count(b"\n") + 1)),
         "too large": (b"#" * 20000 + b"\n", "20001 bytes is too large for a configuration"),
         # Same number, other text: only the exact line counts.
-        "checksum in capitals": (body + b"crc32 = %08X\n" % zlib.crc32(body),
+        "checksum in capitals": (lettered + b"crc32 = %08X\n" % zlib.crc32(lettered),
                                  "checksum mismatch (file corrupt)"),
         "checksum with a leading zero": (body + b"crc32 = 0%08x\n" % zlib.crc32(body),
                                          "checksum mismatch (file corrupt)"),
