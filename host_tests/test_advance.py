@@ -365,8 +365,13 @@ def test_cli_l1_l2_and_report(tmp_path, capsys):
     out_path, rep_path = tmp_path / "out.gcode", tmp_path / "report.json"
     assert cli.main(["advance", src, "-o", str(out_path), "--l1-mm", "1.5",
                      "--l2-mm", "2.0", "--report", str(rep_path)]) == 0
-    report = json.loads(rep_path.read_text())
-    assert report["max_purge_mm"] == 2.5
+    # The report is streamed as JSON lines: each change and warning, then a summary.
+    records = [json.loads(line) for line in rep_path.read_text().splitlines()]
+    report = records[-1]
+    assert report["kind"] == "summary" and report["max_purge_mm"] == 2.5
+    report["changes"] = [r for r in records if r["kind"] == "change"]
+    report["warnings"] = [r for r in records if r["kind"] == "warning"]
+    assert report["changes"] and len(report["changes"]) + len(report["warnings"]) == len(records) - 1
     with open(out_path, newline="") as f:
         check_output(read_lines(FILES[1]), f.readlines(), report)
     err = capsys.readouterr().err

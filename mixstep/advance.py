@@ -241,8 +241,11 @@ def _split_move(ent, t_mm):
 
 
 class _Advancer:
-    def __init__(self, write, purge_for, max_purge_mm, max_buffer_lines):
+    def __init__(self, write, purge_for, max_purge_mm, max_buffer_lines, on_record=None):
         self.write = write
+        # on_record(kind, record): changes as they are written, and warnings, handed
+        # over instead of kept, so memory stays bounded however long the file.
+        self.on_record = on_record
         self.purge_for = purge_for
         self.max_purge_mm = max_purge_mm
         self.max_buffer_lines = max_buffer_lines
@@ -263,9 +266,20 @@ class _Advancer:
             if p.__class__ is str:
                 write(p)
             else:
-                p.rec["out_line"] = n
-                write(p.text)
+                self._write_change(p, n)
         self.out_lines = n
+
+    def _write_change(self, change, out_line):
+        change.rec["out_line"] = out_line
+        self.write(change.text)
+        if self.on_record and "placed" in change.rec:
+            self.on_record("change", change.rec)
+
+    def _warn(self, warning):
+        if self.on_record:
+            self.on_record("warning", warning)
+        else:
+            self.warnings.append(warning)
 
     def flush_all(self):
         self.flush_to(math.inf)
@@ -282,8 +296,7 @@ class _Advancer:
                 if p.__class__ is str:
                     self.write(p)
                 else:
-                    p.rec["out_line"] = self.out_lines
-                    self.write(p.text)
+                    self._write_change(p, self.out_lines)
 
     def place(self, text, lineno, s_mm, from_tool, to_tool, purge_mm):
         """Put a T line purge_mm of printing extrusion before s_mm (see the module doc)."""
@@ -342,7 +355,8 @@ class _Advancer:
         rec["s_mm"] = round(s_mm, 6)
         rec["new_s_mm"] = round(new_s, 6)
         rec["advanced_mm"] = round(s_mm - new_s, 6)
-        self.changes.append(rec)
+        if not self.on_record:
+            self.changes.append(rec)
         short = purge_mm - (s_mm - new_s)
         if short > 1e-4:
             if isinstance(stop, int):
@@ -351,20 +365,23 @@ class _Advancer:
                 why = "the earlier lines were already written (max_buffer_lines)"
             else:
                 why = "not enough printing extrusion before it"
-            self.warnings.append({"line": lineno, "message": "%s advanced %.5f of %.5f mm: %s"
-                                  % (rec["text"], s_mm - new_s, purge_mm, why)})
+            self._warn({"line": lineno, "message": "%s advanced %.5f of %.5f mm: %s"
+                        % (rec["text"], s_mm - new_s, purge_mm, why)})
             rec["short_mm"] = round(short, 6)
         return rec
 
 
 def advance(lines_in, write, purge_for, max_purge_mm=None,
-            max_buffer_lines=_DEFAULT_MAX_BUFFER_LINES):
+            max_buffer_lines=_DEFAULT_MAX_BUFFER_LINES, on_record=None):
     """Stream G-code lines from lines_in to write(), every tool change moved earlier.
 
     purge_for is a number (mm) or a callable (from_tool, to_tool) -> mm; a callable
     needs max_purge_mm or a max_mm attribute (PurgeMatrix has one), which bounds the
     lines held back. Returns the report: changes (each with its input line, where it
-    went, mm advanced), warnings, lines in and out, the most lines held at once."""
+    went, mm advanced), warnings, lines in and out, the most lines held at once. With
+    on_record(kind, record), kind "change" or "warning", each is handed over as it is
+    made instead, and the report's lists stay empty: memory is then bounded by the
+    lines held back alone, whatever the file's length."""
     if not callable(purge_for):
         constant = float(purge_for)
         if not (constant >= 0 and math.isfinite(constant)):
@@ -375,7 +392,7 @@ def advance(lines_in, write, purge_for, max_purge_mm=None,
         max_purge_mm = getattr(purge_for, "max_mm", None)
     if max_purge_mm is None:
         raise ValueError("a purge function needs max_purge_mm")
-    adv = _Advancer(write, purge_for, max_purge_mm, max_buffer_lines)
+    adv = _Advancer(write, purge_for, max_purge_mm, max_buffer_lines, on_record)
     buf = adv.buf
     append = buf.append
     flush_to = adv.flush_to
@@ -430,7 +447,7 @@ def advance(lines_in, write, purge_for, max_purge_mm=None,
                 adv.max_buffered = len(buf)
             continue
         elif error is not None:
-            adv.warnings.append({"line": n, "message": "could not read: " + line.strip()})
+            adv._warn({"line": n, "message": "could not read: " + line.strip()})
         append((s, line))
         if len(buf) > cap:
             adv.force_flush()
@@ -447,12 +464,12 @@ def advance(lines_in, write, purge_for, max_purge_mm=None,
 
 
 def advance_file(in_path, out_path, purge_for, max_purge_mm=None,
-                 max_buffer_lines=_DEFAULT_MAX_BUFFER_LINES):
+                 max_buffer_lines=_DEFAULT_MAX_BUFFER_LINES, on_record=None):
     """advance() from one file to another; lines are kept byte for byte."""
     with open(in_path, newline="", encoding="utf-8", errors="surrogateescape") as fin, \
             open(out_path, "w", newline="", encoding="utf-8", errors="surrogateescape",
                  buffering=1 << 20) as fout:
-        return advance(fin, fout.write, purge_for, max_purge_mm, max_buffer_lines)
+        return advance(fin, fout.write, purge_for, max_purge_mm, max_buffer_lines, on_record)
 
 
 def add_parser(sub):
@@ -467,7 +484,9 @@ def add_parser(sub):
     g.add_argument("--purge-matrix", metavar="FILE",
                    help="purge amount per tool pair (format: pydoc mixstep.advance)")
     p.add_argument("--l2-mm", type=float, help="transition length L2 (with --l1-mm)")
-    p.add_argument("--report", metavar="FILE", help="write the JSON report here ('-': stdout)")
+    p.add_argument("--report", metavar="FILE",
+                   help="write the report here as JSON lines: each change and warning, then "
+                        "a summary ('-': stdout)")
     p.add_argument("--max-buffer-lines", type=int, default=_DEFAULT_MAX_BUFFER_LINES,
                    help="most lines held back at once (default %(default)s)")
 
@@ -485,21 +504,40 @@ def main(args):
         purge = PurgeMatrix.from_file(args.purge_matrix)
     else:
         purge = args.purge_mm
+    # Changes and warnings are printed as they are made, and the JSON report (one
+    # record per line, then a summary line) is written as it goes: the command's
+    # memory does not grow with the file.
+    report_file = None
+    if args.report == "-":
+        report_file = sys.stdout
+    elif args.report:
+        report_file = open(args.report, "w")
+
+    def on_record(kind, rec):
+        if kind == "change":
+            print("line %d %s: %s, advanced %.5f mm (purge %.5f), output line %d" % (
+                rec["line"], rec["text"], rec["placed"], rec["advanced_mm"], rec["purge_mm"],
+                rec.get("out_line", 0)), file=sys.stderr)
+        else:
+            print("warning: line %d: %s" % (rec["line"], rec["message"]), file=sys.stderr)
+        if report_file:
+            report_file.write(json.dumps(dict(rec, kind=kind)) + "\n")
+
     try:
-        report = advance_file(args.gcode, args.output, purge,
-                              max_buffer_lines=args.max_buffer_lines)
+        summary = advance_file(args.gcode, args.output, purge,
+                               max_buffer_lines=args.max_buffer_lines, on_record=on_record)
     except ValueError as err:
         print("mixstep advance: %s" % err, file=sys.stderr)
         return 2
-    for rec in report["changes"]:
-        print("line %d %s: %s, advanced %.5f mm (purge %.5f), output line %d" % (
-            rec["line"], rec["text"], rec["placed"], rec["advanced_mm"], rec["purge_mm"],
-            rec.get("out_line", 0)), file=sys.stderr)
-    for w in report["warnings"]:
-        print("warning: line %d: %s" % (w["line"], w["message"]), file=sys.stderr)
-    if args.report == "-":
-        print(json.dumps(report, indent=1))
-    elif args.report:
-        with open(args.report, "w") as f:
-            json.dump(report, f, indent=1)
+    finally:
+        if report_file and report_file is not sys.stdout:
+            report_file.close()
+    if report_file:
+        summary = {k: v for k, v in summary.items() if k not in ("changes", "warnings")}
+        line = json.dumps(dict(summary, kind="summary")) + "\n"
+        if report_file is sys.stdout:
+            sys.stdout.write(line)
+        else:
+            with open(args.report, "a") as f:
+                f.write(line)
     return 0
