@@ -3,6 +3,9 @@
 try:
     import micropython
     const = micropython.const
+    # Inside viper functions these are the compiler's casts; the names only have to
+    # exist for the modules' imports.
+    ptr32 = ptr8 = ptr16 = None
 except ImportError:
     class _Micropython:
         @staticmethod
@@ -18,5 +21,8 @@ except ImportError:
     micropython = _Micropython()
     const = micropython.const
 
-# Viper pointer annotations are names only CPython evaluates.
-ptr32 = ptr8 = ptr16 = None
+    # Viper's pointer casts: on CPython the buffer itself indexes the same way.
+    def ptr32(buf):
+        return buf
+
+    ptr8 = ptr16 = ptr32

@@ -9,8 +9,10 @@
 # time, ties to the highest index, so n steps back and n forward restore every
 # count and every drive position, however lopsided the weights.
 #
-# All state lives in one preallocated array('i') section (see the M_ offsets) so
-# the step loop can call mix_step() with the heap locked.
+# This module holds the weights, their normalisation and the schedule's state: one
+# preallocated array('i') section (see the M_ offsets). The pick itself runs inline
+# in the step loop (stepper.tick), which has no viper call to spare;
+# stepper.run_mix runs it on a scratch block for the planner's forecasts and tests.
 from mixfw.compat import micropython, const, ptr32
 
 MAX_DRIVES = const(6)
@@ -94,72 +96,6 @@ def load(mem, base, mix_id, weights):
     for i in range(MAX_DRIVES):
         mem[base + M_W + i] = weights[i] if i < len(weights) else 0
     mix_load(mem, base, base)
-
-
-@micropython.viper
-def mix_step(mem: ptr32, base: int, reverse: int) -> int:
-    """Pick the drive for one extrusion step (reverse != 0: undo one). Never allocates."""
-    n = mem[base + M_N]
-    total = mem[base + M_SUM]
-    q = mem[base + M_Q]
-    w_at = base + M_W
-    c_at = base + M_C
-    best = -1
-    best_num = 0
-    best_w = 1
-    i = 0
-    if reverse == 0:
-        if q >= total:
-            while i < n:
-                mem[c_at + i] = 0
-                i += 1
-            q = 0
-            i = 0
-        while i < n:
-            w = mem[w_at + i]
-            if w > 0:
-                num = 2 * mem[c_at + i] + 1
-                if best < 0 or num * best_w < best_num * w:
-                    best = i
-                    best_num = num
-                    best_w = w
-            i += 1
-        if best >= 0:
-            mem[c_at + best] += 1
-            mem[base + M_Q] = q + 1
-    else:
-        if q <= 0:
-            while i < n:
-                mem[c_at + i] = mem[w_at + i]
-                i += 1
-            q = total
-            i = 0
-        while i < n:
-            w = mem[w_at + i]
-            if w > 0:
-                num = 2 * mem[c_at + i] - 1
-                if best < 0 or num * best_w >= best_num * w:
-                    best = i
-                    best_num = num
-                    best_w = w
-            i += 1
-        if best >= 0:
-            mem[c_at + best] -= 1
-            mem[base + M_Q] = q - 1
-    return best
-
-
-def schedule_counts(weights, steps, reverse=False):
-    """Steps per drive the schedule gives from a fresh start in `steps` steps: the
-    planner's forecast of a block, made with the step loop's own mix_step."""
-    from array import array
-    mem = array("i", bytes(4 * M_WORDS))
-    mem[M_N] = len(weights)
-    load(mem, 0, 1, weights)
-    counts = [0] * len(weights)
-    for _ in range(steps):
-        counts[mix_step(mem, 0, 1 if reverse else 0)] += 1
-    return tuple(counts)
 
 
 def default_tool_mixes(drives, count=16):

@@ -1,6 +1,6 @@
 # Pins: how the step loop's GPIO masks reach the pins, and the ENABLE and endstop
 # pins. With pin_writer "registers" the step loop writes the chip's set/clear
-# registers itself (see stepper._emit); "pin" is the portable Pin.value path.
+# registers itself (see the end of stepper.tick); "pin" is the portable Pin.value path.
 from mixfw.compat import micropython, ptr32
 
 AXIS_NAMES = ("x", "y", "z")

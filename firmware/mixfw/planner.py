@@ -7,7 +7,8 @@
 # passed in by main.py, so host tools can plan on CPython too.
 from math import sqrt
 from mixfw import stepper as st
-from mixfw.mixer import MAX_DRIVES, normalize, schedule_counts
+from mixfw.mixer import MAX_DRIVES, normalize
+from mixfw.stepper import schedule_counts
 
 # Largest schedule period the step loop's mixer takes: its products stay below 2**30.
 MAX_PERIOD = 20000

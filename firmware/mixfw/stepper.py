@@ -14,7 +14,7 @@
 # writes only block records and S_HEAD, the step loop writes everything else.
 from mixfw.compat import micropython, const, ptr32
 from mixfw import mixer
-from mixfw.mixer import mix_step, mix_load
+from mixfw.mixer import mix_load
 
 # Fixed point for rates: lead-axis steps per tick times 2**28. A rate is at most
 # half a step per tick, so rate + phase stays below 2**30 (the chips' small ints).
@@ -75,6 +75,13 @@ S_PIO_DRAIN = const(46)  # tick by which the state machine will have output ever
 S_WORDS = const(48)
 
 MIX_BASE = const(48)  # mixer section, mixer.M_WORDS long
+# The mixer words the step loop reads, at MIX_BASE + mixer.M_W, M_N, M_SUM, M_Q, M_C
+# (viper folds only this module's constants).
+MIX_W = const(49)
+MIX_N = const(55)
+MIX_SUM = const(56)
+MIX_Q = const(57)
+MIX_C = const(58)
 MASK_BASE = const(64)  # STEP pin masks: X Y Z then the drives (9 words)
 DIR_MASK_BASE = const(73)  # DIR pin masks in the same order (9 words)
 BLOCK_BASE = const(88)
@@ -103,6 +110,8 @@ F_HOME_SHIFT = const(8)  # homing axis mask (X=1, Y=2, Z=4) << F_HOME_SHIFT
 
 
 assert mixer.M_ID == 0  # the step loop reads the loaded mix id at MIX_BASE
+assert (MIX_W, MIX_N, MIX_SUM, MIX_Q, MIX_C) == tuple(
+    MIX_BASE + m for m in (mixer.M_W, mixer.M_N, mixer.M_SUM, mixer.M_Q, mixer.M_C))
 
 
 CAP_WORDS = const(3)  # per capture record
@@ -134,51 +143,6 @@ def _pio_put(mem: ptr32, out, count: int):
     while count > 0:
         out(word)
         count -= 1
-
-
-@micropython.viper
-def _emit(mem: ptr32, out, set_mask: int, clr_mask: int):
-    """Write STEP/DIR levels: set_mask pins high, clr_mask pins low."""
-    if mem[S_CAP_ON]:
-        head = mem[S_CAP_HEAD]
-        nxt = head + 1
-        if nxt >= mem[S_CAP_SIZE]:
-            nxt = 0
-        if nxt == mem[S_CAP_TAIL]:
-            mem[S_CAP_LOST] += 1
-        else:
-            r = mem[S_CAP_BASE] + head * CAP_WORDS
-            mem[r] = (mem[S_TICKS] - mem[S_CAP_T0]) & 0x3FFFFFFF
-            mem[r + 1] = set_mask
-            mem[r + 2] = clr_mask
-            mem[S_CAP_HEAD] = nxt
-    if mem[S_PIO]:
-        if mem[S_PIO_LEFT] == 0:
-            # A burst starts: old levels until the latency is queued, so this
-            # tick's levels come out exactly LATENCY ticks from now.
-            fill = mem[S_PIO_LATENCY] - int(_pio_ahead(mem))
-            if fill > 0:
-                _pio_put(mem, out, fill)
-        mem[S_LEVELS] = (mem[S_LEVELS] | set_mask) & (0 - 1 - clr_mask)
-        mem[S_PIO_LEFT] = mem[S_PIO_LATENCY] + 2
-        return
-    at = mem[S_REG_SET]
-    if at == 0:
-        out(set_mask, clr_mask)
-        return
-    regs = ptr32(out)
-    hi = mem[S_REG_HI_SET]
-    if hi:
-        if set_mask >> HI_SHIFT:
-            regs[hi] = set_mask >> HI_SHIFT
-        if clr_mask >> HI_SHIFT:
-            regs[mem[S_REG_HI_CLR]] = clr_mask >> HI_SHIFT
-        set_mask = set_mask & LO_MASK
-        clr_mask = clr_mask & LO_MASK
-    if set_mask:
-        regs[at] = set_mask
-    if clr_mask:
-        regs[mem[S_REG_CLR]] = clr_mask
 
 
 @micropython.viper
@@ -222,7 +186,11 @@ def _start(mem: ptr32, b: int) -> int:
 
 @micropython.viper
 def tick(mem: ptr32, out, endstops) -> int:
-    """One timer tick. Returns 1 if a step was taken."""
+    """One timer tick. Returns 1 if a step was taken.
+
+    A stepping tick has the mixer and the pin writes inline, because a viper call
+    costs as much as a whole idle tick: the tick works out the levels (set_mask,
+    clr_mask) first and writes them at one place, the end."""
     mem[S_TICKS] = (mem[S_TICKS] + 1) & 0x3FFFFFFF
     if mem[S_PIO]:
         # The levels the last tick left, for the state machine; the burst goes on
@@ -233,105 +201,252 @@ def tick(mem: ptr32, out, endstops) -> int:
             if mem[S_ACTIVE] or mem[S_TAIL] != mem[S_HEAD] or mem[S_PULSE_LEFT]:
                 left = mem[S_PIO_LATENCY] + 2
             mem[S_PIO_LEFT] = left - 1
-    clr = 0
+    set_mask = 0
+    clr_mask = 0
+    stepped = 0
     left = mem[S_PULSE_LEFT]
     if left > 0:
         left -= 1
         mem[S_PULSE_LEFT] = left
         if left == 0:
-            clr = mem[S_PULSE_MASK]
+            clr_mask = mem[S_PULSE_MASK]
     b = BLOCK_BASE + mem[S_TAIL] * B_WORDS
+    run = 1
     if mem[S_ACTIVE] == 0:
         if mem[S_TAIL] == mem[S_HEAD]:
-            if clr:
-                _emit(mem, out, 0, clr)
-            return 0
-        changed = int(_start(mem, b))
-        if changed:
-            _emit(mem, out, mem[S_DIR] & changed, clr | (changed & (0 - 1 - mem[S_DIR])))
-            return 0
-    wait = mem[S_WAIT]
-    if wait > 0:
-        mem[S_WAIT] = wait - 1
-        if clr:
-            _emit(mem, out, 0, clr)
-        if wait == 1 and (mem[b + B_FLAGS] & F_DWELL):
-            _finish(mem)
-        return 0
+            if clr_mask == 0:
+                return 0  # idle
+            run = 0
+        else:
+            changed = int(_start(mem, b))
+            if changed:
+                dirs = mem[S_DIR]
+                set_mask = dirs & changed
+                clr_mask |= changed & (0 - 1 - dirs)
+                run = 0
     flags = mem[b + B_FLAGS]
-    if flags & F_DWELL:  # a zero-length dwell
-        _finish(mem)
-        if clr:
-            _emit(mem, out, 0, clr)
-        return 0
-    # Velocity ramp, per tick so speed is linear in time.
-    event = mem[S_EVENT]
-    rate = mem[S_RATE]
-    phase = mem[S_PHASE] + rate
-    if event < mem[b + B_ACCEL_UNTIL]:
-        rate += mem[b + B_ACCEL]
-        if rate > mem[b + B_RATE_NOM]:
+    if run:
+        wait = mem[S_WAIT]
+        if wait > 0:
+            mem[S_WAIT] = wait - 1
+            if wait == 1 and (flags & F_DWELL):
+                _finish(mem)
+            run = 0
+        elif flags & F_DWELL:  # a zero-length dwell
+            _finish(mem)
+            run = 0
+    if run:
+        # Velocity ramp, per tick so speed is linear in time.
+        event = mem[S_EVENT]
+        rate = mem[S_RATE]
+        phase = mem[S_PHASE] + rate
+        if event < mem[b + B_ACCEL_UNTIL]:
+            rate += mem[b + B_ACCEL]
+            if rate > mem[b + B_RATE_NOM]:
+                rate = mem[b + B_RATE_NOM]
+        elif event >= mem[b + B_DECEL_AFTER]:
+            rate -= mem[b + B_ACCEL]
+            if rate < mem[b + B_RATE_FINAL]:
+                rate = mem[b + B_RATE_FINAL]
+        else:
             rate = mem[b + B_RATE_NOM]
-    elif event >= mem[b + B_DECEL_AFTER]:
-        rate -= mem[b + B_ACCEL]
-        if rate < mem[b + B_RATE_FINAL]:
-            rate = mem[b + B_RATE_FINAL]
-    else:
-        rate = mem[b + B_RATE_NOM]
-    mem[S_RATE] = rate
-    # A step waits while a STEP pin is still high or has just fallen (its low time).
-    if phase < ONE or left != 0 or clr != 0:
-        mem[S_PHASE] = phase
-        if clr:
-            _emit(mem, out, 0, clr)
-        return 0
-    mem[S_PHASE] = phase - ONE
+        mem[S_RATE] = rate
+        # A step waits while a STEP pin is still high or has just fallen (its low time).
+        if phase < ONE or left != 0 or clr_mask != 0:
+            mem[S_PHASE] = phase
+            run = 0
+        else:
+            mem[S_PHASE] = phase - ONE
     stopped = 0
-    if flags & F_HOMING:
+    if run and (flags & F_HOMING):
         homing = (flags >> F_HOME_SHIFT) & 7
         stopped = mem[S_HOME_STOP] | (int(endstops()) & homing)
         mem[S_HOME_STOP] = stopped
         if stopped == homing:
             _finish(mem)
-            if clr:
-                _emit(mem, out, 0, clr)
-            return 0
-    n = mem[b + B_N]
-    step = 0
-    axis = 0
-    while axis < 4:
-        err = mem[S_ERR + axis] + mem[b + B_STEPS + axis]
+            run = 0
+    if run:
+        stepped = 1
+        n = mem[b + B_N]
+        # Bresenham for X, Y, Z, written out: constant offsets cost nothing.
+        err = mem[S_ERR + X] + mem[b + B_STEPS + X]
         if err > n:
             err -= n
-            if ((stopped >> axis) & 1) == 0:
-                neg = (flags >> axis) & F_NEG
-                if axis == E:
-                    drive = int(mix_step(mem, MIX_BASE, neg))
-                    if drive >= 0:
-                        step |= mem[MASK_BASE + 3 + drive]
-                        if neg:
-                            mem[S_DRIVE_POS + drive] -= 1
-                        else:
-                            mem[S_DRIVE_POS + drive] += 1
+            if (stopped & 1) == 0:
+                set_mask = mem[MASK_BASE + X]
+                if flags & (F_NEG << X):
+                    mem[S_POS + X] -= 1
                 else:
-                    step |= mem[MASK_BASE + axis]
-                if neg:
-                    mem[S_POS + axis] -= 1
+                    mem[S_POS + X] += 1
+        mem[S_ERR + X] = err
+        err = mem[S_ERR + Y] + mem[b + B_STEPS + Y]
+        if err > n:
+            err -= n
+            if (stopped & 2) == 0:
+                set_mask |= mem[MASK_BASE + Y]
+                if flags & (F_NEG << Y):
+                    mem[S_POS + Y] -= 1
                 else:
-                    mem[S_POS + axis] += 1
-        mem[S_ERR + axis] = err
-        axis += 1
-    if step:
-        mem[S_PULSE_MASK] = step
-        mem[S_PULSE_LEFT] = mem[S_PULSE_TICKS]
-        _emit(mem, out, step, clr)
-    elif clr:
-        _emit(mem, out, 0, clr)
-    event += 1
-    mem[S_EVENT] = event
-    if event >= n:
-        _finish(mem)
-    return 1
+                    mem[S_POS + Y] += 1
+        mem[S_ERR + Y] = err
+        err = mem[S_ERR + Z] + mem[b + B_STEPS + Z]
+        if err > n:
+            err -= n
+            if (stopped & 4) == 0:
+                set_mask |= mem[MASK_BASE + Z]
+                if flags & (F_NEG << Z):
+                    mem[S_POS + Z] -= 1
+                else:
+                    mem[S_POS + Z] += 1
+        mem[S_ERR + Z] = err
+        err = mem[S_ERR + E] + mem[b + B_STEPS + E]
+        if err > n:
+            err -= n
+            # The mixer (see mixer.py): forward, the drive whose next step is due
+            # first, ties to the lowest index; backward, the drive whose last step
+            # was due latest, ties to the highest, so a step back undoes a step forward.
+            drives = mem[MIX_N]
+            q = mem[MIX_Q]
+            best = -1
+            best_num = 0
+            best_w = 1
+            i = 0
+            if flags & (F_NEG << E):
+                if q <= 0:  # a new period, walked backwards from its end
+                    while i < drives:
+                        mem[MIX_C + i] = mem[MIX_W + i]
+                        i += 1
+                    q = mem[MIX_SUM]
+                    i = 0
+                while i < drives:
+                    w = mem[MIX_W + i]
+                    if w > 0:
+                        num = 2 * mem[MIX_C + i] - 1
+                        if best < 0 or num * best_w >= best_num * w:
+                            best = i
+                            best_num = num
+                            best_w = w
+                    i += 1
+                if best >= 0:
+                    mem[MIX_C + best] -= 1
+                    mem[MIX_Q] = q - 1
+                    set_mask |= mem[MASK_BASE + 3 + best]
+                    mem[S_DRIVE_POS + best] -= 1
+                mem[S_POS + E] -= 1
+            else:
+                if q >= mem[MIX_SUM]:  # a new period
+                    while i < drives:
+                        mem[MIX_C + i] = 0
+                        i += 1
+                    q = 0
+                    i = 0
+                while i < drives:
+                    w = mem[MIX_W + i]
+                    if w > 0:
+                        num = 2 * mem[MIX_C + i] + 1
+                        if best < 0 or num * best_w < best_num * w:
+                            best = i
+                            best_num = num
+                            best_w = w
+                    i += 1
+                if best >= 0:
+                    mem[MIX_C + best] += 1
+                    mem[MIX_Q] = q + 1
+                    set_mask |= mem[MASK_BASE + 3 + best]
+                    mem[S_DRIVE_POS + best] += 1
+                mem[S_POS + E] += 1
+        mem[S_ERR + E] = err
+        if set_mask:
+            mem[S_PULSE_MASK] = set_mask
+            mem[S_PULSE_LEFT] = mem[S_PULSE_TICKS]
+        event = mem[S_EVENT] + 1
+        mem[S_EVENT] = event
+        if event >= n:
+            _finish(mem)
+    if (set_mask | clr_mask) == 0:
+        return stepped
+    # The writes: set_mask pins high, clr_mask pins low.
+    if mem[S_CAP_ON]:
+        head = mem[S_CAP_HEAD]
+        nxt = head + 1
+        if nxt >= mem[S_CAP_SIZE]:
+            nxt = 0
+        if nxt == mem[S_CAP_TAIL]:
+            mem[S_CAP_LOST] += 1
+        else:
+            r = mem[S_CAP_BASE] + head * CAP_WORDS
+            mem[r] = (mem[S_TICKS] - mem[S_CAP_T0]) & 0x3FFFFFFF
+            mem[r + 1] = set_mask
+            mem[r + 2] = clr_mask
+            mem[S_CAP_HEAD] = nxt
+    if mem[S_PIO]:
+        if mem[S_PIO_LEFT] == 0:
+            # A burst starts: old levels until the latency is queued, so this
+            # tick's levels come out exactly LATENCY ticks from now.
+            fill = mem[S_PIO_LATENCY] - int(_pio_ahead(mem))
+            if fill > 0:
+                _pio_put(mem, out, fill)
+        mem[S_LEVELS] = (mem[S_LEVELS] | set_mask) & (0 - 1 - clr_mask)
+        mem[S_PIO_LEFT] = mem[S_PIO_LATENCY] + 2
+        return stepped
+    at = mem[S_REG_SET]
+    if at == 0:
+        out(set_mask, clr_mask)
+        return stepped
+    regs = ptr32(out)
+    hi = mem[S_REG_HI_SET]
+    if hi:
+        if set_mask >> HI_SHIFT:
+            regs[hi] = set_mask >> HI_SHIFT
+        if clr_mask >> HI_SHIFT:
+            regs[mem[S_REG_HI_CLR]] = clr_mask >> HI_SHIFT
+        set_mask = set_mask & LO_MASK
+        clr_mask = clr_mask & LO_MASK
+    if set_mask:
+        regs[at] = set_mask
+    if clr_mask:
+        regs[mem[S_REG_CLR]] = clr_mask
+    return stepped
+
+
+def run_mix(weights, moves, out=None):
+    """Runs this step loop on E-only moves of moves[k] steps each (negative: back) from
+    a fresh start of the mix `weights`, and returns each drive's net steps: the
+    schedule exactly as the interrupt runs it, for the planner's forecasts and for
+    tests. out(set_mask, clr_mask), if given, sees every step (drive d is bit d)."""
+    from array import array
+    drives = len(weights)
+    mem = array("i", bytes(4 * mem_words(2)))
+    mem[S_QUEUE] = 2
+    mem[MIX_N] = drives
+    mem[MIX_BASE + mixer.M_ID] = -1
+    for d in range(drives):
+        mem[MASK_BASE + 3 + d] = 1 << d
+    if out is None:
+        out = array("i", bytes(12))  # scratch set/clear registers at words 1, 2
+        mem[S_REG_SET] = 1
+        mem[S_REG_CLR] = 2
+    for steps in moves:
+        if steps == 0:
+            continue
+        b = BLOCK_BASE + mem[S_HEAD] * B_WORDS
+        n = abs(steps)
+        mem[b + B_N] = mem[b + B_STEPS + E] = mem[b + B_DECEL_AFTER] = n
+        mem[b + B_FLAGS] = (F_NEG << E) if steps < 0 else 0
+        mem[b + B_RATE_INIT] = mem[b + B_RATE_NOM] = mem[b + B_RATE_FINAL] = ONE
+        mem[b + B_MIX] = 1
+        for d in range(drives):
+            mem[b + B_MIX + 1 + d] = weights[d]
+        mem[S_HEAD] = 1 - mem[S_HEAD]
+        done = mem[S_BLOCKS_DONE]
+        while mem[S_BLOCKS_DONE] == done:
+            tick(mem, out, None)
+    return tuple(mem[S_DRIVE_POS + d] for d in range(drives))
+
+
+def schedule_counts(weights, steps):
+    """Steps per drive the mixer gives in `steps` steps from a fresh start."""
+    return run_mix(weights, (steps,))
 
 
 def make_irq(mem, out, endstops):
