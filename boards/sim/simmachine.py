@@ -317,7 +317,8 @@ def idle():
         nxt = t._next
         if heap_lock_ticks:
             while nxt <= end:
-                _pio_output(nxt)
+                if _pio_head != _pio_tail:  # a call per tick would cost more than the tick
+                    _pio_output(nxt)
                 now_us = nxt
                 micropython.heap_lock()
                 cb(t)
@@ -329,7 +330,8 @@ def idle():
                     flush()
         else:
             while nxt <= end:
-                _pio_output(nxt)
+                if _pio_head != _pio_tail:
+                    _pio_output(nxt)
                 now_us = nxt
                 cb(t)
                 if _bank is not None:
