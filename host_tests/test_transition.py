@@ -3,7 +3,7 @@ printing extrusion before the G-code places it, splitting the move that crosses 
 point; the simulated trace shows the drive switch there."""
 import numpy as np
 
-from mixstep import paths, trace
+from mixstep import advance, paths, trace, tracecheck
 from mixstep.simprinter import SimPrinter
 
 E_SPM = 415
@@ -99,3 +99,26 @@ def test_the_example_print_with_firmware_transitions_keeps_every_step(tmp_path, 
     # Filament moved between drives, none lost.
     assert abs(sum(steps["e%d" % d] for d in range(3)) - sum(plain["e%d" % d] for d in range(3))) <= 2
     assert steps["e0"] != plain["e0"]
+
+
+def test_firmware_transitions_put_every_boundary_where_advance_does(tmp_path, board):
+    """The plain example printed with L1 = 1, L2 = 2.5 in firmware switches drives at
+    the same steps as the G-code `mixstep advance --l1-mm 1 --l2-mm 2.5` writes: its
+    trace passes trace check's move walk against the advanced file, where every drive
+    step must fall in the E move that plans it. (L0 = 2.25 mm is 933.75 steps; an L0 of
+    2.5 mm would be 1037.5, a tie that the file's 5 decimals can round the other way.)"""
+    cfg = configured(tmp_path, 1.0, 2.5)
+    gcode = paths.ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
+    edges = tmp_path / "run.edges"
+    p = SimPrinter(config_path=cfg, edges_path=edges)
+    for line in open(gcode):
+        p.send(line.rstrip("\n"))
+    p.finish()
+    vcd = tmp_path / "firmware.vcd"
+    trace.write_vcd(edges, vcd)
+    advanced = tmp_path / "advanced.gcode"
+    report = advance.advance_file(gcode, advanced, 1.0 + 2.5 / 2)
+    assert sum(1 for c in report["changes"] if c.get("advanced_mm")) >= 10
+    checked = {c["name"]: c for c in tracecheck.check(vcd, advanced)["checks"]}
+    for name in ("moves", "steps_e0", "steps_e1", "steps_e2", "steps_x", "steps_y"):
+        assert checked[name]["ok"] is True, checked[name]["detail"]
