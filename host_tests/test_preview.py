@@ -123,3 +123,30 @@ def test_compare_and_3d_views_write_pngs(tmp_path):
     assert drawn[0].layer is None and len(drawn[0].segments) > 1000
     _, colours = _png_colours(png3)
     assert len(colours) > 50
+
+
+def test_compare_with_advance_shows_the_blend_centred_on_the_designed_boundary(tmp_path):
+    """Where the slicer changes colour, the plain print still gives the old colour pure
+    (the nozzle's delay L1); after `mixstep advance` by L0 = L1 + L2/2 the colour there
+    is half way between the two, which is what advance is for."""
+    from mixstep import advance
+    l1_mm, l2_mm = 1.0, 1.5
+    advanced = tmp_path / "advanced.gcode"
+    advance.advance_file(EXAMPLE, advanced, l1_mm + l2_mm / 2)
+    plain, moved = preview.render([EXAMPLE, advanced], tmp_path / "cmp.png", l1_mm=l1_mm,
+                                  l2_mm=l2_mm, layer=3)
+
+    def outgoing_where_a_piece_starts(drawn, x, y):
+        for seg, out in zip(drawn.segments, drawn.outgoing):
+            hit = np.flatnonzero((np.abs(seg[:, 0, 0] - x) < 1e-6) & (np.abs(seg[:, 0, 1] - y) < 1e-6))
+            if len(hit):
+                return out[hit[0]]
+        raise AssertionError("no piece starts at %g, %g" % (x, y))
+
+    assert len(plain.tool_changes) >= 2
+    for _, x, y, _, label in plain.tool_changes:
+        new = int(label[1:])
+        before = outgoing_where_a_piece_starts(plain, x, y)
+        after = outgoing_where_a_piece_starts(moved, x, y)
+        assert before[new] < 0.01, (label, before)
+        assert abs(after[new] - 0.5) < 0.1, (label, after)
