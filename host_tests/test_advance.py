@@ -1,5 +1,5 @@
 """`mixstep advance` on real slicer output (PrusaSlicer relative and absolute E, Slic3r
-1.3 absolute E, Cura 4.13 absolute E with its 16 mm switch retraction).
+1.3 absolute and relative E, Cura 4.13 absolute E with its 16 mm switch retraction).
 
 The checks read the output with their own small G-code reader, not the module's: it
 counts as printing extrusion the positive E of moves that move X, Y or Z, outside
@@ -20,7 +20,7 @@ from mixstep import cli
 TESTDATA = os.path.join(os.path.dirname(__file__), "..", "testdata")
 CURA = "cura_part_3tool.gcode"
 FILES = ["part_3tool_prusaslicer_rel.gcode", "part_3tool_prusaslicer_abs.gcode",
-         "slic3r_part_3tool_abs.gcode", CURA]
+         "slic3r_part_3tool_abs.gcode", "slic3r_part_3tool_rel.gcode", CURA]
 TOL_MM = 1e-4
 
 
@@ -36,8 +36,10 @@ def run(lines, purge, **kw):
 
 
 def walk(lines):
-    """Per line: (printing extrusion after the line, XYZ point or None, tool or None)."""
+    """Per line: (printing extrusion after the line, XYZ point or None, tool or None,
+    feed rate in effect)."""
     x = y = z = e = 0.0
+    feed = None
     rel_xyz = rel_e = wipe = False
     s = 0.0
     rows = []
@@ -51,6 +53,7 @@ def walk(lines):
         if code:
             cmd, words = code[0], {w[0]: float(w[1:] or 0) for w in code[1:]}
             if cmd in ("G0", "G1", "G2", "G3"):
+                feed = words.get("F", feed)
                 old = (x, y, z)
                 if rel_xyz:
                     x, y, z = x + words.get("X", 0), y + words.get("Y", 0), z + words.get("Z", 0)
@@ -76,13 +79,21 @@ def walk(lines):
                 rel_e = cmd == "M83"
             elif cmd[0] == "T" and cmd[1:].isdigit():
                 tool = int(cmd[1:])
-        rows.append((s, point, tool))
+        rows.append((s, point, tool, feed))
     return rows
 
 
 def changes_in(lines):
     """(line number, tool, printing extrusion before it) of every T line."""
-    return [(n, tool, s) for n, (s, _, tool) in enumerate(walk(lines), 1) if tool is not None]
+    return [(n, tool, s) for n, (s, _, tool, _) in enumerate(walk(lines), 1) if tool is not None]
+
+
+def total_tolerance_mm(lines):
+    """How far the two counting rules may part over a whole file: the module counts what
+    an unretraction pushes beyond its retraction, and Slic3r rounds a wipe's retraction
+    to 5 decimals, so up to 1e-5 mm for each unretraction."""
+    primes = sum(1 for ln in lines if ln.startswith("G1 E") and not ln.startswith("G1 E-"))
+    return TOL_MM + 1e-5 * primes
 
 
 def check_output(lines_in, lines_out, report):
@@ -90,21 +101,27 @@ def check_output(lines_in, lines_out, report):
     rows_in, rows_out = walk(lines_in), walk(lines_out)
     # total printing extrusion preserved
     assert abs(rows_in[-1][0] - rows_out[-1][0]) < TOL_MM
-    assert abs(rows_in[-1][0] - report["extrusion_mm"]) < TOL_MM
+    assert abs(rows_in[-1][0] - report["extrusion_mm"]) < total_tolerance_mm(lines_in)
     # the path preserved: the output's points, split points taken out, are the input's
     splits = [tuple(c["split_point"]) for c in report["changes"] if "split_point" in c]
-    pts_in = [p for _, p, _ in rows_in if p is not None]
-    pts_out = [p for _, p, _ in rows_out if p is not None]
+    pts_in = [(p, f) for _, p, _, f in rows_in if p is not None]
+    pts_out = [(p, f) for _, p, _, f in rows_out if p is not None]
     kept = []
-    for p in pts_out:
+    split_feeds = []
+    for p, f in pts_out:
         hit = next((q for q in splits if max(abs(a - b) for a, b in zip(p, q)) < 1e-9), None)
         if hit is not None:
             splits.remove(hit)
+            split_feeds.append((len(kept), f))  # the first half of the next kept move
         else:
-            kept.append(p)
+            kept.append((p, f))
     assert not splits
     assert len(kept) == len(pts_in)
-    assert max(max(abs(a - b) for a, b in zip(p, q)) for p, q in zip(kept, pts_in)) < 1e-6
+    assert max(max(abs(a - b) for a, b in zip(p[0], q[0])) for p, q in zip(kept, pts_in)) < 1e-6
+    # both halves of a split move at the original move's feed rate
+    assert [f for p, f in kept] == [f for p, f in pts_in]
+    for k, f in split_feeds:
+        assert f == pts_in[k][1], (kept[k], f)
     # tool changes: same lines, same order
     t_in, t_out = changes_in(lines_in), changes_in(lines_out)
     assert [lines_in[n - 1] for n, _, _ in t_in] == [lines_out[n - 1] for n, _, _ in t_out]
@@ -142,7 +159,7 @@ def test_counting_rules_agree_on_the_inputs():
     for name in FILES:
         lines = read_lines(name)
         _, report = run(lines, 0.0)
-        assert abs(walk(lines)[-1][0] - report["extrusion_mm"]) < TOL_MM, name
+        assert abs(walk(lines)[-1][0] - report["extrusion_mm"]) < total_tolerance_mm(lines), name
         assert report["changes"] and not report["warnings"]
 
 
@@ -345,7 +362,7 @@ def test_cura_switch_retraction_is_paid_back_not_printed():
     t_out = changes_in(out)[1:]
     out_retractions = sorted(n for n, de in e_moves(out) if abs(de + 16) < 1e-4)
     assert len(out_retractions) == len(retractions)
-    printed_mm = [s for s, _, _ in walk(out)]
+    printed_mm = [s for s, _, _, _ in walk(out)]
     for n_out, _, _ in t_out:
         after = [r for r in out_retractions if r > n_out]
         assert after and printed_mm[after[0] - 1] > printed_mm[n_out - 1]
