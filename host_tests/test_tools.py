@@ -166,6 +166,21 @@ def test_any_sequence_of_mixes_and_moves_gives_each_drive_its_exact_share(moves)
         assert abs(steps["e%d" % i] - ideal_mm[i] * E_SPM) <= 0.5 + 1e-6, (i, steps, ideal_mm)
 
 
+def test_a_long_purge_gives_each_drive_its_exact_share():
+    """60 mm in one move is 24,900 E steps, more than one block of the mixer's integer
+    range: it goes in pieces, and each drive still ends within half a step."""
+    p = SimPrinter()
+    p.send("M302 P1")
+    p.send("M83")
+    weights = [266, 565, 240, 197]
+    assert p.send("M567 P0 E" + ":".join(map(str, weights)))[-1] == "ok"
+    assert p.send("G1 X20 E60 F600")[-1] == "ok"
+    steps = p.finish()["steps"]
+    for i, w in enumerate(weights):
+        assert abs(steps["e%d" % i] - 60 * E_SPM * w / sum(weights)) <= 0.5 + 1e-6, steps
+    assert steps["x"] == 20 * 80
+
+
 def test_palette_mixtures_of_mixtures():
     """Ovenbird's mixing matrix: tools as amounts of the palette's mixtures (u . P)."""
     p = SimPrinter()

@@ -269,6 +269,23 @@ class Planner:
         move is shorter than one step on every axis (nothing to do). mix: (id, weights)
         for this move instead of the active one. replay: a retraction or unretraction
         that replays the latest extrusion exactly (retract_policy 2)."""
+        # The mixer gives every drive exactly its count in a block of at most
+        # MAX_PERIOD E steps (each drive's count rounds by up to a step: hence the
+        # margin), so a longer extrusion, such as a purge, goes in equal pieces.
+        pieces = int(abs(e_mm) * max(self.drive_steps_per_mm) / (MAX_PERIOD - 2 * MAX_DRIVES)) + 1
+        if pieces == 1:
+            return self._add_block(target_steps, feed_mm_s, homing_axes, dir_masks, e_mm,
+                                   mix, replay)
+        start = self.position_steps
+        added = False
+        for k in range(1, pieces + 1):
+            point = [start[i] + round_steps((target_steps[i] - start[i]) * k / pieces)
+                     for i in range(3)]
+            added = self._add_block(point, feed_mm_s, homing_axes, dir_masks, e_mm / pieces,
+                                    mix, replay) or added
+        return added
+
+    def _add_block(self, target_steps, feed_mm_s, homing_axes, dir_masks, e_mm, mix, replay):
         if feed_mm_s <= 0:
             raise PlanError("feed rate must be > 0")
         pos = self.position_steps
