@@ -21,11 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from mixstep import paths, sim
+from mixstep import paths, sim, steptiming
 from mixstep.simprinter import SimPrinter
 from mixfw.gcode import Parser
-
-import step_times
 
 ROOT = paths.ROOT
 WORK = ROOT / "out" / "bench"
@@ -96,12 +94,9 @@ def child_usage(cmd, ok_codes=(0,)):
 
 
 def example_snippet():
-    """The example's first lines with cold extrusion allowed and the heating waits left
-    out (nothing to wait for)."""
+    """The example's first lines as the step timing measurement runs them."""
     path = WORK / "snippet.gcode"
-    lines = EXAMPLE.read_text().splitlines()[:SNIPPET_LINES]
-    keep = [ln for ln in lines if not ln.startswith(("M109", "M190"))]
-    path.write_text("M302 P1\n" + "\n".join(keep) + "\n")
+    path.write_text(steptiming.snippet(EXAMPLE, SNIPPET_LINES))
     return path
 
 
@@ -207,17 +202,13 @@ def bench_planner(res):
 # --- step timing -----------------------------------------------------------------
 
 def bench_step_timing(res):
-    snippet = example_snippet()
-    edges = WORK / "snippet.edges"
-    blocks = WORK / "snippet.blocks"
-    r = micropython("step_times_sim.py", snippet, edges, blocks, heap="8M")
-    if r["errors"]:
-        raise RuntimeError("step timing snippet: %s" % r["errors"][:3])
-    pins = paths.load_board("sim")["PINS"]
-    res.update(step_times.analyse(edges, blocks, r["tick_us"], pins))
-    res["step_time_tick_us"] = r["tick_us"]
+    r = steptiming.measure(example_snippet(), WORK)
+    errors = r.pop("firmware_errors")
+    if errors:
+        raise RuntimeError("step timing snippet: %s" % errors[:3])
+    res.update(r)
     res["step_time_note"] = ("lead-axis STEP edges vs the ideal trapezoid of each block "
-                             "(see bench/step_times.py), first %d lines of the example"
+                             "(see mixstep/steptiming.py), first %d lines of the example"
                              % SNIPPET_LINES)
 
 

@@ -51,6 +51,47 @@ def _gcd(a, b):
     return a
 
 
+def ramp_ticks(n, r0, r_nom, r1, acc):
+    """The step loop's schedule (B_ACCEL_UNTIL, B_DECEL_AFTER, B_RATE_DECEL) for the
+    trapezoid of a record: n lead steps from rate r0 up to r_nom (or the peak where
+    the ramps meet) and down to r1 at acc per tick, all in the step loop's fixed point.
+
+    Tick i (from 1) moves by the speed's mean over it. The step loop starts at
+    r0 + acc/2 and adds acc per tick until ACCEL_UNTIL, the tick holding the end of
+    acceleration, where r_nom clamps it; cruises; and at tick DECEL_AFTER, the one
+    holding the start of deceleration, sets the rate for the tick after, the first
+    wholly decelerating one, which then falls by acc per tick. Only the two corner
+    ticks then differ from the trapezoid, by less than acc each, so the position
+    stays on the plan to well under a step, however slow the end of the block."""
+    dist = n * float(st.ONE)
+    a = float(acc)
+    v0 = float(r0)
+    vn = float(r_nom)
+    v1 = float(r1)
+    two_a = 2.0 * a
+    d_acc = max(0.0, (vn * vn - v0 * v0) / two_a)
+    d_dec = max(0.0, (vn * vn - v1 * v1) / two_a)
+    if d_acc + d_dec > dist:  # the ramps meet below r_nom
+        peak2 = max(v0 * v0, v1 * v1, a * dist + (v0 * v0 + v1 * v1) * 0.5)
+        vn = sqrt(peak2)
+        d_acc = min(max((peak2 - v0 * v0) / two_a, 0.0), dist)
+        d_dec = dist - d_acc
+    accel_s = (vn - v0) / a  # in ticks, as every time here
+    decel_s = accel_s + (dist - d_acc - d_dec) / vn
+    accel_until = _ceil(accel_s)
+    decel_after = max(1, _ceil(decel_s))
+    r_decel = int(vn - a * (decel_after + 0.5 - decel_s) + 0.5)
+    return min(accel_until, _MAX_TICK), min(decel_after, _MAX_TICK), max(r_decel, r1)
+
+
+def _ceil(x):
+    i = int(x)
+    return i + 1 if i < x else i
+
+
+_MAX_TICK = 0x3FFFFFFF
+
+
 class PlanError(ValueError):
     pass
 
@@ -83,6 +124,7 @@ class Planner:
         self.max_entry = [0.0] * q
         self.entry = [0.0] * q
         self.exit = [0.0] * q  # exit speed baked into the slot's integer record
+        self.ramp = [None] * q  # per slot: (record's rates, its ramp_ticks schedule)
         self.unit = [None] * q
         self.prev_unit = None
         self.prev_nominal = 0.0
@@ -463,7 +505,6 @@ class Planner:
             # The nominal speed is never reached: accelerate to where the ramps meet.
             accel_steps = ((v1 * v1 - v0 * v0) / two_a * f + n) * 0.5
             accel_steps = min(max(accel_steps, 0.0), float(n))
-            decel_steps = n - accel_steps
             vn = sqrt(v0 * v0 + two_a * accel_steps / f)
         k = self.tick_s * st.ONE * f
         acc = a * f * self.tick_s * self.tick_s * st.ONE
@@ -474,10 +515,13 @@ class Planner:
         r_nom = max(int(vn * k), floor)
         r0 = min(max(int(v0 * k), floor), r_nom)
         r1 = min(max(int(v1 * k), floor), r_nom)
-        accel_until = int(accel_steps + 0.5)
-        decel_after = n - int(decel_steps + 0.5)
-        if decel_after < accel_until:
-            decel_after = accel_until
+        # The look-ahead rewrites every waiting block for each new one, mostly with
+        # the same rates: the schedule is worked out again only when they change.
+        rates = (n, r0, r_nom, r1, acc_i)
+        ramp = self.ramp[slot]
+        if ramp is None or ramp[0] != rates:
+            ramp = self.ramp[slot] = (rates, ramp_ticks(n, r0, r_nom, r1, acc_i))
+        accel_until, decel_after, r_decel = ramp[1]
         state = self._irq_off()
         try:
             if slot == m[st.S_TAIL] and m[st.S_ACTIVE]:
@@ -488,6 +532,7 @@ class Planner:
             m[b + st.B_ACCEL] = acc_i
             m[b + st.B_ACCEL_UNTIL] = accel_until
             m[b + st.B_DECEL_AFTER] = decel_after
+            m[b + st.B_RATE_DECEL] = r_decel
             self.exit[slot] = v1
         finally:
             self._irq_on(state)

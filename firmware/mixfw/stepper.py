@@ -72,6 +72,7 @@ S_PIO_LEFT = const(43)
 S_PIO_LATENCY = const(44)
 S_LEVELS = const(45)  # STEP/DIR levels written so far
 S_PIO_DRAIN = const(46)  # tick by which the state machine will have output every word
+S_RAMP_TICKS = const(47)  # ticks of velocity ramp run in the block
 S_WORDS = const(48)
 
 MIX_BASE = const(48)  # mixer section, mixer.M_WORDS long
@@ -96,10 +97,16 @@ B_RATE_INIT = const(8)
 B_RATE_NOM = const(9)
 B_RATE_FINAL = const(10)
 B_ACCEL = const(11)  # rate change per tick
-B_ACCEL_UNTIL = const(12)  # step event where acceleration ends
-B_DECEL_AFTER = const(13)  # step event where deceleration starts
+# The ramp is scheduled in ramp ticks (counted from 1 in the block), not in steps: the
+# planner knows the times of the trapezoid's corners, while the step at which a corner
+# falls depends on the phase the block inherits. Accelerating ends at tick ACCEL_UNTIL;
+# at tick DECEL_AFTER the rate is set to RATE_DECEL, the planned decelerating line at
+# the next tick (the corner falls between ticks), and falls by ACCEL per tick after.
+B_ACCEL_UNTIL = const(12)
+B_DECEL_AFTER = const(13)
 B_DWELL = const(14)  # ticks, for dwell blocks
 B_MIX = const(15)  # mix id then 6 weights: same shape as the mixer's M_ID..M_W
+B_RATE_DECEL = const(22)
 B_WORDS = const(24)
 
 # Flag bits.
@@ -171,7 +178,10 @@ def _start(mem: ptr32, b: int) -> int:
     mem[S_ERR + 1] = half
     mem[S_ERR + 2] = half
     mem[S_ERR + 3] = half
-    mem[S_RATE] = mem[b + B_RATE_INIT]
+    # A tick moves by its rate, so the rate must be the mean speed over the tick
+    # (trapezoidal integration): half a tick of acceleration above the entry speed.
+    mem[S_RATE] = mem[b + B_RATE_INIT] + (mem[b + B_ACCEL] >> 1)
+    mem[S_RAMP_TICKS] = 0
     if mem[b + B_STEPS + E] != 0 and mem[b + B_MIX] != mem[MIX_BASE]:
         mix_load(mem, MIX_BASE, b + B_MIX)
     old = mem[S_DIR]
@@ -237,17 +247,21 @@ def tick(mem: ptr32, out, endstops) -> int:
             run = 0
     if run:
         # Velocity ramp, per tick so speed is linear in time.
-        event = mem[S_EVENT]
+        ramp = mem[S_RAMP_TICKS] + 1
+        mem[S_RAMP_TICKS] = ramp
         rate = mem[S_RATE]
         phase = mem[S_PHASE] + rate
-        if event < mem[b + B_ACCEL_UNTIL]:
+        if ramp < mem[b + B_ACCEL_UNTIL]:
             rate += mem[b + B_ACCEL]
             if rate > mem[b + B_RATE_NOM]:
                 rate = mem[b + B_RATE_NOM]
-        elif event >= mem[b + B_DECEL_AFTER]:
-            rate -= mem[b + B_ACCEL]
-            if rate < mem[b + B_RATE_FINAL]:
-                rate = mem[b + B_RATE_FINAL]
+        elif ramp >= mem[b + B_DECEL_AFTER]:
+            if ramp == mem[b + B_DECEL_AFTER]:
+                rate = mem[b + B_RATE_DECEL]
+            else:
+                rate -= mem[b + B_ACCEL]
+                if rate < mem[b + B_RATE_FINAL]:
+                    rate = mem[b + B_RATE_FINAL]
         else:
             rate = mem[b + B_RATE_NOM]
         mem[S_RATE] = rate
@@ -431,7 +445,8 @@ def run_mix(weights, moves, out=None):
             continue
         b = BLOCK_BASE + mem[S_HEAD] * B_WORDS
         n = abs(steps)
-        mem[b + B_N] = mem[b + B_STEPS + E] = mem[b + B_DECEL_AFTER] = n
+        mem[b + B_N] = mem[b + B_STEPS + E] = n
+        mem[b + B_DECEL_AFTER] = n + 1  # a step per tick: done before it decelerates
         mem[b + B_FLAGS] = (F_NEG << E) if steps < 0 else 0
         mem[b + B_RATE_INIT] = mem[b + B_RATE_NOM] = mem[b + B_RATE_FINAL] = ONE
         mem[b + B_MIX] = 1

@@ -1,9 +1,9 @@
 # Runs a G-code file on the simulated printer with edges recorded, and records for
 # every block the step loop starts the record it runs (as the planner left it) and
-# the time its velocity ramp begins. bench/step_times.py compares the edges with the
+# the time its velocity ramp begins. mixstep/steptiming.py compares the edges with the
 # ideal trapezoid of each block. The timer callback is wrapped, so nothing in the
 # firmware changes; the wrapper runs between ticks and allocates (no heap lock).
-#   MICROPYPATH=firmware:boards/sim micropython bench/step_times_sim.py GCODE EDGES BLOCKS
+#   MICROPYPATH=firmware:boards/sim micropython boards/sim/step_times_sim.py GCODE EDGES BLOCKS
 # BLOCKS gets one JSON line per block: ramp_origin_us, phase, flags, n, steps (X Y Z E),
 # rate_init, rate_nom, rate_final, accel, accel_until, decel_after.
 import sys

@@ -1,8 +1,8 @@
 """Step timing error: every step the simulated printer took against the ideal time of
-that step in the trapezoid planned for its block.
+that step in the trapezoid planned for its block (`make bench`, and the tests).
 
 Method
-    1. bench/step_times_sim.py runs a G-code snippet on the simulated printer (the
+    1. boards/sim/step_times_sim.py runs a G-code file on the simulated printer (the
        firmware unchanged, MicroPython unix port) with every GPIO edge recorded. It
        wraps the timer callback and, for each block the step loop starts, keeps the
        block record as the step loop runs it (lead-axis steps n, steps per axis, and
@@ -29,14 +29,18 @@ Method
     no steps). A block whose edge count differs from its record fails the
     measurement.
 
-Errors come from ticks (a step falls on the next tick: up to tick_us late), from
-the per-tick rate update (speed changes once per tick, not continuously), from the
-STEP high/low time holding a step back, and from rounding in the planner's
-integer records.
+A step can only fall on a tick: a step loop that follows the plan exactly takes each
+step at the first tick at or after its ideal time, 0 to tick_us late (tick_us / 2 on
+average). Errors beyond that come from the velocity ramp leaving the plan, from the
+STEP high/low time holding a step back, and from rounding in the planner's integer
+records.
 """
 import json
+import subprocess
 
 import numpy as np
+
+from mixstep import paths, trace
 
 ONE = 1 << 28
 F_DWELL = 1
@@ -83,8 +87,7 @@ def read_blocks(path):
 
 def analyse(edges_path, blocks_path, tick_us, pins):
     """Timing errors (us) of lead-axis steps and of all axes' steps. pins: the board's
-    pin map; E is every mixing drive's STEP pin."""
-    from mixstep import trace
+    pin map; E is every mixing drive's STEP pin. Positive errors are late steps."""
     times, gpios, levels = trace.read_edges(edges_path)
     rising = (levels == 1) & (times > 0)
     axis_pins = [[pins["x_step"]], [pins["y_step"]], [pins["z_step"]],
@@ -119,12 +122,15 @@ def analyse(edges_path, blocks_path, tick_us, pins):
             if axis == lead:
                 lead_err.append(err)
         checked += 1
-    lead_abs = np.abs(np.concatenate(lead_err))
-    all_abs = np.abs(np.concatenate(all_err))
+    lead_signed = np.concatenate(lead_err)
+    lead_abs = np.abs(lead_signed)
+    all_signed = np.concatenate(all_err)
+    all_abs = np.abs(all_signed)
     return {
         "step_time_error_max_us": float(lead_abs.max()),
         "step_time_error_p99_us": float(np.percentile(lead_abs, 99)),
-        "step_time_error_mean_signed_us": float(np.concatenate(lead_err).mean()),
+        "step_time_error_mean_signed_us": float(lead_signed.mean()),
+        "step_time_error_earliest_us": float(all_signed.min()),
         "step_time_error_all_axes_max_us": float(all_abs.max()),
         "step_time_error_all_axes_p99_us": float(np.percentile(all_abs, 99)),
         "step_time_blocks": checked,
@@ -132,8 +138,35 @@ def analyse(edges_path, blocks_path, tick_us, pins):
     }
 
 
-if __name__ == "__main__":
-    import sys
-    from mixstep import paths
-    pins = paths.load_board("sim")["PINS"]
-    print(json.dumps(analyse(sys.argv[1], sys.argv[2], float(sys.argv[3]), pins), indent=2))
+def snippet(gcode_path, lines):
+    """The first lines of a G-code file as the measurement runs them: cold extrusion
+    allowed and the heating waits left out (nothing to wait for)."""
+    with open(gcode_path) as f:
+        head = f.read().splitlines()[:lines]
+    keep = [ln for ln in head if not ln.startswith(("M109", "M190"))]
+    return "M302 P1\n" + "\n".join(keep) + "\n"
+
+
+def record(gcode_path, edges_path, blocks_path, heap="8M"):
+    """Run a G-code file on the simulated printer with the edges and block records
+    kept (step 1 above). Returns the run's summary: blocks, sim_us, tick_us, errors."""
+    script = paths.BOARDS / "sim" / "step_times_sim.py"
+    cmd = [paths.micropython(), "-X", "heapsize=" + heap, str(script),
+           str(gcode_path), str(edges_path), str(blocks_path)]
+    done = subprocess.run(cmd, cwd=paths.ROOT, env=paths.micropython_env("sim"),
+                          capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError("step_times_sim.py failed: %s" % done.stderr.strip()[-2000:])
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def measure(gcode_path, work_dir):
+    """Record a G-code file and analyse it; the figures of analyse() plus tick_us and
+    the errors the firmware answered."""
+    edges = work_dir / "steps.edges"
+    blocks = work_dir / "steps.blocks"
+    run = record(gcode_path, edges, blocks)
+    res = analyse(edges, blocks, run["tick_us"], paths.load_board("sim")["PINS"])
+    res["step_time_tick_us"] = run["tick_us"]
+    res["firmware_errors"] = run["errors"]
+    return res
