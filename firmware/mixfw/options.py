@@ -28,7 +28,9 @@ FIRMWARE_DEFAULTS = {
     "transition_l1_mm": 0.0,
     "transition_l2_mm": 0.0,
     "transition_pairs": ((0, 0, 0.0, 0.0),) * 8,
-    "trace_records": 512,
+    # 3 KB of RAM held from boot for a debugging aid: enough for a short burst (about
+    # 128 steps); a longer capture sets more and restarts.
+    "trace_records": 256,
 }
 
 
