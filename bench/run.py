@@ -14,6 +14,7 @@ import argparse
 import json
 import math
 import re
+import shutil
 import subprocess
 import sys
 import time
@@ -21,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mixstep import paths, sim, steptiming
+from mixstep import deploy, paths, sim, steptiming
 from mixstep.simprinter import SimPrinter
 from mixfw.gcode import Parser
 
@@ -46,6 +47,11 @@ TARGETS = {
     "heap_peak_bytes": ("<=", 65536),
     "heap_at_rest_bytes": None,
     "heap_peak_over_rest_bytes": None,
+    "heap_module_objects_bytes": None,
+    "heap_frozen_peak_bytes": ("<=", 65536),
+    "heap_frozen_peak_32bit_estimate_bytes": None,
+    "heap_code_bytes": None,
+    "heap_total_peak_bytes": None,
     "min_heap_bytes_that_prints": None,
     "planner_lines_per_s": (">=", 50000),
     "required_lines_per_s": None,
@@ -142,16 +148,44 @@ def bench_heap(res):
     r = sim.run(EXAMPLE, heap_lock=True)
     if r["errors"]:
         raise RuntimeError("example print with the heap locked: %s" % r["errors"][:3])
-    buf = r["sim_buffer_bytes"]
-    res["heap_peak_bytes"] = r["heap_peak_bytes"] - buf
-    res["heap_at_rest_bytes"] = r["heap_at_rest_bytes"] - buf
-    res["heap_sim_buffer_bytes"] = buf
-    # What the print adds over what stays allocated (code, buffers, tables).
-    res["heap_peak_over_rest_bytes"] = r["heap_peak_bytes"] - r["heap_at_rest_bytes"]
-    res["heap_note"] = ("firmware heap = MicroPython heap in use minus the simulated chip's "
-                        "edge buffer (heap_sim_buffer_bytes), example print, default queue, "
-                        "step loop run with the heap locked; includes the firmware's "
-                        "bytecode, compiled from .py at boot (frozen on a board)")
+    code = sim.code_heap(r["firmware_modules"])
+    data_peak, data_rest = r["heap_data_peak_bytes"], r["heap_data_at_rest_bytes"]
+    res["heap_peak_bytes"] = res["heap_data_peak_bytes"] = data_peak
+    res["heap_at_rest_bytes"] = res["heap_data_at_rest_bytes"] = data_rest
+    res["heap_peak_over_rest_bytes"] = data_peak - data_rest
+    res["heap_data_after_print_bytes"] = r["heap_data_after_bytes"]
+    res["heap_module_objects_bytes"] = code["module_body_bytes"]
+    res["heap_frozen_peak_bytes"] = code["module_body_bytes"] + data_peak
+    res["heap_code_bytes"] = r["heap_code_bytes"]
+    res["heap_code_compiled_bytes"] = code["compiled_bytes"]
+    res["heap_code_mpy_bytes"] = mpy_code_bytes()
+    res["heap_total_peak_bytes"] = r["heap_code_bytes"] + data_peak
+    # On a 32-bit chip every object is half as many bytes (words of 4 bytes, GC blocks
+    # of 16, single-precision floats boxed in one block as here); byte buffers are
+    # not. Only the step-loop array is counted as a buffer: the few smaller ones (line
+    # and receive buffers, under 1 KB) are halved too.
+    buffers = r["step_memory_bytes"]
+    res["heap_frozen_peak_32bit_estimate_bytes"] = (
+        buffers + (res["heap_frozen_peak_bytes"] - buffers) // 2)
+    res["heap_sim_buffer_bytes"] = r["sim_buffer_bytes"]
+    res["heap_note"] = (
+        "bytes of heap on the 64-bit unix port (objects twice a 32-bit chip's size), "
+        "example print, default queue, step loop run with the heap locked; the "
+        "simulation's own heap (chip, edge buffer, thermal model) is in none of them. "
+        "heap_peak_bytes = heap_data_peak_bytes (the target): the firmware's data, what "
+        "building the printer and printing allocate, at the peak of the print (live "
+        "heap sampled after a collection); heap_at_rest_bytes = heap_data_at_rest_bytes: "
+        "the same after boot, before the first line. heap_module_objects_bytes: what "
+        "the module bodies make at import (globals, function and class objects, module "
+        "tables), which a board with the firmware frozen into flash also holds in RAM; "
+        "heap_frozen_peak_bytes: that plus the data peak, the whole heap of a frozen "
+        "board; heap_frozen_peak_32bit_estimate_bytes: the same with every object but "
+        "the step-loop array halved. heap_code_bytes: importing the modules from .py, "
+        "bytecode included; heap_code_mpy_bytes: from .mpy files made by mpy-cross "
+        "(make deploy), which load onto the heap as well; heap_code_compiled_bytes: the "
+        "compiled modules alone (bytecode and constants, without the names they intern), "
+        "which a frozen board keeps in flash; "
+        "heap_total_peak_bytes: heap_code_bytes plus the data peak.")
     # The smallest heap the print runs in: bisect on a snippet (fast), then confirm
     # with the whole example, growing by 8 KiB steps if it needs more.
     snippet = example_snippet()
@@ -173,6 +207,18 @@ def bench_heap(res):
             return
         hi += step
     raise RuntimeError("the example does not print in %d bytes of heap" % hi)
+
+
+def mpy_code_bytes():
+    """The firmware's code heap when its modules are .mpy files from the pinned
+    mpy-cross, as `make deploy` puts them on a board (the unix port loads x64 ones)."""
+    out = WORK / "mpy"
+    if out.exists():
+        shutil.rmtree(out)
+    deploy.compile_mixfw(out, "x64")
+    printer = SimPrinter(code_dir=out)
+    report = printer.finish()
+    return report["heap_code_bytes"]
 
 
 # --- planner ---------------------------------------------------------------------

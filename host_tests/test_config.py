@@ -697,3 +697,21 @@ print(json.dumps(sweep(%r, %r, %r, "old file")))
         assert got["tried"] >= got["save_steps"] + 1
 
     check()
+
+
+def test_the_beds_option_rows_are_the_hot_ends():
+    """options.py spells out both heaters' rows in literals (so they stay in flash on a
+    frozen board); they must not drift apart."""
+    from mixfw.options import SCHEMA
+    hotend = [row for row in SCHEMA if row[0].startswith("hotend_")]
+    bed = [row for row in SCHEMA if row[0].startswith("bed_")]
+    assert len(hotend) == 16
+    assert bed == [("bed_" + r[0][len("hotend_"):],) + r[1:6] + ("bed " + r[6][len("hotend "):],)
+                   for r in hotend]
+
+
+def test_the_option_table_is_a_constant():
+    """Its rows are literals, so importing options.py builds almost nothing in RAM (a
+    row naming FLOAT or LIVE would be built at import: 11 KB on this port)."""
+    from mixstep import sim
+    assert sim.code_heap(["mixfw.options"])["module_body_bytes"] < 1024

@@ -28,6 +28,20 @@ def test_whole_print_runs_with_heap_locked_and_no_errors(printed):
     assert report["lines"] == sum(1 for _ in open(SAMPLES / "part_3tool_prusaslicer_rel.gcode"))
 
 
+# The firmware's data heap during a print with the default queue, as bench/run.py
+# reports it (heap_peak_bytes): measured on the 64-bit unix port, where every object is
+# twice its size on the chips, so an ESP32 without PSRAM has room to spare.
+HEAP_TARGET_BYTES = 64 * 1024
+
+
+def test_firmware_data_heap_during_the_print_fits_the_target(printed):
+    """What building the printer and printing allocate (the firmware's code is not in
+    it: frozen into flash on a board)."""
+    report, _ = printed
+    assert 0 < report["heap_data_at_rest_bytes"] <= report["heap_data_peak_bytes"]
+    assert report["heap_data_peak_bytes"] <= HEAP_TARGET_BYTES
+
+
 def test_each_drive_gets_the_e_of_its_tool_and_xyz_end_where_commanded(printed, board):
     report, _ = printed
     want = expected_steps(SAMPLES / "part_3tool_prusaslicer_rel.gcode",

@@ -88,18 +88,23 @@ def build(board, out_dir=None):
     out = Path(out_dir) if out_dir else paths.ROOT / "build" / board
     if out.exists():
         shutil.rmtree(out)
-    (out / "mixfw").mkdir(parents=True)
-    cross = _tool("mpy-cross")
-    for src in sorted((paths.FIRMWARE / "mixfw").glob("*.py")):
-        dst = out / "mixfw" / (src.stem + ".mpy")
-        cmd = [cross, "-march=" + MARCH[chip], "-s", "mixfw/" + src.name, "-o", str(dst),
-               str(src)]
-        proc = subprocess.run(cmd, capture_output=True, text=True)
-        if proc.returncode != 0:
-            raise DeployError("mpy-cross failed on %s:\n%s" % (src.name, proc.stderr.strip()))
+    compile_mixfw(out, MARCH[chip])
     shutil.copy(paths.FIRMWARE / "main.py", out / "main.py")
     shutil.copy(paths.BOARDS / board / "board.py", out / "board.py")
     return out
+
+
+def compile_mixfw(out, march):
+    """Every module of firmware/mixfw compiled with mpy-cross -march=<march> into
+    <out>/mixfw/*.mpy."""
+    (out / "mixfw").mkdir(parents=True, exist_ok=True)
+    cross = _tool("mpy-cross")
+    for src in sorted((paths.FIRMWARE / "mixfw").glob("*.py")):
+        dst = out / "mixfw" / (src.stem + ".mpy")
+        cmd = [cross, "-march=" + march, "-s", "mixfw/" + src.name, "-o", str(dst), str(src)]
+        proc = subprocess.run(cmd, capture_output=True, text=True)
+        if proc.returncode != 0:
+            raise DeployError("mpy-cross failed on %s:\n%s" % (src.name, proc.stderr.strip()))
 
 
 def mpy_header(path):

@@ -1,12 +1,15 @@
 """`mixstep sim`: stream a G-code file through the simulated printer, one line per
 `ok` as a host does, and write the GPIO trace (VCD) and a JSON report."""
 import json
+import subprocess
 import tempfile
 import time
 from pathlib import Path
 
-from mixstep import trace
+from mixstep import paths, trace
 from mixstep.simprinter import SimPrinter
+
+HEAP_CODE = paths.BOARDS / "sim" / "heap_code.py"
 
 
 def run(gcode_path, trace_path=None, report_path=None, heap_lock=False, edges_path=None,
@@ -43,8 +46,17 @@ def run(gcode_path, trace_path=None, report_path=None, heap_lock=False, edges_pa
         "sim_seconds": fw["sim_us"] / 1e6,
         "wall_seconds": round(wall, 3),
         "firmware_wall_seconds": round(sim_wall, 3),
-        "heap_at_rest_bytes": fw["heap_at_rest_bytes"],
-        "heap_peak_bytes": fw["heap_peak_bytes"],
+        # The firmware's heap on this 64-bit port (see boards/sim/sim_main.py): its
+        # code as imported here, its data at rest after boot, at the peak of the run
+        # and after it; total: code and the data peak.
+        "heap_code_bytes": fw["heap_code_bytes"],
+        "heap_data_at_rest_bytes": fw["heap_data_at_rest_bytes"],
+        "heap_data_peak_bytes": fw["heap_data_peak_bytes"],
+        "heap_data_after_bytes": fw["heap_data_after_bytes"],
+        "heap_total_peak_bytes": fw["heap_code_bytes"] + fw["heap_data_peak_bytes"],
+        "heap_process_peak_bytes": fw["heap_process_peak_bytes"],
+        "firmware_modules": fw["firmware_modules"],
+        "step_memory_bytes": fw["step_memory_bytes"],
         "sim_buffer_bytes": fw["sim_buffer_bytes"],
         "heap_locked_step_loop": fw["heap_locked"],
         "trace": str(trace_path) if trace_path else None,
@@ -53,3 +65,17 @@ def run(gcode_path, trace_path=None, report_path=None, heap_lock=False, edges_pa
         Path(report_path).write_text(json.dumps(report, indent=2) + "\n")
     tmp.cleanup()
     return report
+
+
+def code_heap(modules, board="sim"):
+    """The heap the firmware's modules hold on the unix port, in two parts (see
+    boards/sim/heap_code.py): {"compiled_bytes": bytecode and constants, which a
+    frozen board keeps in flash, "module_body_bytes": the objects the module bodies
+    make at import, which it keeps in RAM}. modules: names such as a run's
+    report["firmware_modules"]."""
+    done = subprocess.run([paths.micropython(), "-X", "heapsize=2M", str(HEAP_CODE)]
+                          + list(modules), capture_output=True, text=True,
+                          env=paths.micropython_env(board), timeout=600)
+    if done.returncode != 0:
+        raise RuntimeError("heap_code.py failed: %s" % done.stderr.strip()[-2000:])
+    return json.loads(done.stdout.strip().splitlines()[-1])

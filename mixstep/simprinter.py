@@ -1,6 +1,7 @@
 """The simulated printer as a host sees it: a process that takes G-code lines and
 answers them, here the firmware running on the MicroPython unix port."""
 import json
+import os
 import subprocess
 
 from mixstep import paths
@@ -10,9 +11,10 @@ SIM_MAIN = paths.BOARDS / "sim" / "sim_main.py"
 
 class SimPrinter:
     def __init__(self, edges_path=None, heap_lock=False, heap_size="2M", board="sim",
-                 config_path=None, files_dir=None, settings=None):
+                 config_path=None, files_dir=None, settings=None, code_dir=None):
         """board: whose pin map and settings (the chip is simulated); settings: board
-        settings to override, e.g. {"pin_writer": "registers"}."""
+        settings to override, e.g. {"pin_writer": "registers"}; code_dir: a folder
+        searched before the firmware's, e.g. with its modules compiled to .mpy."""
         cmd = [paths.micropython(), "-X", "heapsize=" + heap_size, str(SIM_MAIN)]
         for key, value in (settings or {}).items():
             if isinstance(value, (tuple, list)):
@@ -26,8 +28,11 @@ class SimPrinter:
             cmd += ["--edges", str(edges_path)]
         if heap_lock:
             cmd.append("--heap-lock")
+        env = paths.micropython_env(board)
+        if code_dir:
+            env["MICROPYPATH"] = os.pathsep.join([str(code_dir), env["MICROPYPATH"]])
         self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     env=paths.micropython_env(board), bufsize=0)
+                                     env=env, bufsize=0)
         self.out = self.proc.stdout
         self.report = None
         banner = self._readline()

@@ -20,7 +20,6 @@ import gc
 import json
 import simmachine
 import simtime
-import simthermal
 
 sys.modules["machine"] = simmachine
 sys.modules["time"] = simtime
@@ -61,9 +60,23 @@ def _value(text):
     return text
 
 
+def _heap_bytes():
+    """Live heap: what stays allocated after a full collection."""
+    gc.collect()
+    return gc.mem_alloc()
+
+
 def main():
     opts = _args(sys.argv)
+    # The heap is split into the simulation's own share (chip, edge buffer, thermal
+    # model), the firmware's code (what importing its modules costs: bytecode, function
+    # and class objects, module tables) and its data (what building the printer and
+    # printing allocate). Each share is the live heap's growth over a stretch that only
+    # that share runs in.
+    heap_code = 0
+    before = _heap_bytes()
     import board
+    heap_code += _heap_bytes() - before
     for key, text in opts["set"]:
         board.SETTINGS[key] = _value(text)
     # The simulated chip is the board's: its GPIOs, its register layout.
@@ -73,8 +86,18 @@ def main():
     simmachine.quantum_us = int(opts["quantum_us"])
     if opts["edges"]:
         simmachine.record_to(opts["edges"])
+    before = _heap_bytes()
     import main as firmware
     from mixfw.console import StreamConsole
+    if opts["tcp"]:
+        from mixfw.netconsole import TcpListener
+    heap_code += _heap_bytes() - before
+    firmware_modules = sorted(name for name in sys.modules
+                              if name in ("board", "main") or name.startswith("mixfw"))
+    # Imported after the firmware: it uses the firmware's parser, whose code is the
+    # firmware's share.
+    import simthermal
+    data_from = _heap_bytes()
     interactive = opts["tcp"] is not None or opts["realtime"] is not None
     consoles = []
     if opts["stdio"]:
@@ -82,7 +105,6 @@ def main():
                                       blocking=not interactive))
     listeners = []
     if opts["tcp"]:
-        from mixfw.netconsole import TcpListener
         host, port = opts["tcp"].rsplit(":", 1)
         listeners.append(TcpListener(host, int(port)))
     if interactive:
@@ -91,22 +113,39 @@ def main():
     config = firmware.Config(board.SETTINGS, opts["config"], warn=warnings.append)
     config.boot()
     printer = firmware.build(config, files_root=opts["files"])
+    heap_data_at_rest = _heap_bytes() - data_from
+    before = _heap_bytes()
     simthermal.install(simmachine, board, printer)
     # The last STEP pulse ends a few ticks after the queue empties, and a PIO state
     # machine still holds its last words: let the chip finish them before stopping.
     printer.finish.append(simmachine.idle)
-    gc.collect()
+    # The firmware's data is the live heap over data_from less what the simulation
+    # added after it.
+    data_from += _heap_bytes() - before
+    simmachine.heap_peak_bytes = 0
     simmachine.heap_lock_ticks = opts["heap_lock"]
     firmware.run(consoles, listeners, printer, warnings)
     simmachine.drain_pio()
     simmachine.close()
-    gc.collect()
+    heap_after = _heap_bytes()
     pos = simmachine.positions
     report = {
         "sim_us": simmachine.now_us,
         "steps": {name: pos[i] for i, name in enumerate(simmachine.step_names)},
-        "heap_at_rest_bytes": gc.mem_alloc(),
-        "heap_peak_bytes": max(simmachine.heap_peak_bytes, gc.mem_alloc()),
+        # The firmware's heap, in bytes of this (64-bit) port: its modules as imported
+        # here (compiled from .py, or loaded from .mpy); its data once built, before
+        # the first line; the most data live at once during the run (sampled after a
+        # collection every few hundred idle calls) and after it.
+        "heap_code_bytes": heap_code,
+        "heap_data_at_rest_bytes": heap_data_at_rest,
+        "heap_data_peak_bytes": max(simmachine.heap_peak_bytes, heap_after) - data_from,
+        "heap_data_after_bytes": heap_after - data_from,
+        # The whole MicroPython heap in use, simulation included.
+        "heap_process_peak_bytes": max(simmachine.heap_peak_bytes, heap_after),
+        "firmware_modules": firmware_modules,
+        # The firmware's largest buffer (step-loop state, block ring, trace ring):
+        # bytes, the same on any port.
+        "step_memory_bytes": len(printer.mem) * 4,
         # What the simulated chip itself holds (edge buffer), not the firmware's.
         "sim_buffer_bytes": simmachine.buffer_bytes(),
         "heap_locked": opts["heap_lock"],

@@ -243,9 +243,15 @@ class Pin:
     PULL_UP = 1
     PULL_DOWN = 2
 
-    def __init__(self, gpio, mode=-1, pull=-1, value=None):
+    # As on the chips, Pin(n) is the one object of GPIO n, made before the firmware
+    # runs: on rp2 and ESP32 the pin objects are a table in flash, so they cost the
+    # firmware no heap, and here their heap is the simulation's.
+    def __new__(cls, gpio, *args, **kw):
         if not 0 <= gpio < GPIO_COUNT or gpio not in _CHIP_GPIOS.get(chip, range(GPIO_COUNT)):
             raise ValueError("GPIO %d does not exist on the %s" % (gpio, chip))
+        return _pin_table[gpio]
+
+    def __init__(self, gpio, mode=-1, pull=-1, value=None):
         if mode == Pin.OUT and gpio in _INPUT_ONLY.get(chip, ()):
             raise ValueError("GPIO %d of the %s is input-only" % (gpio, chip))
         self.gpio = gpio
@@ -272,6 +278,14 @@ class Pin:
 
     def __call__(self, v=None):
         return self.value(v)
+
+
+_pin_table = []
+for _g in range(GPIO_COUNT):
+    _pin = object.__new__(Pin)
+    _pin.gpio = _g
+    _pin.mode = -1
+    _pin_table.append(_pin)
 
 
 class Timer:

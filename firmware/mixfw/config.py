@@ -59,15 +59,24 @@ class FileStorage:
 
 
 class Option:
-    def __init__(self, name, key, index, kind, lo, hi, restart, help_text):
-        self.name = name
-        self.key = key  # the settings key
-        self.index = index  # position in the setting's tuple; -1 for a plain value
-        self.kind = kind
-        self.lo = lo
-        self.hi = hi
-        self.restart = restart
-        self.help = help_text
+    """One option, made from its schema row when it is asked for. The configuration
+    keeps no object per option: the 116 options of a six-drive board would hold
+    about 30 KB of heap on a 64-bit port (15 KB on a chip) for text that lives in
+    the schema anyway."""
+
+    def __init__(self, row, index, axis, width):
+        """row: options.SCHEMA's; index: position in the setting's tuple, -1 for a plain
+        value; axis: the name's suffix ("x", "3"); width: drives of a MIX, tools of a
+        PAIR."""
+        self.key, _axes, self.kind, self.lo, self.hi, self.restart, self._help = row
+        self.index = index
+        self.axis = axis
+        self.name = self.key if index < 0 else self.key + "_" + axis
+        self.width = width
+
+    @property
+    def help(self):
+        return self._help if self.index < 0 else self.axis.upper() + ": " + self._help
 
     def parse(self, text):
         """The typed value of text as M926 or the file gives it."""
@@ -133,38 +142,48 @@ class Option:
         return "%d" % v
 
 
-def _options(defaults):
-    opts = []
-    for key, axes, kind, lo, hi, restart, help_text in SCHEMA:
-        if key not in defaults:
-            continue
-        if axes == EACH:
-            axes = ["%d" % i for i in range(len(defaults[key]))]
-        if not axes:
-            opts.append(Option(key, key, -1, kind, lo, hi, restart, help_text))
-        for i, axis in enumerate(axes):
-            opts.append(Option(key + "_" + axis, key, i, kind, lo, hi, restart,
-                               axis.upper() + ": " + help_text))
-        if kind == MIX:
-            for o in opts[-len(axes):]:
-                o.width = defaults["drives"]
-        if kind == PAIR:
-            for o in opts[-len(axes):]:
-                o.width = len(defaults["tool_mixes"])
-    return opts
+def _axes(row, settings):
+    """The name suffixes of a schema row's options: letters, tuple positions, or none
+    (a plain value)."""
+    axes = row[1]
+    if axes == EACH:
+        return ["%d" % i for i in range(len(settings[row[0]]))]
+    return list(axes)
+
+
+def _put(settings, o, v):
+    """Store option o's value v into a settings dict."""
+    if o.index < 0:
+        settings[o.key] = v
+    else:
+        t = list(settings[o.key])
+        t[o.index] = v
+        settings[o.key] = tuple(t)
 
 
 class Config:
     def __init__(self, board_settings, path, storage=None, warn=None):
-        """board_settings: the board's SETTINGS (not modified). path: the file on flash.
-        warn(text): prints one `echo:` line, used when the saved file can't be loaded."""
+        """board_settings: the board's SETTINGS (not modified; kept for the defaults).
+        path: the file on flash. warn(text): prints one `echo:` line, used when the
+        saved file can't be loaded."""
         self.path = path
         self.storage = storage or FileStorage()
         self.warn = warn or (lambda text: None)
         self.appliers = []  # fn(settings) each, called by apply() (M930)
         self.before_save = []  # fn() each: bring running state (counters) into settings
+        self.board_settings = board_settings
+        defaults = self._board_defaults()
+        # Widths of the per-tool options, fixed by the board (as the firmware's arrays).
+        self.mix_width = defaults.get("drives", 0)
+        self.pair_width = len(defaults.get("tool_mixes", ()))
+        self.settings = self._default_settings()  # the live dict: changed in place, never replaced
+        self._mark_running()
+
+    def _board_defaults(self):
+        """The board's settings over the firmware's defaults, with the per-drive and
+        per-tool settings the board leaves out filled in; not yet checked."""
         defaults = dict(FIRMWARE_DEFAULTS)
-        defaults.update(board_settings)
+        defaults.update(self.board_settings)
         if "drives" in defaults and "drive_steps_per_mm" not in defaults:
             defaults["drive_steps_per_mm"] = (defaults["steps_per_mm"][3],) * defaults["drives"]
         if "drives" in defaults and "filament_used_mm" not in defaults:
@@ -172,27 +191,56 @@ class Config:
         if "drives" in defaults and "tool_mixes" not in defaults:
             defaults["tool_mixes"] = default_tool_mixes(
                 defaults["drives"], defaults.get("virtual_tools", 16))
-        self.options = _options(defaults)
-        self.by_name = {o.name: o for o in self.options}
-        self.settings = dict(defaults)  # the live dict: changed in place, never replaced
-        self.defaults = {}
+        return defaults
+
+    def _default_settings(self):
+        """A whole settings dict at the board's defaults, every option checked."""
+        defaults = self._board_defaults()
         try:
-            for o in self.options:
-                self.defaults[o.name] = o.check(self._read_setting(o))
+            for o in self._options_of(defaults):
+                _put(defaults, o, o.check(self._read_setting(o, defaults)))
         except ConfigError as e:
             raise ConfigError("board default %s" % e)
-        self.set_defaults()
-        self._mark_running()
+        return defaults
+
+    def _option(self, row, index, axis):
+        width = self.mix_width if row[2] == MIX else self.pair_width if row[2] == PAIR else 0
+        return Option(row, index, axis, width)
+
+    def _options_of(self, settings):
+        """Every option of these settings in schema order, made one at a time."""
+        for row in SCHEMA:
+            if row[0] not in settings:
+                continue  # the board has no such setting (e.g. no bed)
+            if not row[1]:
+                yield self._option(row, -1, "")
+            for i, axis in enumerate(_axes(row, settings)):
+                yield self._option(row, i, axis)
+
+    @property
+    def options(self):
+        """Every option, in the order M503 and the file list them."""
+        return self._options_of(self.settings)
 
     # --- values ---
     def option(self, name):
-        o = self.by_name.get(name)
-        if o is None:
-            raise ConfigError("unknown option %r (M503 lists them)" % name)
-        return o
+        settings = self.settings
+        for row in SCHEMA:
+            key = row[0]
+            if key not in settings or not name.startswith(key):
+                continue
+            if not row[1]:
+                if name == key:
+                    return self._option(row, -1, "")
+            elif name[len(key):len(key) + 1] == "_":
+                axes = _axes(row, settings)
+                axis = name[len(key) + 1:]
+                if axis in axes:
+                    return self._option(row, axes.index(axis), axis)
+        raise ConfigError("unknown option %r (M503 lists them)" % name)
 
-    def _read_setting(self, o):
-        v = self.settings[o.key]
+    def _read_setting(self, o, settings=None):
+        v = (self.settings if settings is None else settings)[o.key]
         return v if o.index < 0 else v[o.index]
 
     def get(self, name):
@@ -205,25 +253,19 @@ class Config:
         for name, v in pairs:
             o = self.option(name)
             checked.append((o, o.parse(v) if isinstance(v, str) else o.check(v)))
-        s = self.settings
         for o, v in checked:
-            if o.index < 0:
-                s[o.key] = v
-            else:
-                t = list(s[o.key])
-                t[o.index] = v
-                s[o.key] = tuple(t)
+            _put(self.settings, o, v)
 
     def set(self, name, value):
         self.update(((name, value),))
 
     def reset(self, name):
         """Back to the board's default (M926 without V)."""
-        self.option(name)  # an unknown name is refused here
-        self.set(name, self.defaults[name])
+        o = self.option(name)
+        self.set(name, o.check(self._read_setting(o, self._board_defaults())))
 
     def set_defaults(self):
-        self.update(self.defaults.items())
+        self.settings.update(self._default_settings())
 
     def format(self, name):
         o = self.option(name)
@@ -238,12 +280,15 @@ class Config:
 
     # --- applying ---
     def _mark_running(self):
-        self.running = {o.name: self._read_setting(o) for o in self.options if o.restart}
+        """Keep the restart settings the machine is built with (the values are shared
+        with the settings, which replace rather than change them)."""
+        self.running = {row[0]: self.settings[row[0]] for row in SCHEMA
+                        if row[5] and row[0] in self.settings}
 
     def pending_restart(self):
         """Restart options whose value differs from what the machine was built with."""
         return [o.name for o in self.options
-                if o.restart and self._read_setting(o) != self.running[o.name]]
+                if o.restart and self._read_setting(o) != self._read_setting(o, self.running)]
 
     def apply(self):
         """M930: hand the settings to every applier; returns pending_restart()."""
@@ -254,7 +299,7 @@ class Config:
     # --- storage ---
     def text(self):
         body = HEADER + "".join(
-            "%s = %s\n" % (o.name, self.format(o.name)) for o in self.options)
+            "%s = %s\n" % (o.name, o.format(self._read_setting(o))) for o in self.options)
         data = body.encode()
         return data + (_CRC_LINE % crc32(data)).encode()
 
@@ -361,15 +406,22 @@ class Config:
         values, problem = self._read_saved()
         if values is None:
             raise ConfigError(problem or "no saved configuration in %s" % self.path)
-        self.update(tuple(self.defaults.items()) + tuple(values.items()))
+        self._take(values)
         return problem
+
+    def _take(self, values):
+        """The defaults overridden by values (option name -> checked value), all at once."""
+        settings = self._default_settings()
+        for name, v in values.items():
+            _put(settings, self.option(name), v)
+        self.settings.update(settings)
 
     def boot(self):
         """At start-up, before the machine is assembled: load the saved configuration.
         A bad file leaves the defaults and warns; no file at all is a first boot."""
         values, problem = self._read_saved()
         if values is not None:
-            self.update(tuple(self.defaults.items()) + tuple(values.items()))
+            self._take(values)
         if problem:
             self.warn("echo:config %s%s" % (
                 problem, "" if values is not None else "; using defaults"))

@@ -13,9 +13,11 @@ REGISTERS = {
 }
 # GPIOs the step path can drive: masks are 30 bits wide (31-bit small ints on the
 # chips), and ESP32's GPIO 32/33 ride on bits 28/29, as it has no GPIO 28..31.
+# Ranges and literal tuples: nothing to build in RAM at import.
 STEP_GPIOS = {
-    "rp2040": tuple(range(30)), "rp2350": tuple(range(30)), "sim": tuple(range(30)),
-    "esp32": tuple(g for g in range(34) if g not in (20, 24, 28, 29, 30, 31)),
+    "rp2040": range(30), "rp2350": range(30), "sim": range(30),
+    "esp32": (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19,
+              21, 22, 23, 25, 26, 27, 32, 33),
 }
 
 
@@ -98,7 +100,7 @@ class Pins:
         gpio = pin_map[name]
         if gpio not in STEP_GPIOS.get(self.chip, ()):
             raise ValueError("%s on GPIO %d: the step path of a %s drives GPIO %s" % (
-                name, gpio, self.chip, STEP_GPIOS.get(self.chip)))
+                name, gpio, self.chip, tuple(STEP_GPIOS.get(self.chip, ()))))
         bit = mask_bit(self.chip, gpio)
         self.by_gpio[bit] = Pin(gpio, Pin.OUT, value=level)
         return 1 << bit

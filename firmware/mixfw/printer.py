@@ -123,7 +123,6 @@ class Printer:
         self.parser = Parser(raw_commands)
         self.commands = {}
         self.guarded = set()  # commands refused while halted
-        self.helps = {}
         self.machine_idle = machine_idle
         self.channels = []
         self.listeners = []  # objects with accept() -> console or None
@@ -152,14 +151,15 @@ class Printer:
     # --- registration and replies ---
     def register(self, name, handler, help_text, guarded=False):
         """name like "G1" or "M163"; "T" takes every tool number. guarded: refused
-        while the printer is halted (moves, heating)."""
+        while the printer is halted (moves, heating). help_text documents the command
+        where it is registered; nothing prints it, so it is not kept (a table of them
+        would hold 1-2 KB of RAM)."""
         letter = name[0]
         number = int(name[1:]) if len(name) > 1 else -1
         key = command_key(letter, number)
         self.commands[key] = handler
         if guarded:
             self.guarded.add(key)
-        self.helps[name] = help_text
 
     def add_channel(self, console):
         ch = Channel(console, self.line_bytes)
