@@ -2,12 +2,13 @@
 trace passes, and each kind of corruption fails with a non-zero exit."""
 import json
 import re
+import socket
 import subprocess
 
 import numpy as np
 import pytest
 
-from mixstep import cli, paths, sim, trace, tracecheck, tracepull
+from mixstep import cli, paths, serve, sim, trace, tracecheck, tracepull
 
 SAMPLES = paths.ROOT / "testdata"
 PRINT = SAMPLES / "part_3tool_prusaslicer_rel.gcode"
@@ -362,3 +363,54 @@ def test_pull_refuses_broken_dumps_and_reports_overrun(tmp_path):
     assert cli.main(["trace", "pull", "--log", str(log), "-o", str(out)]) == 1
     assert out.exists()
 
+
+
+def _ask(console, line):
+    """Send one line on a TCP console; return its reply up to and including its ok
+    (every line gets exactly one)."""
+    console.write(line.encode("ascii") + b"\n")
+    console.flush()
+    reply = []
+    while True:
+        text = console.readline().decode("ascii", "replace").strip()
+        assert text, "the printer closed the connection after %r" % line
+        reply.append(text)
+        if text == "ok" or text.startswith("ok "):
+            return reply
+
+
+def test_pull_over_tcp_from_the_served_printer_passes_trace_check(tmp_path, capsys):
+    """The console path end to end: a host prints the start of a real file on `mixstep
+    serve --tcp` with the capture on (M7300 S1), line by line, each after the last
+    one's ok, and waits for the moves (M400); `mixstep trace pull --tcp` then fetches
+    the ring over a second connection, and the VCD it writes passes `mixstep trace
+    check` against those lines, step for step."""
+    from test_hosts import free_port, wait_for_port
+    gcode = tmp_path / "start.gcode"
+    gcode.write_text("".join(PRINT.read_text().splitlines(keepends=True)[:45]))
+    address = "127.0.0.1:%d" % free_port()
+    # The default ring (512 records) holds a few dozen steps; these lines make thousands.
+    proc = serve.serve_tcp(address, realtime=0, announce=lambda s: None,
+                           settings={"trace_records": 60000})
+    try:
+        wait_for_port(address)
+        host, port = address.rsplit(":", 1)
+        with socket.create_connection((host, int(port)), timeout=60) as c, \
+                c.makefile("rwb") as console:
+            assert _ask(console, "M7300 S1")[-1] == "ok"
+            for line in gcode.read_text().splitlines():
+                reply = _ask(console, line)
+                assert not [r for r in reply if r.startswith("Error")], (line, reply)
+            _ask(console, "M400")
+            pulled = tmp_path / "pulled.vcd"
+            assert cli.main(["trace", "pull", "--tcp", address, "-o", str(pulled)]) == 0
+            assert "records at 20 us per tick" in capsys.readouterr().out
+    finally:
+        proc.terminate()
+        proc.wait()
+    report = tracecheck.check(pulled, gcode)
+    assert _failed(report) == []
+    checks = _by_name(report)
+    assert checks["steps_x"]["measured"] > 1000 and checks["steps_e0"]["measured"] > 100
+    assert checks["moves"]["measured"] > 10
+    assert _run_cli(pulled, "--gcode", gcode) == 0

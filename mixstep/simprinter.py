@@ -8,16 +8,25 @@ from mixstep import paths
 SIM_MAIN = paths.BOARDS / "sim" / "sim_main.py"
 
 
+def set_args(settings):
+    """sim_main arguments that override board settings before the machine is built:
+    {"pin_writer": "registers", "invert_dir": ("x",)} -> --set pin_writer=registers
+    --set invert_dir=x, (a tuple keeps its trailing comma, even with one item)."""
+    args = []
+    for key, value in (settings or {}).items():
+        if isinstance(value, (tuple, list)):
+            value = ",".join(str(v) for v in value) + ","
+        args += ["--set", "%s=%s" % (key, value)]
+    return args
+
+
 class SimPrinter:
     def __init__(self, edges_path=None, heap_lock=False, heap_size="2M", board="sim",
                  config_path=None, files_dir=None, settings=None):
         """board: whose pin map and settings (the chip is simulated); settings: board
         settings to override, e.g. {"pin_writer": "registers"}."""
         cmd = [paths.micropython(), "-X", "heapsize=" + heap_size, str(SIM_MAIN)]
-        for key, value in (settings or {}).items():
-            if isinstance(value, (tuple, list)):
-                value = ",".join(str(v) for v in value) + ","
-            cmd += ["--set", "%s=%s" % (key, value)]
+        cmd += set_args(settings)
         if config_path:
             cmd += ["--config", str(config_path)]
         if files_dir:
