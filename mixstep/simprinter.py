@@ -22,9 +22,10 @@ def set_args(settings):
 
 class SimPrinter:
     def __init__(self, edges_path=None, heap_lock=False, heap_size="2M", board="sim",
-                 config_path=None, files_dir=None, settings=None):
+                 config_path=None, files_dir=None, settings=None, jitter_us=0, jitter_seed=1):
         """board: whose pin map and settings (the chip is simulated); settings: board
-        settings to override, e.g. {"pin_writer": "registers"}."""
+        settings to override, e.g. {"pin_writer": "registers"}; jitter_us: the step
+        timer's callbacks run up to this late (pseudo-random from jitter_seed)."""
         cmd = [paths.micropython(), "-X", "heapsize=" + heap_size, str(SIM_MAIN)]
         cmd += set_args(settings)
         if config_path:
@@ -35,6 +36,8 @@ class SimPrinter:
             cmd += ["--edges", str(edges_path)]
         if heap_lock:
             cmd.append("--heap-lock")
+        if jitter_us:
+            cmd += ["--jitter-us", str(jitter_us), "--jitter-seed", str(jitter_seed)]
         self.proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                      env=paths.micropython_env(board), bufsize=0)
         self.out = self.proc.stdout
