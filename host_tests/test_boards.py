@@ -6,7 +6,13 @@ import pytest
 
 from mixstep import boards, cli, paths
 
-REAL_BOARDS = ("pico", "pico2", "esp32_devkit", "skr_pico", "fysetc_e4")
+# Every board in boards/, so a new one is checked without being listed here.
+REAL_BOARDS = tuple(n for n in boards.board_names() if n != "sim")
+
+
+def test_the_real_boards_are_found():
+    assert set(REAL_BOARDS) >= {"pico", "pico2", "pico_6drives", "esp32_devkit", "skr_pico",
+                                "fysetc_e4"}
 
 
 def broken(name, pins=None, settings=None, drop_settings=(), **attrs):
@@ -172,8 +178,23 @@ def test_tmc_addresses():
 def test_settings_rules():
     assert_one(broken("esp32_devkit", settings={"step_backend": "pio"}), "pio", "rp2")
     assert broken("pico", settings={"step_backend": "pio"}) == []
+    # The sixth drive's pins (GPIO 21, 28) are not next to the others.
+    assert_one(broken("pico_6drives", settings={"step_backend": "pio"}), "pio",
+               "one run of GPIOs", "21, 28")
     assert_one(broken("pico", settings={"pin_writer": "fast"}), "pin_writer")
     assert_one(broken("pico", settings={"invert_dir": ("x", "e5")}), "invert_dir", "e5")
+
+
+def test_pico_6drives_trades_the_part_fan_for_a_sixth_drive():
+    six, five = paths.load_board("pico_6drives"), paths.load_board("pico")
+    assert six["SETTINGS"]["drives"] == 6 and "part_fan" not in six["PINS"]
+    assert (six["PINS"]["e5_step"], six["PINS"]["e5_dir"]) == (five["PINS"]["part_fan"], 28)
+    assert 28 not in five["PINS"].values()
+    # Every pin the Pico brings out is used.
+    header = set(range(23)) | {26, 27, 28}
+    assert set(six["PINS"].values()) == header
+    # Without a fan the check passes; pico without its fan, too (the fan is optional).
+    assert broken("pico", PINS={k: v for k, v in five["PINS"].items() if k != "part_fan"}) == []
 
 
 def test_pwm_slice_shared_at_two_frequencies():

@@ -16,9 +16,10 @@ GCODE = paths.ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
 LINES = [l.rstrip("\n") for l in itertools.islice(open(GCODE), 1200)]
 
 
-def run(tmp_path, name, settings, lines=LINES, heap_lock=True, board="sim"):
+def run(tmp_path, name, settings, lines=LINES, heap_lock=True, board="sim", jitter_us=0):
     edges = tmp_path / (name + ".edges")
-    p = SimPrinter(edges_path=edges, heap_lock=heap_lock, settings=settings, board=board)
+    p = SimPrinter(edges_path=edges, heap_lock=heap_lock, settings=settings, board=board,
+                   jitter_us=jitter_us)
     for line in lines:
         reply = p.send(line)
         assert not [r for r in reply if r.startswith("Error")], (line, reply)
@@ -142,6 +143,56 @@ def test_pio_output_is_the_register_trace_a_fixed_latency_later(tmp_path):
     assert np.array_equal(g0[a], g1[b]) and np.array_equal(v0[a], v1[b])
     assert set((t1[b] - t0[a]).tolist()) == {4 * 50}
     assert a.sum() > 10000
+
+
+def _step_path_edges(edges, board):
+    """(time_us, gpio, level) of the STEP/DIR edges after the start, as int64."""
+    pins = paths.load_board(board)["PINS"]
+    step_path = [g for name, g in pins.items() if name.endswith(("_step", "_dir"))]
+    t, g, v = trace.read_edges(edges)
+    keep = (t > 0) & np.isin(g, step_path)
+    return t[keep].astype(np.int64), g[keep], v[keep]
+
+
+@pytest.mark.parametrize("board", ["pico", "pico2"])
+def test_pio_keeps_interrupt_jitter_off_the_pins_within_a_burst(tmp_path, board):
+    """The step timer fires each callback up to 3 ticks late (seeded, in order). With
+    PIO every edge is still there, in order, and every interval between edges is the
+    jitter-free trace's to the microsecond, so pulse widths, step spacing and DIR
+    setup stay whole ticks, except across an idle gap: a burst that starts when the
+    state machine has run empty starts when its first callback runs, so that
+    callback's lateness shifts the whole burst. The register path under the same
+    jitter has its edges moved one by one."""
+    tick_us = paths.load_board(board)["SETTINGS"]["tick_us"]
+    idle_gap_us = 6 * tick_us  # pio.LATENCY_TICKS + 2: the burst has ended
+    lines = LINES[:400]
+    p, calm = run(tmp_path, "calm", {"step_backend": "pio"}, lines, board=board)
+    steps = p.finish()["steps"]
+    p, shaken = run(tmp_path, "shaken", {"step_backend": "pio"}, lines, board=board,
+                    jitter_us=3 * tick_us)
+    assert p.finish()["steps"] == steps and steps["e0"] > 0
+    p, reg = run(tmp_path, "reg", {"step_backend": "timer"}, lines, board=board,
+                 jitter_us=3 * tick_us)
+    assert p.finish()["steps"] == steps
+    t0, g0, v0 = _step_path_edges(calm, board)
+    t1, g1, v1 = _step_path_edges(shaken, board)
+    t2, g2, v2 = _step_path_edges(reg, board)
+    assert len(t0) > 100000
+    assert np.array_equal(g0, g1) and np.array_equal(v0, v1)
+    assert np.array_equal(g0, g2) and np.array_equal(v0, v2)
+    assert (t0 % tick_us == 0).all()
+    gap0, gap1, gap2 = np.diff(t0), np.diff(t1), np.diff(t2)
+    moved = np.flatnonzero(gap1 != gap0)
+    # Only burst starts move (the print's few idle waits: homing, heating)...
+    assert 1 <= len(moved) <= 5 and (gap0[moved] >= idle_gap_us).all(), gap0[moved]
+    # ...each as a whole, by less than a tick more than the jitter.
+    bursts = np.split(t1 - t0, moved + 1)
+    assert all(len(set(b.tolist())) == 1 for b in bursts)
+    assert all(abs(int(b[0])) < 4 * tick_us for b in bursts)
+    # The register path passes the jitter on: most intervals change, and the
+    # shortest one between two edges falls far below a tick.
+    assert (gap2 != gap0).sum() > len(gap0) // 4
+    assert gap0[gap0 > 0].min() == tick_us > 3 * gap2[gap2 > 0].min()
 
 
 def test_pio_needs_the_step_pins_in_one_run_of_gpios(mp):

@@ -2,12 +2,13 @@
 trace passes, and each kind of corruption fails with a non-zero exit."""
 import json
 import re
+import socket
 import subprocess
 
 import numpy as np
 import pytest
 
-from mixstep import cli, paths, sim, trace, tracecheck, tracepull
+from mixstep import cli, paths, serve, sim, trace, tracecheck, tracepull
 
 SAMPLES = paths.ROOT / "testdata"
 PRINT = SAMPLES / "part_3tool_prusaslicer_rel.gcode"
@@ -48,6 +49,27 @@ def _failed(report):
 
 def _ident(text, name):
     return re.search(rb"\$var wire 1 (\S+) " + name.encode() + rb" \$end", text).group(1)
+
+
+def _keep_signals(text, keep):
+    """A simulated VCD as a capture that probed only the signals named in keep: the
+    other signals' declarations and changes are left out."""
+    head, sep, body = text.partition(b"$enddefinitions $end\n")
+    drop = set()
+    kept_head = []
+    for line in head.splitlines(keepends=True):
+        var = re.match(rb"\$var wire 1 (\S+) (\S+) \$end", line)
+        if var and var.group(2).decode() not in keep:
+            drop.add(var.group(1))
+        else:
+            kept_head.append(line)
+    kept_body = [l for l in body.splitlines(keepends=True)
+                 if not (l[:1] in b"01" and l[1:].rstrip() in drop)]
+    return b"".join(kept_head) + sep + b"".join(kept_body)
+
+
+def _by_name(report):
+    return {c["name"]: c for c in report["checks"]}
 
 
 # --- the true trace -------------------------------------------------------------------
@@ -95,7 +117,8 @@ def test_a_logic_analysers_names_are_mapped(snippet, tmp_path):
     renamed.write_bytes(text.replace(b" e1_step $end", b" D0 $end").replace(b" e1_dir $end",
                                                                             b" D1 $end"))
     unmapped = tracecheck.check(renamed, gcode)
-    assert next(c for c in unmapped["checks"] if c["name"] == "steps_e1")["ok"] is None
+    assert unmapped["missing_signals"] == ["e1_step", "e1_dir"]
+    assert _failed(unmapped) == ["steps_e1"]
     assert _run_cli(renamed, "--gcode", gcode, "--map", "e1_step=D0,e1_dir=D1") == 0
 
 
@@ -110,7 +133,83 @@ def test_a_sigrok_capture_reads_back_and_passes(snippet, tmp_path):
     assert _run_cli(sr, "--gcode", gcode) == 0
 
 
+def test_a_nanosecond_capture_reads_like_the_microsecond_one(snippet, tmp_path):
+    """A logic analyser writes its VCD in ns: the same edges, every time stamp x1000
+    and `$timescale 1ns`, give the same checks, measurements and messages."""
+    gcode, vcd_path, _, _ = snippet
+    text = vcd_path.read_bytes()
+    assert b"$timescale 1 us $end" in text
+    ns = re.sub(rb"(?m)^#(\d+)$", rb"#\g<1>000", text.replace(b"$timescale 1 us $end",
+                                                               b"$timescale 1ns $end"))
+    assert ns.count(b"000\n") > text.count(b"000\n") + 10000
+    (tmp_path / "ns.vcd").write_bytes(ns)
+    in_us = tracecheck.check(vcd_path, gcode)
+    in_ns = tracecheck.check(tmp_path / "ns.vcd", gcode)
+    assert in_us["timescale_us"] == 1.0 and in_ns["timescale_us"] == 0.001
+    assert in_ns["checks"] == in_us["checks"]
+    assert _failed(in_ns) == [] and _by_name(in_ns)["pulse_high_us"]["measured"] == 20.0
+
+
+def test_a_capture_without_a_signal_the_gcode_moves_fails_and_names_it(snippet, tmp_path,
+                                                                        capsys):
+    """Probing only X of a print that also moves Y, Z and four drives: nothing it did
+    probe is wrong, but the trace cannot show the rest, so it must not pass."""
+    gcode, vcd_path, _, report = snippet
+    assert report["steps"]["e0"] > 0 and report["steps"]["x"] > 0
+    only_x = tmp_path / "only_x.vcd"
+    only_x.write_bytes(_keep_signals(vcd_path.read_bytes(), {"x_step", "x_dir"}))
+    result = tracecheck.check(only_x, gcode)
+    moved = ["y", "z", "e0", "e1", "e2", "e4"]
+    assert result["missing_signals"] == [n + k for n in moved for k in ("_step", "_dir")]
+    assert _failed(result) == sorted("steps_" + n for n in moved)
+    checks = _by_name(result)
+    assert checks["steps_x"]["ok"] is True and checks["rate_x"]["ok"] is True
+    assert checks["steps_e0"]["detail"] == ("the G-code moves e0, but e0_step and e0_dir "
+                                            "are not in the trace")
+    assert checks["steps_e3"]["ok"] is None  # never moved: may be left out
+    assert _run_cli(only_x, "--gcode", gcode) == 1
+    out = capsys.readouterr().out
+    assert "FAIL steps_e0" in out and "OK:" not in out
+    assert "FAILED: the G-code moves what the trace does not show: y_step, y_dir" in out
+
+
+def test_only_signals_the_gcode_never_moves_may_be_left_out(snippet, tmp_path):
+    """Leaving out e3 and e5, which the snippet never moves, passes; leaving out one
+    DIR of a drive it moves fails, naming that DIR (its steps cannot be counted)."""
+    gcode, vcd_path, _, report = snippet
+    assert report["steps"]["e3"] == report["steps"]["e5"] == 0 < report["steps"]["e1"]
+    text = vcd_path.read_bytes()
+    wired = [n for n in paths.load_board("sim")["PINS"] if n.endswith(("_step", "_dir"))]
+    fewer = tmp_path / "fewer.vcd"
+    fewer.write_bytes(_keep_signals(text, {n for n in wired if n[:2] not in ("e3", "e5")}))
+    assert _failed(tracecheck.check(fewer, gcode)) == []
+    assert _run_cli(fewer, "--gcode", gcode) == 0
+    no_dir = tmp_path / "no_dir.vcd"
+    no_dir.write_bytes(_keep_signals(text, set(wired) - {"e1_dir"}))
+    result = tracecheck.check(no_dir, gcode)
+    assert result["missing_signals"] == ["e1_dir"]
+    assert _failed(result) == ["steps_e1"]
+    assert _by_name(result)["moves"]["ok"] is None  # cannot be followed without e1
+    assert _run_cli(no_dir, "--gcode", gcode) == 1
+
+
 # --- corrupted traces -----------------------------------------------------------------
+
+def test_steps_played_faster_than_the_axes_can_go_fail_the_rate_check(snippet, tmp_path):
+    """The snippet's trace with its clock ten times faster ($timescale 100 ns): every
+    step is still there in order and pulses and DIR setup are still long enough (20 us
+    -> 2 us), but every axis now steps far beyond its maximum feed rate."""
+    gcode, vcd_path, _, _ = snippet
+    fast = tmp_path / "fast.vcd"
+    fast.write_bytes(vcd_path.read_bytes().replace(b"$timescale 1 us $end",
+                                                   b"$timescale 100 ns $end"))
+    result = tracecheck.check(fast, gcode)
+    moved = ["x", "y", "z", "e0", "e1", "e2", "e4"]
+    assert _failed(result) == sorted("rate_" + n for n in moved)
+    for n in moved:
+        check = _by_name(result)["rate_" + n]
+        assert check["measured"] > float(check["expected"].split()[1])
+    assert _run_cli(fast, "--gcode", gcode) == 1
 
 def test_a_dropped_step_pulse_fails(printed, tmp_path):
     text = printed.read_bytes()
@@ -263,3 +362,55 @@ def test_pull_refuses_broken_dumps_and_reports_overrun(tmp_path):
     log.write_text("trace:begin tick_us=20 records=1 overrun=5\ntrace:1,64,0\ntrace:end\nok\n")
     assert cli.main(["trace", "pull", "--log", str(log), "-o", str(out)]) == 1
     assert out.exists()
+
+
+
+def _ask(console, line):
+    """Send one line on a TCP console; return its reply up to and including its ok
+    (every line gets exactly one)."""
+    console.write(line.encode("ascii") + b"\n")
+    console.flush()
+    reply = []
+    while True:
+        text = console.readline().decode("ascii", "replace").strip()
+        assert text, "the printer closed the connection after %r" % line
+        reply.append(text)
+        if text == "ok" or text.startswith("ok "):
+            return reply
+
+
+def test_pull_over_tcp_from_the_served_printer_passes_trace_check(tmp_path, capsys):
+    """The console path end to end: a host prints the start of a real file on `mixstep
+    serve --tcp` with the capture on (M7300 S1), line by line, each after the last
+    one's ok, and waits for the moves (M400); `mixstep trace pull --tcp` then fetches
+    the ring over a second connection, and the VCD it writes passes `mixstep trace
+    check` against those lines, step for step."""
+    from test_hosts import free_port, wait_for_port
+    gcode = tmp_path / "start.gcode"
+    gcode.write_text("".join(PRINT.read_text().splitlines(keepends=True)[:45]))
+    address = "127.0.0.1:%d" % free_port()
+    # The default ring (512 records) holds a few dozen steps; these lines make thousands.
+    proc = serve.serve_tcp(address, realtime=0, announce=lambda s: None,
+                           settings={"trace_records": 60000})
+    try:
+        wait_for_port(address)
+        host, port = address.rsplit(":", 1)
+        with socket.create_connection((host, int(port)), timeout=60) as c, \
+                c.makefile("rwb") as console:
+            assert _ask(console, "M7300 S1")[-1] == "ok"
+            for line in gcode.read_text().splitlines():
+                reply = _ask(console, line)
+                assert not [r for r in reply if r.startswith("Error")], (line, reply)
+            _ask(console, "M400")
+            pulled = tmp_path / "pulled.vcd"
+            assert cli.main(["trace", "pull", "--tcp", address, "-o", str(pulled)]) == 0
+            assert "records at 20 us per tick" in capsys.readouterr().out
+    finally:
+        proc.terminate()
+        proc.wait()
+    report = tracecheck.check(pulled, gcode)
+    assert _failed(report) == []
+    checks = _by_name(report)
+    assert checks["steps_x"]["measured"] > 1000 and checks["steps_e0"]["measured"] > 100
+    assert checks["moves"]["measured"] > 10
+    assert _run_cli(pulled, "--gcode", gcode) == 0

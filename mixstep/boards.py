@@ -18,6 +18,9 @@ MAX_DRIVES = 6
 ENDSTOPS = ("x_min", "y_min", "z_min")
 THERMAL = ("hotend_heater", "bed_heater", "part_fan", "hotend_thermistor", "bed_thermistor")
 THERMISTORS = ("hotend_thermistor", "bed_thermistor")
+# Pins a board may leave out: without a part fan the firmware answers M106 with an
+# error (boards/pico_6drives gives the fan's pin to a sixth drive).
+OPTIONAL = ("part_fan",)
 OUTPUT_SUFFIXES = ("_step", "_dir", "_enable", "_heater")
 _MOTOR_KEY = re.compile(r"^(x|y|z|e[0-9])_(step|dir|enable)$")
 
@@ -100,6 +103,8 @@ def check(board, name):
     drives = _check_settings(settings, chip, bad)
     tmc = board.get("TMC_UART")
     _check_required(pins, drives, bad)
+    if settings.get("step_backend") == "pio" and chip in STEP_BACKENDS["pio"] and drives:
+        _check_pio_run(pins, drives, bad)
     # Every GPIO the board uses, with the key that names it; the TMC UART counts too.
     used = [(k, g) for k, g in pins.items()]
     if isinstance(tmc, dict):
@@ -150,7 +155,7 @@ def _check_settings(settings, chip, bad):
 def _check_required(pins, drives, bad):
     motors = AXES + tuple("e%d" % i for i in range(drives))
     required = ["%s_%s" % (m, f) for m in motors for f in ("step", "dir", "enable")]
-    required += list(ENDSTOPS) + list(THERMAL)
+    required += [k for k in ENDSTOPS + THERMAL if k not in OPTIONAL]
     for key in required:
         if key not in pins:
             bad("PINS has no %r" % key)
@@ -160,6 +165,18 @@ def _check_required(pins, drives, bad):
         if key not in known and not (m and (m.group(1) in AXES
                                             or int(m.group(1)[1:]) < MAX_DRIVES)):
             bad("PINS has an unknown key %r" % key)
+
+
+def _check_pio_run(pins, drives, bad):
+    """The state machine writes one run of GPIOs: the firmware's own rule, which would
+    otherwise refuse to start on the board."""
+    from mixfw import pio
+    try:
+        pio.out_range(pins, AXES + tuple("e%d" % i for i in range(drives)))
+    except KeyError:
+        pass  # a missing pin is reported already
+    except ValueError as e:
+        bad(str(e))
 
 
 def _is_output(key):

@@ -20,7 +20,13 @@ def _sim(args):
 
 def _serve(args):
     from mixstep import serve
-    return serve.main(tcp=args.tcp, pty=args.pty, realtime=args.realtime)
+    settings = {}
+    for item in args.set:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise SystemExit("mixstep serve: --set wants KEY=VALUE, got %r" % item)
+        settings[key] = value
+    return serve.main(tcp=args.tcp, pty=args.pty, realtime=args.realtime, settings=settings)
 
 
 def main(argv=None):
@@ -40,6 +46,8 @@ def main(argv=None):
     p.add_argument("--pty", action="store_true", help="serve a pseudo-terminal; prints its path")
     p.add_argument("--realtime", type=float, default=1.0,
                    help="simulated seconds per wall second (0: as fast as possible)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="override a board setting, e.g. trace_records=60000 (repeatable)")
     p.set_defaults(run=_serve)
     from mixstep import detool, esteps, preview  # each registers its own subcommand
     for tool in (esteps, detool, preview):

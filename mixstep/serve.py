@@ -3,7 +3,9 @@ such as Pronterface/printcore and OctoPrint.
 
 --tcp HOST:PORT  the firmware's own TCP console (several connections at once);
 --pty            a pseudo-terminal, bridged to the firmware's serial console; the
-                 device path is printed, and hosts open it like a USB printer."""
+                 device path is printed, and hosts open it like a USB printer.
+--set KEY=VALUE  a board setting for this run, e.g. trace_records=60000 for a step
+                 capture (M7300) longer than the default ring."""
 import os
 import selectors
 import subprocess
@@ -13,12 +15,12 @@ import time
 import tty
 
 from mixstep import paths
-from mixstep.simprinter import SIM_MAIN
+from mixstep.simprinter import SIM_MAIN, set_args
 
 
-def _command(tcp, realtime, stdio, edges=None):
+def _command(tcp, realtime, stdio, edges=None, settings=None):
     cmd = [paths.micropython(), "-X", "heapsize=2M", str(SIM_MAIN),
-           "--realtime", str(realtime)]
+           "--realtime", str(realtime)] + set_args(settings)
     if tcp:
         cmd += ["--tcp", tcp]
     if not stdio:
@@ -28,8 +30,8 @@ def _command(tcp, realtime, stdio, edges=None):
     return cmd
 
 
-def serve_tcp(address, realtime=1.0, announce=print):
-    proc = subprocess.Popen(_command(address, realtime, stdio=False),
+def serve_tcp(address, realtime=1.0, announce=print, settings=None):
+    proc = subprocess.Popen(_command(address, realtime, stdio=False, settings=settings),
                             stdin=subprocess.DEVNULL, env=paths.micropython_env())
     announce("mixstep: simulated printer on tcp %s" % address)
     return proc
@@ -38,12 +40,12 @@ def serve_tcp(address, realtime=1.0, announce=print):
 class PtyBridge:
     """A pseudo-terminal whose far end is the firmware's stdio console."""
 
-    def __init__(self, realtime=1.0):
+    def __init__(self, realtime=1.0, settings=None):
         self._lock = threading.Lock()
         self.master, self.slave = os.openpty()
         tty.setraw(self.slave)  # a serial line: no echo, no line editing
         self.path = os.ttyname(self.slave)
-        self.proc = subprocess.Popen(_command(None, realtime, stdio=True),
+        self.proc = subprocess.Popen(_command(None, realtime, stdio=True, settings=settings),
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                      env=paths.micropython_env(), bufsize=0)
 
@@ -94,17 +96,19 @@ class PtyBridge:
             self.master = self.slave = None
 
 
-def main(tcp=None, pty=False, realtime=1.0):
+def main(tcp=None, pty=False, realtime=1.0, settings=None):
+    """settings: board settings to override, {key: value text}."""
     if bool(tcp) == bool(pty):
         raise SystemExit("mixstep serve: give either --tcp HOST:PORT or --pty")
     if tcp:
-        proc = serve_tcp(tcp, realtime, announce=lambda s: print(s, flush=True))
+        proc = serve_tcp(tcp, realtime, announce=lambda s: print(s, flush=True),
+                         settings=settings)
         try:
             return proc.wait()
         except KeyboardInterrupt:
             proc.terminate()
             return 0
-    bridge = PtyBridge(realtime)
+    bridge = PtyBridge(realtime, settings)
     print("mixstep: simulated printer on serial device %s" % bridge.path, flush=True)
     try:
         bridge.run()

@@ -9,17 +9,29 @@ from mixstep import paths
 SIM_MAIN = paths.BOARDS / "sim" / "sim_main.py"
 
 
+def set_args(settings):
+    """sim_main arguments that override board settings before the machine is built:
+    {"pin_writer": "registers", "invert_dir": ("x",)} -> --set pin_writer=registers
+    --set invert_dir=x, (a tuple keeps its trailing comma, even with one item)."""
+    args = []
+    for key, value in (settings or {}).items():
+        if isinstance(value, (tuple, list)):
+            value = ",".join(str(v) for v in value) + ","
+        args += ["--set", "%s=%s" % (key, value)]
+    return args
+
+
 class SimPrinter:
     def __init__(self, edges_path=None, heap_lock=False, heap_size="2M", board="sim",
-                 config_path=None, files_dir=None, settings=None, code_dir=None):
+                 config_path=None, files_dir=None, settings=None, code_dir=None, jitter_us=0,
+                 jitter_seed=1):
         """board: whose pin map and settings (the chip is simulated); settings: board
         settings to override, e.g. {"pin_writer": "registers"}; code_dir: a folder
-        searched before the firmware's, e.g. with its modules compiled to .mpy."""
+        searched before the firmware's, e.g. with its modules compiled to .mpy;
+        jitter_us: the step timer's callbacks run up to this late (pseudo-random from
+        jitter_seed)."""
         cmd = [paths.micropython(), "-X", "heapsize=" + heap_size, str(SIM_MAIN)]
-        for key, value in (settings or {}).items():
-            if isinstance(value, (tuple, list)):
-                value = ",".join(str(v) for v in value) + ","
-            cmd += ["--set", "%s=%s" % (key, value)]
+        cmd += set_args(settings)
         if config_path:
             cmd += ["--config", str(config_path)]
         if files_dir:
@@ -28,6 +40,8 @@ class SimPrinter:
             cmd += ["--edges", str(edges_path)]
         if heap_lock:
             cmd.append("--heap-lock")
+        if jitter_us:
+            cmd += ["--jitter-us", str(jitter_us), "--jitter-seed", str(jitter_seed)]
         env = paths.micropython_env(board)
         if code_dir:
             env["MICROPYPATH"] = os.pathsep.join([str(code_dir), env["MICROPYPATH"]])

@@ -13,7 +13,10 @@ Checks
                    0, i.e. at home, as the simulation does) and of every drive
                    (round(drive_mm * steps_per_mm_E), drive_mm summing each E move's
                    share by the active tool's weights). Exact: the firmware plans every
-                   drive from its absolute position the same way.
+                   drive from its absolute position the same way. An axis or drive
+                   that the G-code moves must have its STEP and DIR in the trace, or
+                   the check fails and names the missing signal; one it never moves
+                   may be left out of a capture (the check is then skipped).
     moves          the drive steps follow the G-code's E moves in order: each move
                    takes every drive monotonically to its planned step, no drive
                    steps outside its move. Fails at the first step that does not fit.
@@ -73,9 +76,10 @@ class TraceError(Exception):
 def expected_from_gcode(gcode_path, settings):
     """Net steps per axis and drive, and the E moves in order, from a G-code file.
 
-    Returns {"steps": {axis: n}, "moves": [(line, weights, drive_steps)], "unmodelled":
-    {command: first line}}: drive_steps are every drive's absolute planned steps after
-    the move, weights the mix it prints with. Modal state follows the firmware's
+    Returns {"steps": {axis: n}, "moves": [(line, weights, drive_steps)], "moved":
+    {axis}, "unmodelled": {command: first line}}: drive_steps are every drive's
+    absolute planned steps after the move, weights the mix it prints with; moved names
+    every axis and drive that some move steps, even if it ends where it started. Modal state follows the firmware's
     cmd_motion and cmd_mixing; the arithmetic is the planner's, in the same order, so
     rounding is identical."""
     drives = settings["drives"]
@@ -91,6 +95,7 @@ def expected_from_gcode(gcode_path, settings):
     drive_mm = [0.0] * drives
     drive_steps = [0] * drives
     moves = []
+    moved = set()
     unmodelled = {}
     with open(gcode_path, "rb") as f:
         for number, raw in enumerate(f, 1):
@@ -114,7 +119,13 @@ def expected_from_gcode(gcode_path, settings):
                         now = [steps_from_mm(drive_mm[i], spm[3]) for i in range(drives)]
                         if now != drive_steps:
                             moves.append((number, w, tuple(now)))
+                            moved.update("e%d" % d for d in range(drives)
+                                         if now[d] != drive_steps[d])
                             drive_steps = now
+                    for i, a in enumerate(AXES):
+                        if target[i] != pos[i] and a not in moved and steps_from_mm(
+                                target[i] + off[i], spm[i]) != steps_from_mm(pos[i] + off[i], spm[i]):
+                            moved.add(a)
                     pos = target
                 elif cmd == "G92":
                     named = [i for i in range(4) if ln.has("XYZE"[i])]
@@ -152,7 +163,7 @@ def expected_from_gcode(gcode_path, settings):
                 continue  # refused by the firmware as well
     steps = {a: steps_from_mm(pos[i] + off[i], spm[i]) for i, a in enumerate(AXES)}
     steps.update({"e%d" % d: drive_steps[d] for d in range(drives)})
-    return {"steps": steps, "moves": moves, "unmodelled": unmodelled}
+    return {"steps": steps, "moves": moves, "moved": moved, "unmodelled": unmodelled}
 
 
 # --- Reading: VCD (or .sr via sigrok-cli), streamed ---------------------------------
@@ -416,7 +427,7 @@ def _track_min(ax, field, values, times):
 
 
 class Checker:
-    def __init__(self, signals, settings, expected, window, mix_tolerance):
+    def __init__(self, signals, settings, expected, window, mix_tolerance, unit_us):
         self.signals = signals
         index = {n: i for i, n in enumerate(signals)}
         inverted = settings.get("invert_dir", ())
@@ -427,10 +438,13 @@ class Checker:
             if name + "_step" in index:
                 self.axes[name] = _Axis(name, 0 if name in inverted else 1)
                 self.sig[name] = (index[name + "_step"], index.get(name + "_dir", -1))
-        # Drives the G-code never moves may be left out of a capture.
-        moving = set(d for _, _, target in expected["moves"] for d, n in enumerate(target) if n)
-        self.walk = _MoveWalk(expected["moves"], settings["drives"], window, mix_tolerance) \
-            if all(self.drives[d] in self.axes for d in moving) else None
+        # What the G-code moves must be in the trace, STEP and DIR (without DIR no step
+        # can be counted); what it never moves may be left out of a capture.
+        self.missing = [name + kind for name in list(AXES) + self.drives
+                        if name in expected["moved"] for kind in ("_step", "_dir")
+                        if name + kind not in index]
+        self.walk = None if any(n.rsplit("_", 1)[0] in self.drives for n in self.missing) \
+            else _MoveWalk(expected["moves"], settings["drives"], window, mix_tolerance, unit_us)
 
     def feed(self, times, sig, vals):
         e_events = []
@@ -495,10 +509,12 @@ class Checker:
 
 class _MoveWalk:
     """Follows the drive steps through the G-code's E moves, one step at a time, and
-    checks the mix in windows of `window` steps within each stretch of one mix."""
+    checks the mix in windows of `window` steps within each stretch of one mix. Times
+    come in the trace's units; messages give them in us (unit_us each)."""
 
-    def __init__(self, moves, drives, window, tolerance):
+    def __init__(self, moves, drives, window, tolerance, unit_us):
         self.moves = moves
+        self.unit_us = unit_us
         self.drives = drives
         self.window = window
         self.tolerance = tolerance
@@ -540,8 +556,8 @@ class _MoveWalk:
             if self.left == 0 or want == 0 or (want > 0) != (s > 0):
                 where = ("after the last E move" if self.left == 0 else
                          "in the E move of G-code line %d" % self.moves[self.m][0])
-                self.error = "e%d stepped %s at t=%d %s (drives at %s, move target %s)" % (
-                    d, "forward" if s > 0 else "back", t, where, pos, target)
+                self.error = "e%d stepped %s at %s %s (drives at %s, move target %s)" % (
+                    d, "forward" if s > 0 else "back", _at(t, self.unit_us), where, pos, target)
                 return
             pos[d] += s
             self.left -= 1
@@ -592,7 +608,8 @@ def check(trace_path, gcode_path, board="sim", mapping=None, step_pulse_us=None,
     wall0 = time.perf_counter()
     try:
         reader = VcdReader(path, names, mapping, chunk_bytes)
-        checker = Checker(reader.signals, settings, expected, window, mix_tolerance)
+        checker = Checker(reader.signals, settings, expected, window, mix_tolerance,
+                          reader.timescale_s * 1e6)
         for times, sig, vals in reader.chunks():
             checker.feed(times, sig, vals)
         reader.close()
@@ -612,6 +629,7 @@ def check(trace_path, gcode_path, board="sim", mapping=None, step_pulse_us=None,
         "board": board,
         "signals": reader.signals,
         "timescale_us": unit_us,
+        "missing_signals": checker.missing,
         "unmodelled": expected["unmodelled"],
         "checks": checks,
         "input": {"bytes": reader.bytes_read, "lines": reader.lines,
@@ -629,14 +647,20 @@ def _report_checks(ck, settings, expected, unit_us, pulse_us, setup_us, rate_mar
 
     for name, want in expected["steps"].items():
         ax = ck.axes.get(name)
-        if ax is None:
-            add("steps_" + name, want, None, None, "not in the trace")
+        absent = [n for n in ck.missing if n.rsplit("_", 1)[0] == name]
+        if absent:
+            add("steps_" + name, want, None, False, "the G-code moves %s, but %s %s not in "
+                "the trace" % (name, " and ".join(absent), "are" if len(absent) > 1 else "is"))
+        elif ax is None:
+            add("steps_" + name, want, None, None, "not in the trace (the G-code does not "
+                "move it)")
         else:
             add("steps_" + name, want, ax.net, ax.net == want,
                 "%d rising edges" % ax.rises)
     walk = ck.walk
     if walk is None:
-        add("moves", len(expected["moves"]), None, None, "a drive that moves is not in the trace")
+        add("moves", len(expected["moves"]), None, None, "not checked: a drive that moves "
+            "is not in the trace")
     else:
         done = walk.m + 1 if walk.finished() else walk.m
         add("moves", len(expected["moves"]), done, walk.finished(),
@@ -646,7 +670,8 @@ def _report_checks(ck, settings, expected, unit_us, pulse_us, setup_us, rate_mar
             walk.bad_windows == 0,
             "%d windows of %d drive steps, %d over; worst %s" % (
                 walk.windows, window, walk.bad_windows,
-                "e%d at t=%d" % (walk.worst_at[1], walk.worst_at[0]) if walk.worst_at else "-"))
+                "e%d at %s" % (walk.worst_at[1], _at(walk.worst_at[0], unit_us))
+                if walk.worst_at else "-"))
 
     def worst(field):
         best = None
@@ -664,7 +689,7 @@ def _report_checks(ck, settings, expected, unit_us, pulse_us, setup_us, rate_mar
         else:
             us = w[0] * unit_us
             add(name, ">= %g" % limit, round(us, 6), us >= limit - 1e-9,
-                "%s at t=%g us" % (w[1], w[2] * unit_us))
+                "%s at %s" % (w[1], _at(w[2], unit_us)))
     tick_us = settings.get("tick_us", 0)
     for name, ax in ck.axes.items():
         if ax.min_run is None:
@@ -673,8 +698,14 @@ def _report_checks(ck, settings, expected, unit_us, pulse_us, setup_us, rate_mar
         limit = settings["max_feed_mm_s"][i] * settings["steps_per_mm"][i] * (1 + rate_margin)
         rate = RATE_RUN / ((ax.min_run * unit_us + 2 * tick_us) * 1e-6)
         add("rate_" + name, "<= %.0f steps/s" % limit, round(rate, 1), rate <= limit,
-            "fastest %d steps at t=%g us" % (RATE_RUN, ax.at_run * unit_us))
+            "fastest %d steps at %s" % (RATE_RUN, _at(ax.at_run, unit_us)))
     return checks
+
+
+def _at(time_units, unit_us):
+    """A trace time for messages, in us whatever the timescale (so a capture at 1 ns
+    and one at 1 us of the same steps read alike), exact to the nanosecond."""
+    return "t=%s us" % ("%.3f" % (time_units * unit_us)).rstrip("0").rstrip(".")
 
 
 def format_report(report):
@@ -686,8 +717,12 @@ def format_report(report):
     for cmd, line in sorted(report["unmodelled"].items()):
         lines.append("  note: %s (first at line %d) is not modelled; counts may differ"
                      % (cmd, line))
-    lines.append("OK: the trace does what the G-code asks" if report["ok"] else
-                 "FAILED: the trace disagrees with the G-code")
+    if report["missing_signals"]:
+        lines.append("FAILED: the G-code moves what the trace does not show: %s missing"
+                     % ", ".join(report["missing_signals"]))
+    else:
+        lines.append("OK: the trace does what the G-code asks" if report["ok"] else
+                     "FAILED: the trace disagrees with the G-code")
     return "\n".join(lines)
 
 

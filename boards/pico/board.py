@@ -11,7 +11,8 @@
 #   thermistors (ADC0/1)    2   GPIO 26, 27
 #   spare                   1   GPIO 28 (ADC2): a chamber thermistor, or a UART pin
 # A sixth drive needs two more pins and only GPIO 28 is left, so the Pico runs five;
-# six take a board with more GPIOs (RP2350B has 48) or drives on an I/O expander.
+# six take boards/pico_6drives (no part fan), a board with more GPIOs (RP2350B has
+# 48) or drives on an I/O expander.
 # The heaters and the fan sit on three different PWM slices (17: 0B, 19: 1B, 21: 2B),
 # because the two channels of a slice share one frequency and the heaters run at
 # 10 Hz while the fan runs at 1 kHz.

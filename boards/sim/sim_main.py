@@ -1,5 +1,6 @@
 # Runs the firmware on the unix port against the simulated chip. Usage:
 #   micropython sim_main.py [--edges FILE] [--heap-lock] [--quantum-us N]
+#                           [--jitter-us N [--jitter-seed N]]
 #                           [--tcp HOST:PORT] [--no-stdio] [--realtime FACTOR]
 #                           [--config FILE] [--files DIR] [--set KEY=VALUE ...]
 # By default it takes G-code on stdin and answers on stdout like a serial printer, in
@@ -11,6 +12,8 @@
 # --files is the simulated flash folder for printing from flash (M20-M32).
 # --set overrides a board setting before the machine is assembled, e.g.
 # --set pin_writer=registers (VALUE: a number, a comma-separated tuple, or text).
+# --jitter-us fires the timer callbacks up to N us late (interrupt latency; seeded by
+# --jitter-seed, so a run repeats exactly).
 import sys
 
 # The script's own folder comes first on the path; board.py must be the board's from
@@ -27,11 +30,13 @@ sys.modules["time"] = simtime
 
 def _args(argv):
     opts = {"edges": None, "heap_lock": False, "quantum_us": 1000, "tcp": None,
-            "stdio": True, "realtime": None, "config": None, "files": None, "set": []}
+            "stdio": True, "realtime": None, "config": None, "files": None, "set": [],
+            "jitter_us": 0, "jitter_seed": 1}
     i = 1
     while i < len(argv):
         a = argv[i]
-        if a in ("--edges", "--quantum-us", "--tcp", "--realtime", "--config", "--files"):
+        if a in ("--edges", "--quantum-us", "--tcp", "--realtime", "--config", "--files",
+                 "--jitter-us", "--jitter-seed"):
             i += 1
             opts[a[2:].replace("-", "_")] = argv[i]
         elif a == "--set":
@@ -84,6 +89,7 @@ def main():
     names = ["x", "y", "z"] + ["e%d" % i for i in range(board.SETTINGS["drives"])]
     simmachine.attach_world(board.PINS, names, board.SETTINGS.get("invert_dir", ()))
     simmachine.quantum_us = int(opts["quantum_us"])
+    simmachine.set_jitter(int(opts["jitter_us"]), int(opts["jitter_seed"]))
     if opts["edges"]:
         simmachine.record_to(opts["edges"])
     before = _heap_bytes()

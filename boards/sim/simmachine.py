@@ -45,6 +45,11 @@ _idle_calls = 0
 heap_peak_bytes = 0
 # Models of the world around the chip (thermal, ...), called once per idle quantum.
 _world_hooks = []
+# Interrupt latency (set_jitter): each timer callback runs up to _jitter_max_us after
+# its due time, by a seeded pseudo-random amount, and never before the callback
+# before it. 0, the default, keeps idle()'s loop free of any per-tick cost.
+_jitter_max_us = 0
+_jitter_state = 0
 # Virtual seconds allowed per wall second; 0 runs as fast as it can. Interactive
 # consoles (TCP, PTY) pace the simulation so hosts see a printer in real time.
 realtime_factor = 0
@@ -288,6 +293,20 @@ for _g in range(GPIO_COUNT):
     _pin_table.append(_pin)
 
 
+def set_jitter(max_us, seed=1):
+    """Fire every timer callback late by 0..max_us (0: on time, the default)."""
+    global _jitter_max_us, _jitter_state
+    _jitter_max_us = max_us
+    _jitter_state = seed & 0x7FFFFFFF
+
+
+def _draw_late_us():
+    global _jitter_state
+    # The C library's LCG: repeatable, and small ints only (no allocation).
+    _jitter_state = (_jitter_state * 1103515245 + 12345) & 0x7FFFFFFF
+    return (_jitter_state >> 8) % (_jitter_max_us + 1)
+
+
 class Timer:
     ONE_SHOT = 0
     PERIODIC = 1
@@ -306,6 +325,7 @@ class Timer:
             raise ValueError("timer period below 1 us")
         self._cb = callback
         self._next = now_us + self.period_us
+        self._late_us = 0  # how late the callback due at _next will run
         if self not in _timers:
             _timers.append(self)
 
@@ -326,6 +346,9 @@ def idle():
             heap_peak_bytes = used
     end = now_us + quantum_us
     for t in _timers:
+        if _jitter_max_us:
+            _fire_late(t, end)
+            continue
         cb = t._cb
         per = t.period_us
         nxt = t._next
@@ -363,6 +386,36 @@ def idle():
             walltime.ticks_us(), _wall_start_us)
         if ahead_us > 2000:
             walltime.sleep_us(int(ahead_us))
+
+
+def _fire_late(t, end):
+    """idle()'s timer loop with interrupt latency: the callback due at nxt runs at
+    nxt + late. Each one's lateness is drawn when the one before it has run, and
+    raised if need be so it runs at least 1 us after that one: callbacks keep their
+    order, as a late interrupt delays the next. A callback whose time falls after end
+    waits for the next quantum."""
+    global now_us
+    cb = t._cb
+    per = t.period_us
+    nxt = t._next
+    late = t._late_us
+    while nxt + late <= end:
+        at = nxt + late
+        _pio_output(at)
+        now_us = at
+        if heap_lock_ticks:
+            micropython.heap_lock()
+        cb(t)
+        if _bank is not None:
+            _apply_bank()
+        if heap_lock_ticks:
+            micropython.heap_unlock()
+        if _n > _FLUSH_AT:
+            flush()
+        nxt += per
+        late = max(_draw_late_us(), late - per + 1)
+    t._next = nxt
+    t._late_us = late
 
 
 def disable_irq():

@@ -74,7 +74,11 @@ class ThermalCommands:
         return text.rstrip()
 
     # M106 [P0] [S<0-255>]: part fan speed, full without S. Example: M106 S128
+    # A board without a part fan (PINS has no part_fan) refuses it, so a print that
+    # counts on cooling hears so; M107 (off) is then simply true.
     def m106(self, line):
+        if self.thermal.fan is None:
+            raise GcodeError("this board has no part fan")
         line.int("P", 0, lo=0, hi=0)
         s = line.float("S", 255.0)
         if not 0 <= s <= 255:

@@ -2,12 +2,13 @@
 # feeds a state machine's FIFO, one word per tick: the levels of the STEP/DIR pins,
 # which must be one contiguous run of GPIOs from out_base. The state machine spends
 # exactly one tick on each word, so edges come out on exact tick multiples, a fixed
-# LATENCY_TICKS behind the interrupt: interrupt jitter up to that is absorbed, where
+# LATENCY_TICKS behind their ticks: interrupt jitter below that is absorbed, where
 # register writes would pass it straight to the pins.
 #
 # A burst of words starts with LATENCY_TICKS words of the old levels and goes on while
 # the step loop has work; when it goes idle the state machine stalls on an empty FIFO
-# with the pins held.
+# with the pins held. The next burst starts when its first word arrives, so the
+# latency of the interrupt that opens a burst delays the whole burst (not its pulses).
 from mixfw.compat import const
 
 CYCLES_PER_TICK = const(20)  # the program below: pull (1) + out (1) + 18 delay

@@ -1,0 +1,70 @@
+# Raspberry Pi Pico (RP2040) on a carrier with external STEP/DIR drivers, like
+# boards/pico, but with six mixing drives and no part fan.
+#
+# GPIO budget. The Pico brings out GPIO 0-22 and 26-28: 26 pins. GPIO 23 (SMPS
+# power save), 24 (VBUS sense), 25 (LED) and 29 (VSYS/3) stay on the board.
+#   X, Y, Z STEP/DIR        6
+#   6 drives STEP/DIR      12
+#   one shared ENABLE       1
+#   X/Y/Z min endstops      3
+#   hot end, bed            2
+#   thermistors (ADC0/1)    2   GPIO 26, 27
+# Every pin is used. The sixth drive takes the two pins that are left on boards/pico:
+# the part fan's GPIO 21 (STEP) and the spare GPIO 28 (DIR). With no fan output, M106
+# answers an error; run a part fan from the supply if the print needs cooling.
+# e5's pins are not next to the others, so the PIO backend (one run of GPIOs) is not
+# possible here; the hard timer with register writes is, as on boards/pico.
+# The heaters stay on two PWM slices (17: 0B, 19: 1B), both at 10 Hz.
+from mixfw import defaults
+
+NAME = "pico_6drives"
+CHIP = "rp2040"
+SOURCE = ("Raspberry Pi Pico datasheet, 'Pinout' and 'GPIO' sections; "
+          "https://datasheets.raspberrypi.com/pico/pico-datasheet.pdf. The assignment "
+          "of functions to header pins is mixstep's.")
+
+# GPIOs the Pico board itself uses; nothing of the printer may go there.
+RESERVED = {23: "SMPS power-save", 24: "VBUS sense", 25: "on-board LED",
+            29: "VSYS/3 ADC"}
+
+PINS = {
+    "x_step": 0, "x_dir": 1,
+    "y_step": 2, "y_dir": 3,
+    "z_step": 4, "z_dir": 5,
+    "e0_step": 6, "e0_dir": 7,
+    "e1_step": 8, "e1_dir": 9,
+    "e2_step": 10, "e2_dir": 11,
+    "e3_step": 12, "e3_dir": 13,
+    "e4_step": 14, "e4_dir": 15,
+    "e5_step": 21, "e5_dir": 28,
+    # One ENABLE for every driver: M18 X then releases all motors at once.
+    "x_enable": 16, "y_enable": 16, "z_enable": 16, "e0_enable": 16, "e1_enable": 16,
+    "e2_enable": 16, "e3_enable": 16, "e4_enable": 16, "e5_enable": 16,
+    "hotend_heater": 17,
+    "x_min": 18,
+    "bed_heater": 19,
+    "y_min": 20,
+    "z_min": 22,
+    "hotend_thermistor": 26, "bed_thermistor": 27,
+}
+
+SHARED_PINS = (
+    ("x_enable", "y_enable", "z_enable", "e0_enable", "e1_enable", "e2_enable",
+     "e3_enable", "e4_enable", "e5_enable"),
+)
+
+TMC_UART = None  # external drivers, set up by their own jumpers
+
+SETTINGS = dict(
+    defaults.SETTINGS,
+    chip="rp2040",
+    # A hard machine.Timer (MicroPython >= 1.26) at 20 kHz; `make board-check` shows
+    # what the chip really achieves and what one step-loop call costs.
+    tick_us=50,
+    step_backend="timer",
+    pin_writer="registers",  # SIO set/clear registers: one write per tick
+    drives=6,
+    enable_active_low=True,  # A4988/DRV8825/TMC2209 all enable on a low EN
+    steps_per_mm=(80.0, 80.0, 400.0, 415.0),
+    console_uart=-1,  # no pins left for a UART console; USB serial only
+)

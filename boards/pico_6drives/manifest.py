@@ -1,0 +1,7 @@
+# Freeze the firmware with this board's pin map and settings. The port's own manifest
+# comes first: it holds _boot.py, which mounts the flash filesystem the configuration
+# (M500) and G-code files live on.
+include("$(PORT_DIR)/boards/manifest.py")
+module("board.py")
+module("main.py", base_path="../../firmware")
+package("mixfw", base_path="../../firmware")
