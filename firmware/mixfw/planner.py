@@ -396,17 +396,19 @@ class Planner:
         first = tail
         if m[st.S_ACTIVE]:
             first = tail + 1 if tail + 1 < q else 0
-        if first == newest and m[st.S_ACTIVE]:
-            # Its entry is what the running block was planned to leave at.
-            self.entry[newest] = min(self.entry[newest], self.exit[tail])
+        # The block before the first one is running or has run: the first one enters at
+        # most at the exit baked into its record, even between blocks (tail advanced, not
+        # yet started), where more look-ahead would otherwise raise that entry above the
+        # speed the step loop left at. After a stop, max_entry is 0 anyway.
+        handed_over_exit = self.exit[first - 1 if first > 0 else q - 1]
         # Backward pass.
         k = newest
         nxt_entry = 0.0
         while True:
             a2d = 2.0 * self.accel[k] * self.mm[k]
             e = min(self.max_entry[k], sqrt(nxt_entry * nxt_entry + a2d))
-            if k == first and m[st.S_ACTIVE]:
-                e = min(e, self.exit[tail])
+            if k == first:
+                e = min(e, handed_over_exit)
             self.entry[k] = e
             nxt_entry = e
             if k == first:
