@@ -82,6 +82,8 @@ class Planner:
         self.nominal = [0.0] * q
         self.max_entry = [0.0] * q
         self.entry = [0.0] * q
+        self.back_entry = [0.0] * q  # see _recalculate
+        self.gain_v2 = [0.0] * q  # 2 * accel * mm: the v**2 a block gains or sheds
         self.exit = [0.0] * q  # exit speed baked into the slot's integer record
         self.unit = [None] * q
         self.prev_unit = None
@@ -380,6 +382,7 @@ class Planner:
     def _set_plan(self, slot, mm, accel, nominal, max_entry, unit):
         self.mm[slot] = mm
         self.accel[slot] = accel
+        self.gain_v2[slot] = 2.0 * accel * mm
         self.nominal[slot] = nominal
         self.max_entry[slot] = max_entry
         self.entry[slot] = 0.0
@@ -388,45 +391,67 @@ class Planner:
 
     # --- look-ahead ---
     def _recalculate(self, newest):
-        """Backward then forward pass over the blocks not yet started, then refresh
-        their integer records. The newest block must stop at its end."""
+        """Bring the look-ahead up to date after `newest` was queued (it stops at its
+        end) and rewrite the records of the blocks not yet started whose entry or exit
+        speed changed.
+
+        back_entry[k], the fastest block k may enter and still stop by the end of the
+        queue, only grows as blocks are queued. The backward pass stops at the first
+        block whose back_entry stays the same (Grbl's and Marlin's optimal marker): the
+        plan before it stands, and the forward pass starts there."""
         m = self.mem
         q = self.queue
+        back = self.back_entry
+        gain = self.gain_v2
+        max_entry = self.max_entry
         tail = m[st.S_TAIL]
         first = tail
         if m[st.S_ACTIVE]:
             first = tail + 1 if tail + 1 < q else 0
-        # The block before the first one is running or has run: the first one enters at
-        # most at the exit baked into its record, even between blocks (tail advanced, not
-        # yet started), where more look-ahead would otherwise raise that entry above the
-        # speed the step loop left at. After a stop, max_entry is 0 anyway.
-        handed_over_exit = self.exit[first - 1 if first > 0 else q - 1]
         # Backward pass.
         k = newest
-        nxt_entry = 0.0
-        while True:
-            a2d = 2.0 * self.accel[k] * self.mm[k]
-            e = min(self.max_entry[k], sqrt(nxt_entry * nxt_entry + a2d))
-            if k == first:
-                e = min(e, handed_over_exit)
-            self.entry[k] = e
-            nxt_entry = e
-            if k == first:
+        e = min(max_entry[k], sqrt(gain[k]))
+        back[k] = e
+        while k != first:
+            j = k - 1 if k > 0 else q - 1
+            e = min(max_entry[j], sqrt(e * e + gain[j]))
+            k = j
+            if e == back[j]:
                 break
-            k = k - 1 if k > 0 else q - 1
-        # Forward pass, then records.
-        k = first
+            back[j] = e
+        # Forward pass from block k, whose entry stands, then records.
+        entry = self.entry
+        exit_speed = self.exit
+        if k == first:
+            # The block before the first one is running or has run: the first one
+            # enters at most at the exit baked into that record, also between blocks
+            # (tail advanced, not yet started), where more look-ahead would otherwise
+            # raise it above the speed the step loop left at. After a stop, max_entry
+            # is 0 anyway.
+            v0 = back[k]
+            handed_over = exit_speed[k - 1 if k > 0 else q - 1]
+            if handed_over < v0:
+                v0 = handed_over
+        else:
+            v0 = entry[k]
         while True:
-            nk = k + 1 if k + 1 < q else 0
-            exit_speed = 0.0 if k == newest else self.entry[nk]
-            if k != newest:
-                reach = sqrt(self.entry[k] * self.entry[k] + 2.0 * self.accel[k] * self.mm[k])
-                if exit_speed > reach:
-                    exit_speed = reach
-                    self.entry[nk] = reach
-            self._write_trapezoid(k, exit_speed)
+            if k == newest:
+                v1 = 0.0
+            else:
+                nk = k + 1 if k + 1 < q else 0
+                v1 = back[nk]
+                reach = sqrt(v0 * v0 + gain[k])
+                if v1 > reach:
+                    v1 = reach
+            # A record is a function of its entry and exit speeds: rewrite changed ones.
+            if k == newest or v0 != entry[k] or v1 != exit_speed[k]:
+                entry[k] = v0
+                self._write_trapezoid(k, v1)
             if k == newest:
                 break
+            # The step loop may have started block k meanwhile: then the next block
+            # enters at most at the exit it was given before.
+            v0 = v1 if v1 <= exit_speed[k] else exit_speed[k]
             k = nk
 
     def _write_trapezoid(self, slot, exit_speed):
