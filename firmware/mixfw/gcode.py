@@ -81,6 +81,7 @@ _R_PRESENT = const(0)
 _R_VALUED = const(1)
 _R_LETTER = const(2)  # command letter's code (G, M or T), 0 for none
 _R_NUMBER = const(3)
+_R_KEY = const(11)  # command_key of the command, 0 for none
 _R_HAS_N = const(4)
 _R_N = const(5)
 _R_ARGS = const(6)  # raw-argument commands: index of the text after the command; else -1
@@ -88,7 +89,7 @@ _R_AT = const(7)  # the letter or character an error is about
 _R_NEG = const(8)  # an unsupported command's sign, mantissa and decimals
 _R_M = const(9)
 _R_D = const(10)
-_R_WORDS = const(11)
+_R_WORDS = const(12)
 
 # _scan's verdicts on bad input.
 _E_UNCLOSED = const(1)
@@ -105,12 +106,13 @@ _E_TWICE = const(9)
 @micropython.viper
 def _scan(buf: ptr8, n: int, mant: ptr32, decimals: ptr8, raw: ptr32, r: ptr32) -> int:
     """Words of buf[:n] into mant/decimals (only those present are written) and the
-    result words r; raw[0] keys of raw-argument commands follow in raw[1:]. Returns 0,
-    or an _E_ code with r[_R_AT] naming the letter or character."""
+    result words r. raw: a count, then the keys of the commands whose arguments are
+    text. Returns 0, or an _E_ code with r[_R_AT] naming the letter or character."""
     present = 0
     valued = 0
     r[_R_LETTER] = 0
     r[_R_NUMBER] = 0
+    r[_R_KEY] = 0
     r[_R_HAS_N] = 0
     r[_R_N] = 0
     r[_R_ARGS] = -1
@@ -194,6 +196,7 @@ def _scan(buf: ptr8, n: int, mant: ptr32, decimals: ptr8, raw: ptr32, r: ptr32) 
                 r[_R_LETTER] = letter
                 r[_R_NUMBER] = m
                 key = letter * 10000 + m  # command_key
+                r[_R_KEY] = key
                 k = raw[0]
                 while k > 0:
                     if raw[k] == key:
@@ -238,10 +241,9 @@ class Parser:
         ln.present = r[_R_PRESENT]
         ln.valued = r[_R_VALUED]
         code = r[_R_LETTER]
-        number = r[_R_NUMBER]
         ln.letter = "G" if code == 71 else ("M" if code == 77 else ("T" if code == 84 else ""))
-        ln.number = number
-        ln.key = code * 10000 + number if code else 0
+        ln.number = r[_R_NUMBER]
+        ln.key = r[_R_KEY]
         ln.has_line_number = r[_R_HAS_N] == 1
         ln.line_number = r[_R_N]
         start = r[_R_ARGS]
