@@ -40,8 +40,42 @@ def retire_all(mem, queue_blocks):
     return wait
 
 
-def is_move(line):
-    return line[:3] in (b"G1 ", b"G0 ")
+def is_move(buf, i):
+    return buf[i] == 71 and (buf[i + 1] == 49 or buf[i + 1] == 48) and buf[i + 2] == 32
+
+
+def file_lines(path, chunk_bytes=4096):
+    """(buffer, start, end) of each line, CR and LF left out. Read in chunks, as a board
+    reads from its console or flash: MicroPython's readline() makes one read call per
+    byte, which would cost more than parsing and planning the line."""
+    buf = bytearray(chunk_bytes)
+    mv = memoryview(buf)
+    have = 0
+    f = open(path, "rb")
+    try:
+        while True:
+            got = f.readinto(mv[have:])
+            have += got
+            i = 0
+            while i < have:
+                j = buf.find(b"\n", i, have)
+                if j < 0:
+                    if got:
+                        break  # the rest of the line is in the next chunk
+                    j = have  # a last line with no newline
+                end = j
+                while end > i and buf[end - 1] == 13:
+                    end -= 1
+                yield mv, i, end
+                i = j + 1
+            if not got:
+                return
+            if i == 0 and have == chunk_bytes:
+                raise ValueError("line longer than %d bytes" % chunk_bytes)
+            buf[:have - i] = buf[i:have]
+            have -= i
+    finally:
+        f.close()
 
 
 def plan_file(path, mode):
@@ -57,23 +91,20 @@ def plan_file(path, mode):
     moves = 0
     errors = []
     lines = 0
-    f = open(path, "rb")  # streamed, as a board reads from its console or flash
     t0 = time.ticks_us()
-    for number, text in enumerate(f, 1):
-        lines = number
-        text = text.rstrip(b"\r\n")
-        if text[:4] in SKIPPED:
+    for mv, start, end in file_lines(path):
+        lines += 1
+        if end - start >= 4 and mv[start] == 77 and bytes(mv[start:start + 4]) in SKIPPED:
             continue
-        if is_move(text):
+        if end - start >= 3 and is_move(mv, start):
             moves += 1
         try:
-            run_line(parse(text, len(text)))
+            run_line(parse(mv[start:end], end - start))
         except Exception as e:  # the firmware would answer Error: and go on
             if len(errors) < 10:
-                errors.append("line %d: %r" % (number, e))
+                errors.append("line %d: %r" % (lines, e))
     printer.planner.synchronize()
     seconds = time.ticks_diff(time.ticks_us(), t0) / 1e6
-    f.close()
     return {"file": path, "mode": mode, "lines": lines, "move_lines": moves,
             "seconds": seconds, "move_lines_per_s": moves / seconds, "errors": errors}
 

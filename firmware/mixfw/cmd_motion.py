@@ -1,10 +1,13 @@
 # Motion commands: G0/G1, G4, G28, G90/G91, G92, G20/G21, M82/M83, M400, M17/M18/M84.
 # Handlers parse and check; the planner does the work.
-from mixfw.gcode import GcodeError
+from mixfw.gcode import GcodeError, letter_index
 from mixfw.planner import steps_from_mm
 from mixfw import stepper as st
 
 AXIS_LETTERS = "XYZE"
+_AXIS_INDEX = tuple(letter_index(ch) for ch in AXIS_LETTERS)
+_AXIS_BITS = sum(1 << i for i in _AXIS_INDEX)  # in a parsed line's present mask
+_F_INDEX = letter_index("F")
 # retract_policy: retractions follow the mix and run it exactly backwards, or pull every
 # drive equally (and push them back equally), or take back exactly the steps each drive
 # made in the latest extrusion (and push exactly those back).
@@ -91,6 +94,8 @@ class Motion:
         want = axes_mask & 7
         if axes_mask & 8:
             want |= ((1 << self.drives) - 1) << 3
+        if not want & ~self.enabled:
+            return  # every move: mostly all are on already
         for i in range(3 + self.drives):
             if (want >> i) & 1 and not (self.enabled >> i) & 1:
                 self.pins.set_enabled(i, True)
@@ -108,22 +113,24 @@ class Motion:
 
     # G0/G1 X Y Z E F: straight move. Example: G1 X10 Y5 E0.4 F1800
     def g1(self, line):
-        f = line.float("F", -1.0)
-        if line.has("F"):
+        present = line.present
+        if (present >> _F_INDEX) & 1:
+            f = line.float_at(_F_INDEX, -1.0)
             if f <= 0:
                 raise GcodeError("feed rate F must be > 0, got %s" % f)
             self.feed_mm_s = f / 60.0
-        target = list(self.pos_mm)
+        if not present & _AXIS_BITS:
+            return None
+        pos = self.pos_mm
+        target = list(pos)
         moved = 0
         for i in range(4):
-            ch = AXIS_LETTERS[i]
-            if line.has(ch):
-                v = line.float(ch)
+            k = _AXIS_INDEX[i]
+            if (present >> k) & 1:
+                v = line.float_at(k)
                 relative = not (self.absolute_e if i == 3 else self.absolute)
                 target[i] = target[i] + v if relative else v
                 moved |= 1 << i
-        if not moved:
-            return None
         if self.soft_limits:
             for i in range(3):
                 mm = target[i] + self.offset_mm[i]
@@ -131,16 +138,13 @@ class Motion:
                     raise GcodeError("move to %s%.3f is outside the soft limits 0..%g mm"
                                      % (AXIS_LETTERS[i], target[i], self.travel_mm[i]))
         steps = self._steps(target)
-        e_mm = target[3] - self.pos_mm[3]
-        xyz = 0
+        e_mm = target[3] - pos[3]
         at = self.queue.position_steps
-        for i in range(3):
-            if steps[i] != at[i]:
-                xyz |= 1 << i
+        xyz = (steps[0] != at[0]) | (steps[1] != at[1]) << 1 | (steps[2] != at[2]) << 2
         if xyz or e_mm:
             if e_mm:
                 for fn in self.before_extrude:
-                    fn((self.pos_mm[2] + target[2]) / 2, e_mm)
+                    fn((pos[2] + target[2]) / 2, e_mm)
             self._queue(steps, xyz, e_mm, self.feed_mm_s)
         self.pos_mm = target
         return None

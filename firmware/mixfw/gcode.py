@@ -2,15 +2,23 @@
 #
 # Numbers are kept as an integer mantissa and a count of decimals in preallocated
 # arrays, so parsing a line allocates nothing per word; handlers turn a word into a
-# float only when they need one. Pure logic: imports on CPython for the host tools.
+# float only when they need one. The scan over the bytes is viper, as it runs for every
+# line; it reports bad input as a code, and the reason is written out here. Pure logic:
+# imports on CPython for the host tools.
 from array import array
+from mixfw.compat import micropython, const, ptr8, ptr32
 
-_MAX_DIGITS = 9  # keeps every mantissa below 2**30
+_MAX_DIGITS = const(9)  # keeps every mantissa below 2**30
 _POW10 = (1, 10, 100, 1000, 10000, 100000, 1000000, 10000000, 100000000, 1000000000)
 
 
 class GcodeError(ValueError):
     """Bad input: the line is answered with `Error:` and the reason, then the stream goes on."""
+
+
+def command_key(letter, number):
+    """The command table's key of G1, M163, ...; _scan works it out the same way."""
+    return ord(letter) * 10000 + number
 
 
 def letter_index(ch):
@@ -27,6 +35,7 @@ class Line:
         self.valued = 0  # bit per letter that carried a number
         self.letter = ""  # command letter G, M or T; "" for a blank line
         self.number = 0
+        self.key = 0  # command_key(letter, number); 0 for a blank line
         self.has_line_number = False
         self.line_number = 0  # the leading N word (hosts send N-1 with M110)
         self.args_text = ""  # for raw-argument commands: the text after the command
@@ -38,10 +47,13 @@ class Line:
         return (self.valued >> letter_index(ch)) & 1
 
     def float(self, ch, default=None):
-        i = letter_index(ch)
+        return self.float_at(letter_index(ch), default)
+
+    def float_at(self, i, default=None):
+        """float() of the letter with letter_index i."""
         if not (self.valued >> i) & 1:
             if (self.present >> i) & 1 and default is None:
-                raise GcodeError("parameter %s needs a number" % ch)
+                raise GcodeError("parameter %s needs a number" % chr(65 + i))
             return default
         d = self.decimals[i]
         return self.mant[i] / _POW10[d] if d else float(self.mant[i])
@@ -64,115 +76,205 @@ class Line:
             raise GcodeError("missing parameter %s" % ch)
 
 
+# What _scan leaves in its result words besides the parameter words.
+_R_PRESENT = const(0)
+_R_VALUED = const(1)
+_R_LETTER = const(2)  # command letter's code (G, M or T), 0 for none
+_R_NUMBER = const(3)
+_R_KEY = const(11)  # command_key of the command, 0 for none
+_R_HAS_N = const(4)
+_R_N = const(5)
+_R_ARGS = const(6)  # raw-argument commands: index of the text after the command; else -1
+_R_AT = const(7)  # the letter or character an error is about
+_R_NEG = const(8)  # an unsupported command's sign, mantissa and decimals
+_R_M = const(9)
+_R_D = const(10)
+_R_WORDS = const(12)
+
+# _scan's verdicts on bad input.
+_E_UNCLOSED = const(1)
+_E_CHARACTER = const(2)
+_E_TOO_LONG = const(3)
+_E_MALFORMED = const(4)
+_E_LINE_NUMBER = const(5)
+_E_NEEDS_NUMBER = const(6)
+_E_UNSUPPORTED = const(7)
+_E_FIRST = const(8)
+_E_TWICE = const(9)
+
+
+@micropython.viper
+def _scan(buf: ptr8, n: int, mant: ptr32, decimals: ptr8, raw: ptr32, r: ptr32) -> int:
+    """Words of buf[:n] into mant/decimals (only those present are written) and the
+    result words r. raw: a count, then the keys of the commands whose arguments are
+    text. Returns 0, or an _E_ code with r[_R_AT] naming the letter or character."""
+    present = 0
+    valued = 0
+    r[_R_LETTER] = 0
+    r[_R_NUMBER] = 0
+    r[_R_KEY] = 0
+    r[_R_HAS_N] = 0
+    r[_R_N] = 0
+    r[_R_ARGS] = -1
+    first = 1
+    i = 0
+    while i < n:
+        c = buf[i]
+        if c == 32 or c == 9 or c == 13 or c == 10:
+            i += 1
+            continue
+        if c == 59 or c == 42:  # ';' comment, '*' checksum: rest of line is not words
+            break
+        if c == 40:  # '(' comment up to ')'
+            while i < n and buf[i] != 41:
+                i += 1
+            if i >= n:
+                return _E_UNCLOSED
+            i += 1
+            continue
+        if not ((c >= 65 and c <= 90) or (c >= 97 and c <= 122)):
+            r[_R_AT] = c
+            return _E_CHARACTER
+        letter = c & 0xDF  # upper case
+        r[_R_AT] = letter
+        i += 1
+        while i < n and buf[i] == 32:
+            i += 1
+        # number: [sign] digits [. digits]
+        neg = 0
+        if i < n and (buf[i] == 45 or buf[i] == 43):
+            if buf[i] == 45:
+                neg = 1
+            i += 1
+        m = 0
+        d = 0
+        digits = 0
+        has_number = 0
+        seen_dot = 0
+        while i < n:
+            c = buf[i]
+            if c >= 48 and c <= 57:
+                has_number = 1
+                if digits < _MAX_DIGITS:
+                    if m != 0 or c != 48 or seen_dot:
+                        digits += 1
+                    m = m * 10 + c - 48
+                    if seen_dot:
+                        d += 1
+                elif not seen_dot:
+                    return _E_TOO_LONG
+            elif c == 46 and not seen_dot:
+                seen_dot = 1
+            else:
+                break
+            i += 1
+        if i < n:
+            # Only a blank, a comment, a checksum or the next letter may follow.
+            c = buf[i]
+            if not (c == 32 or c == 9 or c == 13 or c == 10 or c == 59 or c == 40 or c == 42
+                    or (c >= 65 and c <= 90) or (c >= 97 and c <= 122)):
+                return _E_MALFORMED
+        if (neg or seen_dot) and not has_number:
+            return _E_MALFORMED
+        if first:
+            first = 0
+            if letter == 78 and r[_R_HAS_N] == 0:  # N line number first
+                if not has_number or d:
+                    return _E_LINE_NUMBER
+                r[_R_HAS_N] = 1
+                r[_R_N] = -m if neg else m
+                first = 1
+                continue
+            elif letter == 71 or letter == 77 or letter == 84:  # G M T
+                if not has_number:
+                    return _E_NEEDS_NUMBER
+                if d or neg:
+                    r[_R_NEG] = neg
+                    r[_R_M] = m
+                    r[_R_D] = d
+                    return _E_UNSUPPORTED
+                r[_R_LETTER] = letter
+                r[_R_NUMBER] = m
+                key = letter * 10000 + m  # command_key
+                r[_R_KEY] = key
+                k = raw[0]
+                while k > 0:
+                    if raw[k] == key:
+                        r[_R_ARGS] = i
+                        break
+                    k -= 1
+                if k > 0:
+                    break
+                continue
+            else:
+                return _E_FIRST
+        bit = 1 << (letter - 65)
+        if present & bit:
+            return _E_TWICE
+        present |= bit
+        if has_number:
+            valued |= bit
+            mant[letter - 65] = -m if neg else m
+            decimals[letter - 65] = d
+    r[_R_PRESENT] = present
+    r[_R_VALUED] = valued
+    return 0
+
+
 class Parser:
     def __init__(self, raw_commands=()):
         """raw_commands: (letter, number) pairs whose arguments are text, such as file
         names (M23 name.gcode) or option names (M926 Isteps_per_mm_x V80); for those
         the words after the command are not parsed and line.args_text holds them."""
         self.line = Line()
-        self.raw = set(ord(l) * 10000 + n for l, n in raw_commands)
+        keys = [command_key(l, n) for l, n in raw_commands]
+        self.raw = array("i", [len(keys)] + keys)
+        self.result = array("i", bytes(4 * _R_WORDS))
 
     def parse(self, buf, n):
         """Parse buf[:n] into self.line. Raises GcodeError naming the problem."""
         ln = self.line
-        ln.present = 0
-        ln.valued = 0
-        ln.letter = ""
-        ln.number = 0
-        ln.has_line_number = False
-        ln.line_number = 0
-        ln.args_text = ""
-        mant = ln.mant
-        decimals = ln.decimals
-        first = True
-        i = 0
-        while i < n:
-            c = buf[i]
-            if c == 32 or c == 9 or c == 13 or c == 10:
-                i += 1
-                continue
-            if c == 59 or c == 42:  # ';' comment, '*' checksum: rest of line is not words
-                break
-            if c == 40:  # '(' comment up to ')'
-                while i < n and buf[i] != 41:
-                    i += 1
-                if i >= n:
-                    raise GcodeError("unclosed ( comment")
-                i += 1
-                continue
-            if not (65 <= c <= 90 or 97 <= c <= 122):
-                raise GcodeError("unexpected character %r" % chr(c))
-            letter = c & 0xDF  # upper case
-            idx = letter - 65
-            i += 1
-            while i < n and buf[i] == 32:
-                i += 1
-            # number: [sign] digits [. digits]
-            neg = False
-            if i < n and (buf[i] == 45 or buf[i] == 43):
-                neg = buf[i] == 45
-                i += 1
-            m = 0
-            d = 0
-            digits = 0
-            any_digit = False
-            seen_dot = False
-            while i < n:
-                c = buf[i]
-                if 48 <= c <= 57:
-                    any_digit = True
-                    if digits < _MAX_DIGITS:
-                        if m or c != 48 or seen_dot:
-                            digits += 1
-                        m = m * 10 + c - 48
-                        if seen_dot:
-                            d += 1
-                    elif not seen_dot:
-                        raise GcodeError("number too long for %s" % chr(letter))
-                elif c == 46 and not seen_dot:
-                    seen_dot = True
-                else:
-                    break
-                i += 1
-            has_number = any_digit
-            if i < n:
-                c = buf[i]
-                if not (c == 32 or c == 9 or c == 13 or c == 10 or c == 59 or c == 40
-                        or c == 42 or 65 <= c <= 90 or 97 <= c <= 122):
-                    raise GcodeError("malformed number after %s" % chr(letter))
-            if (neg or seen_dot) and not has_number:
-                raise GcodeError("malformed number after %s" % chr(letter))
-            if first:
-                first = False
-                if letter == 78 and not ln.has_line_number:  # N line number first
-                    if not has_number or d:
-                        raise GcodeError("malformed line number")
-                    ln.has_line_number = True
-                    ln.line_number = -m if neg else m
-                    first = True
-                    continue
-                elif letter in (71, 77, 84):  # G M T
-                    if not has_number:
-                        raise GcodeError("%s needs a number" % chr(letter))
-                    if d or neg:
-                        raise GcodeError("unsupported command %s%s%s" % (
-                            chr(letter), "-" if neg else "", m / _POW10[d] if d else m))
-                    ln.letter = "G" if letter == 71 else ("M" if letter == 77 else "T")
-                    ln.number = m
-                    if letter * 10000 + m in self.raw:
-                        end = i
-                        while end < n and buf[end] != 59 and buf[end] != 42:
-                            end += 1
-                        ln.args_text = bytes(buf[i:end]).decode().strip()
-                        return ln
-                    continue
-                else:
-                    raise GcodeError("line must start with G, M or T, not %s" % chr(letter))
-            if (ln.present >> idx) & 1:
-                raise GcodeError("parameter %s given twice" % chr(letter))
-            ln.present |= 1 << idx
-            if has_number:
-                ln.valued |= 1 << idx
-                mant[idx] = -m if neg else m
-                decimals[idx] = d
+        r = self.result
+        err = _scan(buf, n, ln.mant, ln.decimals, self.raw, r)
+        if err:
+            raise GcodeError(self._reason(err))
+        ln.present = r[_R_PRESENT]
+        ln.valued = r[_R_VALUED]
+        code = r[_R_LETTER]
+        ln.letter = "G" if code == 71 else ("M" if code == 77 else ("T" if code == 84 else ""))
+        ln.number = r[_R_NUMBER]
+        ln.key = r[_R_KEY]
+        ln.has_line_number = r[_R_HAS_N] == 1
+        ln.line_number = r[_R_N]
+        start = r[_R_ARGS]
+        if start >= 0:
+            end = start
+            while end < n and buf[end] != 59 and buf[end] != 42:
+                end += 1
+            ln.args_text = bytes(buf[start:end]).decode().strip()
+        else:
+            ln.args_text = ""
         return ln
+
+    def _reason(self, err):
+        r = self.result
+        at = chr(r[_R_AT])
+        if err == _E_UNCLOSED:
+            return "unclosed ( comment"
+        if err == _E_CHARACTER:
+            return "unexpected character %r" % at
+        if err == _E_TOO_LONG:
+            return "number too long for %s" % at
+        if err == _E_MALFORMED:
+            return "malformed number after %s" % at
+        if err == _E_LINE_NUMBER:
+            return "malformed line number"
+        if err == _E_NEEDS_NUMBER:
+            return "%s needs a number" % at
+        if err == _E_UNSUPPORTED:
+            m, d = r[_R_M], r[_R_D]
+            return "unsupported command %s%s%s" % (at, "-" if r[_R_NEG] else "",
+                                                   m / _POW10[d] if d else m)
+        if err == _E_FIRST:
+            return "line must start with G, M or T, not %s" % at
+        return "parameter %s given twice" % at

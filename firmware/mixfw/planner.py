@@ -6,9 +6,30 @@
 # Pure logic: the hooks that touch the chip (waiting, masking the interrupt) are
 # passed in by main.py, so host tools can plan on CPython too.
 from math import sqrt
+from mixfw.compat import const
 from mixfw import stepper as st
 from mixfw.mixer import MAX_DRIVES, normalize
 from mixfw.stepper import schedule_counts
+
+# The step loop's words written for every block, as this module's constants: the
+# compiler folds them, where each st.X is a lookup at run time.
+_S_HEAD = const(0)
+_S_TAIL = const(1)
+_S_ACTIVE = const(2)
+_BLOCK_BASE = const(88)
+_B_WORDS = const(24)
+_B_N = const(0)
+_B_STEPS = const(1)
+_B_DIR_SET = const(5)
+_B_DIR_CLR = const(6)
+_B_FLAGS = const(7)
+_B_DWELL = const(14)
+_B_MIX = const(15)
+_F_NEG = const(4)
+assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _BLOCK_BASE, _B_WORDS, _B_N, _B_STEPS, _B_DIR_SET,
+        _B_DIR_CLR, _B_FLAGS, _B_DWELL, _B_MIX, _F_NEG) == (
+    st.S_HEAD, st.S_TAIL, st.S_ACTIVE, st.BLOCK_BASE, st.B_WORDS, st.B_N, st.B_STEPS,
+    st.B_DIR_SET, st.B_DIR_CLR, st.B_FLAGS, st.B_DWELL, st.B_MIX, st.F_NEG)
 
 # Largest schedule period the step loop's mixer takes: its products stay below 2**30.
 MAX_PERIOD = 20000
@@ -31,18 +52,23 @@ def steps_from_mm(mm, steps_per_mm):
 
 
 def block_weights(counts):
-    """Mixer weights that make the step loop give each drive exactly counts[i] steps in
-    a block (one whole period of the schedule). Returns (weights, counts given): when
-    the counts are too large for the mixer's integer range they are scaled, and the
-    counts the schedule then gives are worked out with the mixer itself."""
+    """Mixer weights that make the step loop give each drive exactly abs(counts[i])
+    steps in a block (one whole period of the schedule); a block runs every drive the
+    same way. Returns (weights, steps given): when the steps are too many for the
+    mixer's integer range they are scaled, and the steps the schedule then gives are
+    worked out with the mixer itself."""
+    steps = [c if c >= 0 else -c for c in counts]
     g = 0
-    for c in counts:
-        g = _gcd(g, c)
-    reduced = tuple(c // g for c in counts) if g else tuple(counts)
-    if sum(reduced) <= MAX_PERIOD:
-        return reduced, tuple(counts)
-    weights = normalize(counts, len(counts))
-    return weights, schedule_counts(weights, sum(counts))
+    for c in steps:
+        if c:
+            g = _gcd(c, g)
+    if not g:
+        return tuple(steps), steps
+    total = sum(steps)
+    if total // g <= MAX_PERIOD:
+        return tuple([c // g for c in steps]), steps
+    weights = normalize(steps, len(steps))
+    return weights, schedule_counts(weights, total)
 
 
 def _gcd(a, b):
@@ -123,9 +149,10 @@ class Planner:
         self.nominal = [0.0] * q
         self.max_entry = [0.0] * q
         self.entry = [0.0] * q
+        self.back_entry = [0.0] * q  # see _recalculate
+        self.gain_v2 = [0.0] * q  # 2 * accel * mm: the v**2 a block gains or sheds
         self.exit = [0.0] * q  # exit speed baked into the slot's integer record
         self.ramp = [None] * q  # per slot: (record's rates, its ramp_ticks schedule)
-        self.unit = [None] * q
         self.prev_unit = None
         self.prev_nominal = 0.0
         self.mix_id = 0
@@ -136,8 +163,11 @@ class Planner:
         self.drives = settings["drives"]
         self.drive_steps_per_mm = list(settings.get("drive_steps_per_mm") or
                                        [self.steps_per_mm[3]] * self.drives)
+        # drive_mm is replaced, never changed in place: _plan_e knows its lists apart.
         self.drive_mm = [0.0] * self.drives
         self.drive_steps = [0] * self.drives
+        self._targets_of = None
+        self._targets = None
         self.before_sync = []  # fn() each: moves held before the planner are handed over
         self.dir_invert_mask = 0  # DIR pins of motors wired the other way round
         # For retract_policy 2: the latest extrusion as stretches [start, end) of block
@@ -148,13 +178,9 @@ class Planner:
         self.retracted = []
 
     # --- queue state, shared with the step loop ---
-    def _count(self):
-        n = self.mem[st.S_HEAD] - self.mem[st.S_TAIL]
-        return n + self.queue if n < 0 else n
-
     def busy(self):
         m = self.mem
-        return m[st.S_HEAD] != m[st.S_TAIL] or m[st.S_ACTIVE]
+        return m[_S_HEAD] != m[_S_TAIL] or m[_S_ACTIVE]
 
     def synchronize(self):
         """Wait until every queued block has run (M400)."""
@@ -176,18 +202,11 @@ class Planner:
         self.position_steps = [m[st.S_POS + i] for i in range(4)]
         for i in range(self.drives):
             self.drive_steps[i] = m[st.S_DRIVE_POS + i]
-            self.drive_mm[i] = self.drive_steps[i] / self.drive_steps_per_mm[i]
+        self._drive_mm_from_steps()
         self.prev_unit = None
         self.prev_nominal = 0.0
         self.extruded = []
         self.retracted = []
-
-    def _wait_for_slot(self):
-        while self._count() >= self.queue - 1:
-            self.idle()
-        if not self.busy():
-            self.prev_unit = None
-            self.prev_nominal = 0.0
 
     def set_mix(self, mix_id, weights, tool=-1):
         """The mix for E moves queued from now on (already normalised weights). The
@@ -200,17 +219,38 @@ class Planner:
         it is, counted in the new unit."""
         self.synchronize()
         self.drive_steps_per_mm = list(drive_steps_per_mm)
-        for i in range(self.drives):
-            self.drive_mm[i] = self.drive_steps[i] / self.drive_steps_per_mm[i]
+        self._drive_mm_from_steps()
+
+    def _drive_mm_from_steps(self):
+        self.drive_mm = [self.drive_steps[i] / self.drive_steps_per_mm[i]
+                         for i in range(self.drives)]
 
     def _plan_e(self, e_mm, weights=None):
         """Per-drive exact filament and step targets after an E move of e_mm."""
         w = weights or self.tool_mix
         total = sum(w)
         spm = self.drive_steps_per_mm
-        drive_mm = [self.drive_mm[i] + e_mm * w[i] / total for i in range(self.drives)]
-        counts = [steps_from_mm(drive_mm[i], spm[i]) - self.drive_steps[i]
-                  for i in range(self.drives)]
+        now_mm = self.drive_mm
+        now_steps = self.drive_steps
+        # A drive with no share in the move stays where it is, and so does its target
+        # step: taken from the last plan while drive_mm is still that plan's list.
+        known = self._targets if self._targets_of is now_mm else None
+        drives = self.drives
+        drive_mm = [0.0] * drives
+        targets = [0] * drives
+        counts = [0] * drives
+        for i in range(drives):
+            if w[i] or known is None:
+                mm = now_mm[i] + e_mm * w[i] / total
+                target = steps_from_mm(mm, spm[i])
+            else:
+                mm = now_mm[i]
+                target = known[i]
+            drive_mm[i] = mm
+            targets[i] = target
+            counts[i] = target - now_steps[i]
+        self._targets_of = drive_mm
+        self._targets = targets
         return drive_mm, counts
 
     def _replay_counts(self, e_mm):
@@ -247,8 +287,7 @@ class Planner:
         # The drives' exact positions move by the replayed steps, and the rest by the
         # mix: the step targets then follow from those positions as for any move.
         sign = -1 if back else 1
-        for i in range(self.drives):
-            self.drive_mm[i] += sign * counts[i] / spm[i]
+        self.drive_mm = [self.drive_mm[i] + sign * counts[i] / spm[i] for i in range(self.drives)]
         return self._plan_e(sign * need_mm if need_mm > 1e-9 else 0.0)
 
     def _stretch(self, weights, start, end, counts=None):
@@ -283,23 +322,36 @@ class Planner:
 
     # --- adding blocks ---
     def _new_slot(self):
-        self._wait_for_slot()
-        slot = self.mem[st.S_HEAD]
-        return slot, st.BLOCK_BASE + slot * st.B_WORDS
+        """The slot for the next block, once the ring has room (one slot stays free, so
+        a full ring is not taken for an empty one)."""
+        m = self.mem
+        q = self.queue
+        while True:
+            count = m[_S_HEAD] - m[_S_TAIL]
+            if count < 0:
+                count += q
+            if count < q - 1:
+                break
+            self.idle()
+        if not self.busy():
+            self.prev_unit = None
+            self.prev_nominal = 0.0
+        return m[_S_HEAD]
 
     def _commit(self, slot):
         nxt = slot + 1
-        self.mem[st.S_HEAD] = 0 if nxt >= self.queue else nxt
+        self.mem[_S_HEAD] = 0 if nxt >= self.queue else nxt
 
     def add_dwell(self, seconds):
         ticks = int(seconds / self.tick_s + 0.5)
-        slot, b = self._new_slot()
+        slot = self._new_slot()
+        b = _BLOCK_BASE + slot * _B_WORDS
         m = self.mem
         for i in range(st.B_WORDS):
             m[b + i] = 0
         m[b + st.B_FLAGS] = st.F_DWELL
         m[b + st.B_DWELL] = ticks
-        self._set_plan(slot, 0.0, 0.0, 0.0, 0.0, None)
+        self._set_plan(slot, 0.0, 0.0, 0.0, 0.0)
         self._commit(slot)
         self.prev_unit = None
         self.prev_nominal = 0.0
@@ -330,71 +382,91 @@ class Planner:
     def _add_block(self, target_steps, feed_mm_s, homing_axes, dir_masks, e_mm, mix, replay):
         if feed_mm_s <= 0:
             raise PlanError("feed rate must be > 0")
+        # Builtins (abs, min, max) and module attributes are lookups by name: the
+        # arithmetic below is written out, as it runs for every line of G-code.
         pos = self.position_steps
-        spm = self.steps_per_mm
         saved_mm = self.drive_mm
         if replay and e_mm:
-            self.drive_mm = list(saved_mm)
             drive_mm, counts = self._replay_counts(e_mm)
             self.drive_mm = saved_mm
         else:
             drive_mm, counts = self._plan_e(e_mm, mix[1] if mix else None)
         e_steps = sum(counts)
-        delta = [target_steps[0] - pos[0], target_steps[1] - pos[1], target_steps[2] - pos[2],
-                 e_steps]
-        steps = [abs(d) for d in delta]
-        n = max(steps)
+        dx = target_steps[0] - pos[0]
+        dy = target_steps[1] - pos[1]
+        dz = target_steps[2] - pos[2]
+        steps = (dx if dx >= 0 else -dx, dy if dy >= 0 else -dy, dz if dz >= 0 else -dz,
+                 e_steps if e_steps >= 0 else -e_steps)
+        n = 0
+        for k in steps:
+            if k > n:
+                n = k
         if n == 0:
             self.drive_mm = drive_mm  # less than a step: it counts toward the next move
             return False
         if n >= 0x3FFFFFFF:
             raise PlanError("move too long: %d steps" % n)
-        d_mm = [delta[0] / spm[0], delta[1] / spm[1], delta[2] / spm[2], e_mm]
-        if e_steps and not e_mm:
-            d_mm[3] = e_steps / spm[3]
-        xyz_mm = sqrt(d_mm[0] * d_mm[0] + d_mm[1] * d_mm[1] + d_mm[2] * d_mm[2])
-        dist = xyz_mm if steps[0] or steps[1] or steps[2] else abs(d_mm[3])
+        spm = self.steps_per_mm
+        x_mm = dx / spm[0]
+        y_mm = dy / spm[1]
+        z_mm = dz / spm[2]
+        de_mm = e_steps / spm[3] if e_steps and not e_mm else e_mm
+        d_mm = (x_mm, y_mm, z_mm, de_mm)
+        xyz_mm = sqrt(x_mm * x_mm + y_mm * y_mm + z_mm * z_mm)
+        along_xyz = dx or dy or dz
+        dist = xyz_mm if along_xyz else (de_mm if de_mm >= 0 else -de_mm)
         inv = 1.0 / dist
         speed = feed_mm_s
-        accel = self.acceleration_mm_s2 if xyz_mm > 0 and (steps[0] or steps[1] or steps[2]) \
+        accel = self.acceleration_mm_s2 if xyz_mm > 0 and along_xyz \
             else self.retract_acceleration_mm_s2
+        max_feed = self.max_feed_mm_s
+        max_accel = self.max_accel_mm_s2
         for i in range(4):
             if steps[i]:
-                share = abs(d_mm[i]) * inv
-                speed = min(speed, self.max_feed_mm_s[i] / share)
-                accel = min(accel, self.max_accel_mm_s2[i] / share)
-        speed = min(speed, self.max_step_rate * dist / n)
-        len4 = sqrt(xyz_mm * xyz_mm + d_mm[3] * d_mm[3])
-        unit = [v / len4 for v in d_mm]
+                d = d_mm[i]
+                share = (d if d >= 0 else -d) * inv
+                v = max_feed[i] / share
+                if v < speed:
+                    speed = v
+                v = max_accel[i] / share
+                if v < accel:
+                    accel = v
+        v = self.max_step_rate * dist / n
+        if v < speed:
+            speed = v
+        len4 = sqrt(xyz_mm * xyz_mm + de_mm * de_mm)
+        unit = (x_mm / len4, y_mm / len4, z_mm / len4, de_mm / len4)
 
-        slot, b = self._new_slot()
+        slot = self._new_slot()
         # Junction speed from the deviation model; a stop if the queue ran empty.
         max_entry = 0.0
-        if self.prev_unit is not None and not homing_axes:
-            pu = self.prev_unit
+        pu = self.prev_unit
+        if pu is not None and not homing_axes:
             cos_theta = -(pu[0] * unit[0] + pu[1] * unit[1] + pu[2] * unit[2] + pu[3] * unit[3])
             if cos_theta < -0.999999:
-                vj = _INF
+                max_entry = _INF
             elif cos_theta > 0.999999:
-                vj = 0.0
+                max_entry = 0.0
             else:
                 sin_half = sqrt(0.5 * (1.0 - cos_theta))
-                vj = sqrt(accel * self.junction_deviation_mm * sin_half / (1.0 - sin_half))
-            max_entry = min(vj, speed, self.prev_nominal)
+                max_entry = sqrt(accel * self.junction_deviation_mm * sin_half / (1.0 - sin_half))
+            if speed < max_entry:
+                max_entry = speed
+            if self.prev_nominal < max_entry:
+                max_entry = self.prev_nominal
 
         m = self.mem
-        m[b + st.B_N] = n
+        b = _BLOCK_BASE + slot * _B_WORDS
+        m[b + _B_N] = n
         flags = 0
         dset = 0
         dclr = 0
-        masks = dir_masks
+        delta = (dx, dy, dz, e_steps)
         for i in range(4):
-            m[b + st.B_STEPS + i] = steps[i]
-            neg = delta[i] < 0
-            if neg:
-                flags |= st.F_NEG << i
-            mask = masks[i] if masks else 0
-            if neg:
+            m[b + _B_STEPS + i] = steps[i]
+            mask = dir_masks[i] if dir_masks else 0
+            if delta[i] < 0:
+                flags |= _F_NEG << i
                 dclr |= mask
             else:
                 dset |= mask
@@ -403,31 +475,33 @@ class Planner:
             dset, dclr = (dset & ~inv) | (dclr & inv), (dclr & ~inv) | (dset & inv)
         if homing_axes:
             flags |= st.F_HOMING | (homing_axes << st.F_HOME_SHIFT)
-        m[b + st.B_FLAGS] = flags
-        m[b + st.B_DIR_SET] = dset
-        m[b + st.B_DIR_CLR] = dclr
-        m[b + st.B_DWELL] = 0
+        m[b + _B_FLAGS] = flags
+        m[b + _B_DIR_SET] = dset
+        m[b + _B_DIR_CLR] = dclr
+        m[b + _B_DWELL] = 0
         given = counts
         if e_steps:
             # Exact per-drive counts as the block's mix; a fresh id, so the step loop
             # starts its schedule anew and gives each drive exactly its count.
-            weights, given = block_weights([abs(c) for c in counts])
+            weights, given = block_weights(counts)
             if e_steps < 0:
                 given = [-c for c in given]
             elif self.keep_extrusion and not replay:
                 self._remember_extrusion(weights, given)
             self._block_mix_id = (self._block_mix_id + 1) & 0x3FFFFFF
-            m[b + st.B_MIX] = self._block_mix_id
+            w = b + _B_MIX
+            m[w] = self._block_mix_id
+            last = len(weights) - 1
             for i in range(MAX_DRIVES):
-                m[b + st.B_MIX + 1 + i] = weights[i] if i < len(weights) else 0
-        self._set_plan(slot, dist, accel, speed, max_entry, unit)
-        self.entry[slot] = min(max_entry, sqrt(2.0 * accel * dist))
+                m[w + 1 + i] = weights[i] if i <= last else 0
+        self._set_plan(slot, dist, accel, speed, max_entry)
         self._recalculate(slot)
         self._commit(slot)
         self.position_steps = [target_steps[0], target_steps[1], target_steps[2], pos[3] + e_steps]
         self.drive_mm = drive_mm
+        drive_steps = self.drive_steps
         for i in range(self.drives):
-            self.drive_steps[i] += given[i]
+            drive_steps[i] += given[i]
         if homing_axes:
             self.prev_unit = None
             self.prev_nominal = 0.0
@@ -436,54 +510,82 @@ class Planner:
             self.prev_nominal = speed
         return True
 
-    def _set_plan(self, slot, mm, accel, nominal, max_entry, unit):
+    def _set_plan(self, slot, mm, accel, nominal, max_entry):
         self.mm[slot] = mm
         self.accel[slot] = accel
+        self.gain_v2[slot] = 2.0 * accel * mm
         self.nominal[slot] = nominal
         self.max_entry[slot] = max_entry
         self.entry[slot] = 0.0
         self.exit[slot] = 0.0
-        self.unit[slot] = unit
 
     # --- look-ahead ---
     def _recalculate(self, newest):
-        """Backward then forward pass over the blocks not yet started, then refresh
-        their integer records. The newest block must stop at its end."""
+        """Bring the look-ahead up to date after `newest` was queued (it stops at its
+        end) and rewrite the records of the blocks not yet started whose entry or exit
+        speed changed.
+
+        back_entry[k], the fastest block k may enter and still stop by the end of the
+        queue, only grows as blocks are queued. The backward pass stops at the first
+        block whose back_entry stays the same (Grbl's and Marlin's optimal marker): the
+        plan before it stands, and the forward pass starts there."""
         m = self.mem
         q = self.queue
-        tail = m[st.S_TAIL]
+        back = self.back_entry
+        gain = self.gain_v2
+        max_entry = self.max_entry
+        tail = m[_S_TAIL]
         first = tail
-        if m[st.S_ACTIVE]:
+        if m[_S_ACTIVE]:
             first = tail + 1 if tail + 1 < q else 0
-        if first == newest and m[st.S_ACTIVE]:
-            # Its entry is what the running block was planned to leave at.
-            self.entry[newest] = min(self.entry[newest], self.exit[tail])
         # Backward pass.
         k = newest
-        nxt_entry = 0.0
-        while True:
-            a2d = 2.0 * self.accel[k] * self.mm[k]
-            e = min(self.max_entry[k], sqrt(nxt_entry * nxt_entry + a2d))
-            if k == first and m[st.S_ACTIVE]:
-                e = min(e, self.exit[tail])
-            self.entry[k] = e
-            nxt_entry = e
-            if k == first:
+        e = sqrt(gain[k])
+        if max_entry[k] <= e:
+            e = max_entry[k]
+        back[k] = e
+        while k != first:
+            j = k - 1 if k > 0 else q - 1
+            e = sqrt(e * e + gain[j])
+            if max_entry[j] <= e:
+                e = max_entry[j]
+            k = j
+            if e == back[j]:
                 break
-            k = k - 1 if k > 0 else q - 1
-        # Forward pass, then records.
-        k = first
+            back[j] = e
+        # Forward pass from block k, whose entry stands, then records.
+        entry = self.entry
+        exit_speed = self.exit
+        if k == first:
+            # The block before the first one is running or has run: the first one
+            # enters at most at the exit baked into that record, also between blocks
+            # (tail advanced, not yet started), where more look-ahead would otherwise
+            # raise it above the speed the step loop left at. After a stop, max_entry
+            # is 0 anyway.
+            v0 = back[k]
+            handed_over = exit_speed[k - 1 if k > 0 else q - 1]
+            if handed_over < v0:
+                v0 = handed_over
+        else:
+            v0 = entry[k]
         while True:
-            nk = k + 1 if k + 1 < q else 0
-            exit_speed = 0.0 if k == newest else self.entry[nk]
-            if k != newest:
-                reach = sqrt(self.entry[k] * self.entry[k] + 2.0 * self.accel[k] * self.mm[k])
-                if exit_speed > reach:
-                    exit_speed = reach
-                    self.entry[nk] = reach
-            self._write_trapezoid(k, exit_speed)
+            if k == newest:
+                v1 = 0.0
+            else:
+                nk = k + 1 if k + 1 < q else 0
+                v1 = back[nk]
+                reach = sqrt(v0 * v0 + gain[k])
+                if v1 > reach:
+                    v1 = reach
+            # A record is a function of its entry and exit speeds: rewrite changed ones.
+            if k == newest or v0 != entry[k] or v1 != exit_speed[k]:
+                entry[k] = v0
+                self._write_trapezoid(k, v1)
             if k == newest:
                 break
+            # The step loop may have started block k meanwhile: then the next block
+            # enters at most at the exit it was given before.
+            v0 = v1 if v1 <= exit_speed[k] else exit_speed[k]
             k = nk
 
     def _write_trapezoid(self, slot, exit_speed):

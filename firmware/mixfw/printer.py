@@ -8,10 +8,11 @@
 # full ring stops reading its channel: the host's transport holds the rest, and no
 # `ok` goes out until there is room, so nothing is ever dropped.
 import time
-from mixfw.gcode import Parser, GcodeError
+from mixfw.gcode import Parser, GcodeError, command_key
 from mixfw.intake import Intake, LINE_OK, LINE_CUT
 
 BUSY_EVERY_MS = 2000
+_ANY_TOOL = command_key("T", -1)  # the handler of every T<n>
 RX_BYTES = 256
 
 
@@ -21,10 +22,6 @@ class Halted(Exception):
 
 class Resend(Exception):
     """A transmission error: the host must send the line again."""
-
-
-def command_key(letter, number):
-    return ord(letter) * 10000 + number
 
 
 def _skip_blanks(buf, i, n):
@@ -282,12 +279,12 @@ class Printer:
 
     def run_line(self, line):
         """Run a parsed line; returns text to follow `ok` or None."""
-        if not line.letter:
+        key = line.key
+        if not key:
             return None
-        key = command_key(line.letter, line.number)
         handler = self.commands.get(key)
         if handler is None and line.letter == "T":
-            key = command_key("T", -1)
+            key = _ANY_TOOL
             handler = self.commands.get(key)
         if handler is None:
             self.reply('echo:Unknown command: "%s%d"' % (line.letter, line.number))
