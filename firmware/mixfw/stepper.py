@@ -268,6 +268,8 @@ def tick(mem: ptr32, out, endstops) -> int:
         # A step waits while a STEP pin is still high or has just fallen (its low time).
         if phase < ONE or left != 0 or clr_mask != 0:
             mem[S_PHASE] = phase
+            if clr_mask == 0:
+                return 0  # the most common tick while moving: no step due, no pin to write
             run = 0
         else:
             mem[S_PHASE] = phase - ONE
