@@ -79,9 +79,9 @@ def expected_from_gcode(gcode_path, settings):
     Returns {"steps": {axis: n}, "moves": [(line, weights, drive_steps)], "moved":
     {axis}, "unmodelled": {command: first line}}: drive_steps are every drive's
     absolute planned steps after the move, weights the mix it prints with; moved names
-    every axis and drive that some move steps, even if it ends where it started. Modal state follows the firmware's
-    cmd_motion and cmd_mixing; the arithmetic is the planner's, in the same order, so
-    rounding is identical."""
+    every axis and drive that some move steps, even if it ends where it started. Modal
+    state follows the firmware's cmd_motion and cmd_mixing; the arithmetic is the
+    planner's, in the same order, so rounding is identical."""
     drives = settings["drives"]
     spm = settings["steps_per_mm"]
     mixes = list(default_tool_mixes(drives, settings.get("virtual_tools", 16)))
@@ -123,8 +123,9 @@ def expected_from_gcode(gcode_path, settings):
                                          if now[d] != drive_steps[d])
                             drive_steps = now
                     for i, a in enumerate(AXES):
-                        if target[i] != pos[i] and a not in moved and steps_from_mm(
-                                target[i] + off[i], spm[i]) != steps_from_mm(pos[i] + off[i], spm[i]):
+                        if target[i] != pos[i] and a not in moved and (
+                                steps_from_mm(target[i] + off[i], spm[i])
+                                != steps_from_mm(pos[i] + off[i], spm[i])):
                             moved.add(a)
                     pos = target
                 elif cmd == "G92":
