@@ -65,3 +65,17 @@ boards-check: setup
 .PHONY: bench
 bench: setup
 	$(PY) bench/run.py $(if $(QUICK),--quick)
+
+# OctoPrint, for host_tests/test_octoprint.py, in a venv of its own (its pinned
+# dependencies must not meet the project's). make hosts installs it once.
+HOSTS_VENV := .venv-hosts
+HOSTS_STAMP := $(HOSTS_VENV)/.installed
+OCTOPRINT_VERSION := 1.11.8
+.PHONY: hosts
+hosts: $(HOSTS_STAMP)
+
+$(HOSTS_STAMP):
+	python3 -m venv $(HOSTS_VENV)
+	$(HOSTS_VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(HOSTS_VENV)/bin/python -m pip install --quiet OctoPrint==$(OCTOPRINT_VERSION)
+	touch $(HOSTS_STAMP)
