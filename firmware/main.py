@@ -18,7 +18,8 @@ from mixfw.transition import Transitions, l0_mm
 from mixfw import cmd_motion, cmd_mixing, cmd_thermal, cmd_report, cmd_config, cmd_files, cmd_trace
 
 # Commands whose arguments are text, not numbers.
-RAW_COMMANDS = cmd_config.RAW_COMMANDS + cmd_files.RAW_COMMANDS + cmd_mixing.RAW_COMMANDS
+RAW_COMMANDS = (cmd_config.RAW_COMMANDS + cmd_files.RAW_COMMANDS + cmd_mixing.RAW_COMMANDS
+                + cmd_report.RAW_COMMANDS)
 # Where G-code files for printing from flash live.
 FILES_ROOT = "/"
 # Where the configuration lives on the board's flash filesystem.
@@ -81,8 +82,9 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     planner.dir_invert_mask = pins.dir_invert_mask
     motion = cmd_motion.Motion(planner, pins, settings, printer.reply)
     # A halt stops motion before anything is reported.
-    printer.on_halt.append(planner.abort)
-    printer.on_halt.append(motion.resync)
+    for stop in (printer.on_halt, printer.on_quick_stop):
+        stop.append(planner.abort)
+        stop.append(motion.resync)
     cmd_motion.register(printer, motion)
     transitions = Transitions(
         planner, l0_mm(settings["transition_l1_mm"], settings["transition_l2_mm"]),
@@ -91,6 +93,7 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
         motion.queue = transitions
         planner.before_sync.append(transitions.flush)
         printer.on_halt.insert(0, motion.queue.drop)
+        printer.on_quick_stop.insert(0, motion.queue.drop)
     mixing = cmd_mixing.Mixing(motion.queue, settings, config, printer.reply,
                                lambda i: mem[st.S_DRIVE_POS + i])
     config.before_save.append(mixing.filament_used_mm)
@@ -98,7 +101,9 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     cmd_mixing.register(printer, mixing)
     thermal = Thermal(machine, pin_map, settings, printer)
     cmd_thermal.register(printer, thermal, motion)
-    cmd_report.register(printer, cmd_report.Reports(printer, motion, planner, board.NAME))
+    cmd_report.register(printer, cmd_report.Reports(
+        printer, motion, planner, board.NAME,
+        storage=config.path is not None, files=bool(files_root)))
     cmd_config.register(printer, config)
     cmd_trace.register(printer, cmd_trace.Trace(mem, settings, printer.reply))
     config.appliers.append(motion.apply)

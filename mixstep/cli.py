@@ -8,8 +8,11 @@ from mixstep import paths
 
 def _sim(args):
     from mixstep import sim
+    from mixstep.serve import default_flash
+    config, files = default_flash(args.config, args.files)
     report = sim.run(args.gcode or paths.EXAMPLE_GCODE, args.trace, args.report,
-                     heap_lock=args.heap_lock, board=args.board)
+                     heap_lock=args.heap_lock, board=args.board, config_path=config,
+                     files_dir=files)
     summary = {k: report[k] for k in ("lines", "sim_seconds", "wall_seconds", "steps")}
     summary["errors"] = len(report["errors"])
     print(json.dumps(summary, indent=2))
@@ -26,7 +29,17 @@ def _serve(args):
         if not sep or not key:
             raise SystemExit("mixstep serve: --set wants KEY=VALUE, got %r" % item)
         settings[key] = value
-    return serve.main(tcp=args.tcp, pty=args.pty, realtime=args.realtime, settings=settings)
+    return serve.main(tcp=args.tcp, pty=args.pty, realtime=args.realtime, settings=settings,
+                      config=args.config, files=args.files, console_log=args.console_log)
+
+
+def _add_flash_args(p):
+    p.add_argument("--config", metavar="FILE",
+                   help="the simulated flash's configuration file, kept by M500 "
+                        "(default out/printer/mixstep.cfg)")
+    p.add_argument("--files", metavar="DIR",
+                   help="the simulated flash's G-code folder for M20-M32 "
+                        "(default out/printer/files)")
 
 
 def main(argv=None):
@@ -40,6 +53,7 @@ def main(argv=None):
                    help="lock the MicroPython heap around every step-loop call")
     p.add_argument("--board", default="sim",
                    help="run with this board's pin map and settings (boards/<name>)")
+    _add_flash_args(p)
     p.set_defaults(run=_sim)
     p = sub.add_parser("serve", help="run the simulated printer for host software (TCP or PTY)")
     p.add_argument("--tcp", metavar="HOST:PORT", help="serve the TCP G-code console here")
@@ -48,6 +62,9 @@ def main(argv=None):
                    help="simulated seconds per wall second (0: as fast as possible)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override a board setting, e.g. trace_records=60000 (repeatable)")
+    _add_flash_args(p)
+    p.add_argument("--console-log", metavar="FILE",
+                   help="write every console line in and out, with the simulated time")
     p.set_defaults(run=_serve)
     from mixstep import detool, esteps, preview  # each registers its own subcommand
     for tool in (esteps, detool, preview):

@@ -1,24 +1,48 @@
 """`mixstep serve`: the simulated printer as a network or serial printer, for hosts
 such as Pronterface/printcore and OctoPrint.
 
---tcp HOST:PORT  the firmware's own TCP console (several connections at once);
---pty            a pseudo-terminal, bridged to the firmware's serial console; the
-                 device path is printed, and hosts open it like a USB printer.
---set KEY=VALUE  a board setting for this run, e.g. trace_records=60000 for a step
-                 capture (M7300) longer than the default ring."""
+--tcp HOST:PORT     the firmware's own TCP console (several connections at once);
+--pty               a pseudo-terminal, bridged to the firmware's serial console; the
+                    device path is printed, and hosts open it like a USB printer.
+--config FILE       the simulated flash's configuration file (M500/M501);
+--files DIR         the simulated flash's G-code folder (M20-M32);
+                    both default to out/printer/ under the current directory.
+--set KEY=VALUE     a board setting for this run, e.g. trace_records=60000 for a step
+                    capture (M7300) longer than the default ring.
+--console-log FILE  every console line in and out, stamped with the simulated time.
+
+The firmware runs in a child process. However serve ends (its host closing, Ctrl-C,
+SIGTERM, or the parent dying), the child ends with it, so its TCP port is free again."""
+import ctypes
 import os
 import selectors
+import signal
 import subprocess
 import sys
 import threading
 import time
 import tty
+from pathlib import Path
 
 from mixstep import paths
 from mixstep.simprinter import SIM_MAIN, set_args
 
+# The simulated printer's flash, relative to where mixstep runs (as `make` does).
+DEFAULT_FLASH = Path("out") / "printer"
+_PR_SET_PDEATHSIG = 1
 
-def _command(tcp, realtime, stdio, edges=None, settings=None):
+
+def default_flash(config=None, files=None):
+    """config file and files folder, out/printer/ where not given; made if missing."""
+    config = Path(config) if config else DEFAULT_FLASH / "mixstep.cfg"
+    files = Path(files) if files else DEFAULT_FLASH / "files"
+    config.parent.mkdir(parents=True, exist_ok=True)
+    files.mkdir(parents=True, exist_ok=True)
+    return config, files
+
+
+def _command(tcp, realtime, stdio, edges=None, settings=None, config=None, files=None,
+             console_log=None):
     cmd = [paths.micropython(), "-X", "heapsize=2M", str(SIM_MAIN),
            "--realtime", str(realtime)] + set_args(settings)
     if tcp:
@@ -27,12 +51,46 @@ def _command(tcp, realtime, stdio, edges=None, settings=None):
         cmd.append("--no-stdio")
     if edges:
         cmd += ["--edges", str(edges)]
+    for flag, value in (("--config", config), ("--files", files),
+                        ("--console-log", console_log)):
+        if value:
+            cmd += [flag, str(value)]
     return cmd
 
 
-def serve_tcp(address, realtime=1.0, announce=print, settings=None):
-    proc = subprocess.Popen(_command(address, realtime, stdio=False, settings=settings),
-                            stdin=subprocess.DEVNULL, env=paths.micropython_env())
+def _die_with_parent():
+    """In the child before exec: the kernel sends SIGTERM when serve dies, even by
+    SIGKILL, so no firmware is left holding the port."""
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+    except (OSError, AttributeError):
+        pass  # not Linux: the handlers in main() still end it
+
+
+def _start(cmd, **kw):
+    # A session of its own: Ctrl-C in the terminal reaches serve only, which then
+    # ends the firmware itself (no traceback from the child).
+    return subprocess.Popen(cmd, env=paths.micropython_env(), start_new_session=True,
+                            preexec_fn=_die_with_parent if sys.platform == "linux" else None,
+                            **kw)
+
+
+def stop(proc, timeout_s=5):
+    """End the firmware process: SIGTERM, then SIGKILL if it lingers."""
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def serve_tcp(address, realtime=1.0, announce=print, settings=None, config=None, files=None,
+              console_log=None):
+    proc = _start(_command(address, realtime, stdio=False, settings=settings, config=config,
+                           files=files, console_log=console_log),
+                  stdin=subprocess.DEVNULL)
     announce("mixstep: simulated printer on tcp %s" % address)
     return proc
 
@@ -40,14 +98,14 @@ def serve_tcp(address, realtime=1.0, announce=print, settings=None):
 class PtyBridge:
     """A pseudo-terminal whose far end is the firmware's stdio console."""
 
-    def __init__(self, realtime=1.0, settings=None):
+    def __init__(self, realtime=1.0, settings=None, config=None, files=None, console_log=None):
         self._lock = threading.Lock()
         self.master, self.slave = os.openpty()
         tty.setraw(self.slave)  # a serial line: no echo, no line editing
         self.path = os.ttyname(self.slave)
-        self.proc = subprocess.Popen(_command(None, realtime, stdio=True, settings=settings),
-                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     env=paths.micropython_env(), bufsize=0)
+        self.proc = _start(_command(None, realtime, stdio=True, settings=settings,
+                                    config=config, files=files, console_log=console_log),
+                           stdin=subprocess.PIPE, stdout=subprocess.PIPE, bufsize=0)
 
     def run(self):
         """Copy bytes both ways until the firmware exits."""
@@ -79,6 +137,8 @@ class PtyBridge:
                             if self.master is None:
                                 return
                             os.write(self.master, data)
+        except BrokenPipeError:
+            return  # the firmware ended
         finally:
             self.close()
 
@@ -88,33 +148,52 @@ class PtyBridge:
         with self._lock:
             if self.master is None:
                 return
-            if self.proc.poll() is None:
-                self.proc.terminate()
-                self.proc.wait()
+            stop(self.proc)
             for fd in (self.master, self.slave):
                 os.close(fd)
             self.master = self.slave = None
 
 
-def main(tcp=None, pty=False, realtime=1.0, settings=None):
-    """settings: board settings to override, {key: value text}."""
+class _Terminated(Exception):
+    pass
+
+
+def _on_sigterm(signum, frame):
+    raise _Terminated()
+
+
+def main(tcp=None, pty=False, realtime=1.0, settings=None, config=None, files=None,
+         console_log=None):
+    """settings: board settings to override, {key: value text}. Returns the exit
+    status: 0 when stopped by Ctrl-C or SIGTERM, else the firmware's."""
     if bool(tcp) == bool(pty):
         raise SystemExit("mixstep serve: give either --tcp HOST:PORT or --pty")
-    if tcp:
-        proc = serve_tcp(tcp, realtime, announce=lambda s: print(s, flush=True),
-                         settings=settings)
-        try:
-            return proc.wait()
-        except KeyboardInterrupt:
-            proc.terminate()
-            return 0
-    bridge = PtyBridge(realtime, settings)
-    print("mixstep: simulated printer on serial device %s" % bridge.path, flush=True)
+    config, files = default_flash(config, files)
+    flash = dict(config=config, files=files, console_log=console_log)
+    in_main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _on_sigterm) if in_main_thread else None
+    proc = bridge = None
     try:
+        if tcp:
+            proc = serve_tcp(tcp, realtime, announce=lambda s: print(s, flush=True),
+                             settings=settings, **flash)
+            print("mixstep: configuration %s, files in %s" % (config, files), flush=True)
+            return proc.wait()
+        bridge = PtyBridge(realtime, settings, **flash)
+        print("mixstep: simulated printer on serial device %s" % bridge.path, flush=True)
+        print("mixstep: configuration %s, files in %s" % (config, files), flush=True)
         bridge.run()
-    except KeyboardInterrupt:
-        bridge.close()
-    return 0
+        return 0
+    except (KeyboardInterrupt, _Terminated):
+        print("mixstep: stopped", flush=True)
+        return 0
+    finally:
+        if bridge is not None:
+            bridge.close()
+        if proc is not None:
+            stop(proc)
+        if in_main_thread:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

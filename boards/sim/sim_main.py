@@ -3,6 +3,7 @@
 #                           [--jitter-us N [--jitter-seed N]]
 #                           [--tcp HOST:PORT] [--no-stdio] [--realtime FACTOR]
 #                           [--config FILE] [--files DIR] [--set KEY=VALUE ...]
+#                           [--console-log FILE]
 # By default it takes G-code on stdin and answers on stdout like a serial printer, in
 # lockstep (virtual time passes only when the firmware waits). With --tcp it also
 # serves TCP connections; --realtime paces virtual time against the wall clock (0:
@@ -14,6 +15,9 @@
 # --set pin_writer=registers (VALUE: a number, a comma-separated tuple, or text).
 # --jitter-us fires the timer callbacks up to N us late (interrupt latency; seeded by
 # --jitter-seed, so a run repeats exactly).
+# --console-log writes every line the consoles receive and send, stamped with the
+# simulated time: `<us> < <line>` received, `<us> > <line>` sent (as a host's serial
+# log, but in the printer's own time).
 import sys
 
 # The script's own folder comes first on the path; board.py must be the board's from
@@ -31,12 +35,12 @@ sys.modules["time"] = simtime
 def _args(argv):
     opts = {"edges": None, "heap_lock": False, "quantum_us": 1000, "tcp": None,
             "stdio": True, "realtime": None, "config": None, "files": None, "set": [],
-            "jitter_us": 0, "jitter_seed": 1}
+            "jitter_us": 0, "jitter_seed": 1, "console_log": None}
     i = 1
     while i < len(argv):
         a = argv[i]
         if a in ("--edges", "--quantum-us", "--tcp", "--realtime", "--config", "--files",
-                 "--jitter-us", "--jitter-seed"):
+                 "--jitter-us", "--jitter-seed", "--console-log"):
             i += 1
             opts[a[2:].replace("-", "_")] = argv[i]
         elif a == "--set":
@@ -63,6 +67,62 @@ def _value(text):
         except ValueError:
             pass
     return text
+
+
+class ConsoleLog:
+    """One file of every console's lines in and out, with the simulated time."""
+
+    def __init__(self, path):
+        self.f = open(path, "w")
+
+    def line(self, way, text):
+        self.f.write("%d %s %s\n" % (simmachine.now_us, way, text))
+        self.f.flush()
+
+
+class LoggedConsole:
+    """A console whose lines also go to a ConsoleLog."""
+
+    def __init__(self, console, log):
+        self.console = console
+        self.log = log
+        self.blocking = getattr(console, "blocking", False)
+        self.rx_line = bytearray()
+        self.tx_line = ""
+
+    def readinto(self, mv, block=False):
+        n = self.console.readinto(mv, block)
+        for i in range(max(n, 0)):
+            c = mv[i]
+            if c == 10:
+                self.log.line("<", bytes(self.rx_line).decode("ascii", "replace").rstrip("\r"))
+                self.rx_line = bytearray()
+            else:
+                self.rx_line.append(c)
+        return n
+
+    def write(self, text):
+        # Logged first: a host that has the line may read the log at once.
+        whole = self.tx_line + text
+        while "\n" in whole:
+            done, whole = whole.split("\n", 1)
+            self.log.line(">", done)
+        self.tx_line = whole
+        self.console.write(text)
+
+    def close(self):
+        if hasattr(self.console, "close"):
+            self.console.close()
+
+
+class LoggedListener:
+    def __init__(self, listener, log):
+        self.listener = listener
+        self.log = log
+
+    def accept(self):
+        console = self.listener.accept()
+        return console if console is None else LoggedConsole(console, self.log)
 
 
 def _heap_bytes():
@@ -113,6 +173,10 @@ def main():
     if opts["tcp"]:
         host, port = opts["tcp"].rsplit(":", 1)
         listeners.append(TcpListener(host, int(port)))
+    if opts["console_log"]:
+        log = ConsoleLog(opts["console_log"])
+        consoles = [LoggedConsole(c, log) for c in consoles]
+        listeners = [LoggedListener(l, log) for l in listeners]
     if interactive:
         simmachine.pace(float(opts["realtime"] or 0))
     warnings = []

@@ -1,6 +1,6 @@
-# Printing from flash, with Marlin's SD commands: M20 list, M23 select, M24 start or
-# resume, M25 pause, M26 rewind or set position, M27 status, M32 select and start,
-# M28/M29 upload, M30 delete. File names are text, so these take raw arguments.
+# Printing from flash, with Marlin's SD commands: M21 mount, M20 list, M23 select, M24
+# start or resume, M25 pause, M26 rewind or set position, M27 status, M32 select and
+# start, M28/M29 upload, M30 delete. File names are text, so these take raw arguments.
 from mixfw.gcode import GcodeError
 
 RAW_COMMANDS = (("M", 23), ("M", 28), ("M", 30), ("M", 32))
@@ -10,6 +10,10 @@ class FileCommands:
     def __init__(self, printer, files):
         self.printer = printer
         self.files = files
+
+    # M21: mount the card. The files live on the board's flash, always there.
+    def m21(self, line):
+        self.printer.reply("echo:SD card ok")
 
     # M20: list the G-code files with their sizes.
     def m20(self, line):
@@ -71,6 +75,7 @@ class FileCommands:
 def register(printer, files):
     c = FileCommands(printer, files)
     for name, fn, text in (
+        ("M21", c.m21, "mount the card (flash: always mounted)"),
         ("M20", c.m20, "list files"),
         ("M23", c.m23, "select a file"),
         ("M25", c.m25, "pause the file print"),

@@ -1,24 +1,48 @@
-# Reports: M114 (position), M115 (firmware and capabilities).
+# Reports and messages: M114 (position), M115 (firmware and capabilities), M117
+# (message), M118 (echo to the host). M117 and M118 take free text.
 from mixfw import stepper as st
 
+# The text after these is the argument, whatever letters it holds.
+RAW_COMMANDS = (("M", 117), ("M", 118))
 
-# What hosts may rely on, in Marlin's M115 form.
+# What hosts may rely on, in Marlin's M115 form. EEPROM and SDCARD depend on the
+# printer (Reports): a simulation without storage says 0.
 CAPABILITIES = (
-    ("SERIAL_XON_XOFF", 0), ("EEPROM", 1), ("VOLUMETRIC", 0), ("AUTOREPORT_TEMP", 0),
+    ("SERIAL_XON_XOFF", 0), ("VOLUMETRIC", 0), ("AUTOREPORT_TEMP", 1),
     ("PROGRESS", 0), ("PRINT_JOB", 1), ("AUTOLEVEL", 0), ("Z_PROBE", 0),
     ("LEVELING_DATA", 0), ("BUILD_PERCENT", 0), ("SOFTWARE_POWER", 0),
     ("TOGGLE_LIGHTS", 0), ("CASE_LIGHT_BRIGHTNESS", 0), ("EMERGENCY_PARSER", 1),
-    ("HOST_ACTION_COMMANDS", 0), ("PROMPT_SUPPORT", 0), ("SDCARD", 1), ("AUTOREPORT_SD_STATUS", 0),
+    ("HOST_ACTION_COMMANDS", 0), ("PROMPT_SUPPORT", 0), ("AUTOREPORT_SD_STATUS", 0),
     ("THERMAL_PROTECTION", 1), ("MIXING_EXTRUDER", 1),
 )
 
 
+def m118_words(text):
+    """M118's leading flags and its message: 'E1 A1 layer 3' -> ('E', 'A'), None
+    or the port number, 'layer 3'. As Marlin: flags are A, E or P and one digit,
+    each followed by a blank or the end."""
+    flags = []
+    port = None
+    while len(text) >= 2 and text[0] in "AaEePp" and text[1] in "0123456789" and (
+            len(text) == 2 or text[2] in " \t"):
+        letter = text[0].upper()
+        if letter == "P":
+            port = int(text[1])
+        elif text[1] != "0":
+            flags.append(letter)
+        text = text[2:].lstrip()
+    return flags, port, text
+
+
 class Reports:
-    def __init__(self, printer, motion, planner, board_name):
+    def __init__(self, printer, motion, planner, board_name, storage=True, files=True):
+        """storage: M500 can save the configuration; files: M20-M32 can print from
+        flash. M115 promises only what is there."""
         self.printer = printer
         self.motion = motion
         self.planner = planner
         self.board_name = board_name
+        self.capabilities = CAPABILITIES + (("EEPROM", int(storage)), ("SDCARD", int(files)))
 
     # M114: logical position and step counts, in Marlin's form.
     def m114(self, line):
@@ -31,10 +55,31 @@ class Reports:
     def m115(self, line):
         self.printer.reply("FIRMWARE_NAME:mixstep 0.1 (MicroPython) PROTOCOL_VERSION:1.0 "
                            "MACHINE_TYPE:%s EXTRUDER_COUNT:1" % self.board_name)
-        for cap in CAPABILITIES:
+        for cap in self.capabilities:
             self.printer.reply("Cap:%s:%d" % cap)
+
+    # M117 <text>: the status message, kept for a display or a report; M117 alone
+    # clears it. Example: M117 Printing...
+    def m117(self, line):
+        self.printer.message = line.args_text
+
+    # M118 [A1] [E1] [P<port>] <text>: send the text to the host, after "echo:" with
+    # E1 and "//" (an action command) with A1; P0 to every host, otherwise to the one
+    # that sent it. Example: M118 E1 layer 3
+    def m118(self, line):
+        flags, port, text = m118_words(line.args_text)
+        if "A" in flags:
+            text = "//" + text
+        if "E" in flags:
+            text = "echo:" + text
+        if port == 0:
+            self.printer.broadcast(text)
+        else:
+            self.printer.reply(text)
 
 
 def register(printer, reports):
     printer.register("M114", reports.m114, "report position")
     printer.register("M115", reports.m115, "firmware info")
+    printer.register("M117", reports.m117, "status message: M117 <text>")
+    printer.register("M118", reports.m118, "send text to the host: M118 [A1] [E1] [Pn] <text>")

@@ -1,5 +1,7 @@
-# Temperature and fan commands: M104/M109, M140/M190, M116, M105, M106/M107, M302,
-# M922. Handlers parse and check; mixfw.thermal does the heating and the protection.
+# Temperature and fan commands: M104/M109, M140/M190, M116, M105, M155, M106/M107,
+# M302, M922. Handlers parse and check; mixfw.thermal does the heating and the
+# protection.
+import time
 from mixfw.gcode import GcodeError
 from mixfw.thermal import REACHED_C
 
@@ -9,6 +11,9 @@ class ThermalCommands:
         self.printer = printer
         self.thermal = thermal
         self.cold_extrusion_allowed = False
+        self.autoreport_ms = 0  # M155: temperatures every so often, 0 for never
+        self._autoreport_to = None  # the host that asked
+        self._autoreport_at_ms = 0
 
     def _heater(self, name):
         h = getattr(self.thermal, name)
@@ -33,7 +38,34 @@ class ThermalCommands:
             done = lambda: heater.fault or abs(heater.temp_c - heater.target_c) <= REACHED_C
         else:
             done = lambda: heater.fault or heater.reached()
-        self.printer.wait_until(done)
+        self._wait_reporting(done)
+
+    def _wait_reporting(self, done):
+        """A heating wait: temperatures go to the host every second (the graph moves),
+        and M108 ends it."""
+        self.printer.wait_until(done, breakable=True, report=self.temperatures)
+
+    def temperatures(self):
+        """Marlin's temperature report: T:210.0 /210.0 B:60.0 /60.0 @:45 B@:30"""
+        self.thermal.refresh()
+        text = ""
+        for h, label in ((self.thermal.hotend, "T"), (self.thermal.bed, "B")):
+            if h is not None:
+                text += "%s:%.1f /%.1f " % (label, h.temp_c, h.target_c)
+        for h, label in ((self.thermal.hotend, "@"), (self.thermal.bed, "B@")):
+            if h is not None:
+                text += "%s:%d " % (label, int(h.duty * 127 + 0.5))
+        return text.rstrip()
+
+    def autoreport(self, now_ms):
+        """M155's reports, from the main loop and every wait."""
+        if self.autoreport_ms and time.ticks_diff(now_ms, self._autoreport_at_ms) >= 0:
+            self._autoreport_at_ms = time.ticks_add(now_ms, self.autoreport_ms)
+            ch = self._autoreport_to
+            if ch is None:  # asked by a file being printed
+                self.printer.broadcast(self.temperatures())
+            elif ch.open:
+                ch.write(self.temperatures() + "\n")
 
     # M104 S<celsius>: hot end target, no wait. Example: M104 S210
     def m104(self, line):
@@ -57,21 +89,20 @@ class ThermalCommands:
     # M116: wait until every heater with a target has reached it. Example: M116
     def m116(self, line):
         heaters = self.thermal.heaters
-        self.printer.wait_until(
-            lambda: all(h.fault or h.reached() for h in heaters))
+        self._wait_reporting(lambda: all(h.fault or h.reached() for h in heaters))
 
     # M105: temperatures in Marlin's form, heater power as 0..127.
     # Example reply: ok T:210.0 /210.0 B:60.0 /60.0 @:45 B@:30
     def m105(self, line):
-        self.thermal.refresh()
-        text = ""
-        for h, label in ((self.thermal.hotend, "T"), (self.thermal.bed, "B")):
-            if h is not None:
-                text += "%s:%.1f /%.1f " % (label, h.temp_c, h.target_c)
-        for h, label in ((self.thermal.hotend, "@"), (self.thermal.bed, "B@")):
-            if h is not None:
-                text += "%s:%d " % (label, int(h.duty * 127 + 0.5))
-        return text.rstrip()
+        return self.temperatures()
+
+    # M155 S<seconds>: send the temperatures to this host every S seconds (0: stop),
+    # as Marlin's AUTO_REPORT_TEMPERATURES. Example: M155 S1
+    def m155(self, line):
+        line.require("S")
+        self.autoreport_ms = line.int("S", lo=0, hi=60) * 1000
+        self._autoreport_to = self.printer.current
+        self._autoreport_at_ms = time.ticks_ms()
 
     # M106 [P0] [S<0-255>]: part fan speed, full without S. Example: M106 S128
     # A board without a part fan (PINS has no part_fan) refuses it, so a print that
@@ -124,6 +155,7 @@ def register(printer, thermal, motion):
         ("M190", c.m190, "set bed temperature S<C> and wait", True),
         ("M116", c.m116, "wait for every heater to reach its target", True),
         ("M105", c.m105, "report temperatures", False),
+        ("M155", c.m155, "report temperatures every S<s> seconds (S0: stop)", False),
         ("M106", c.m106, "part fan on S<0-255>", False),
         ("M107", c.m107, "part fan off", False),
         ("M302", c.m302, "cold extrusion: P1 allow, P0 refuse, S<C> minimum", False),
@@ -131,5 +163,6 @@ def register(printer, thermal, motion):
     ):
         printer.register(name, fn, text, guarded)
     motion.extrusion_guards.append(c.check_extrusion)
+    printer.add_background(c.autoreport)
     return c
 

@@ -403,6 +403,8 @@ class Config:
     def load(self):
         """M501: replace the settings with the saved ones (all or nothing). Returns a
         note if the file itself was bad but an interrupted save's copy was taken."""
+        if self.path is None:
+            raise ConfigError("this printer has no configuration storage")
         values, problem = self._read_saved()
         if values is None:
             raise ConfigError(problem or "no saved configuration in %s" % self.path)

@@ -256,6 +256,12 @@ class Parser:
             ln.args_text = ""
         return ln
 
+    def command_of_failed(self):
+        """After parse() raised: the command_key of the line's command, if its command
+        word was read before the error (0 if not). A command we don't know is answered
+        as unknown, not as bad words: its arguments may be text (M0 Click me)."""
+        return self.result[_R_KEY]
+
     def _reason(self, err):
         r = self.result
         at = chr(r[_R_AT])

@@ -4,20 +4,27 @@
 # which registers its own commands.
 #
 # While a command waits (queue full, M400, M109...), the channels are still read into
-# their ring buffers, so M112 is seen at once; other lines wait their turn there. A
-# full ring stops reading its channel: the host's transport holds the rest, and no
-# `ok` goes out until there is room, so nothing is ever dropped.
+# their ring buffers, so the emergency commands are seen at once (Marlin's emergency
+# parser): M112 halts, M410 drops the queued moves, M108 ends a heating wait, M876
+# answers a host prompt. Other lines wait their turn there. A full ring stops reading
+# its channel: the host's transport holds the rest, and no `ok` goes out until there
+# is room, so nothing is ever dropped.
 import time
 from mixfw.gcode import Parser, GcodeError, command_key
 from mixfw.intake import Intake, LINE_OK, LINE_CUT
 
 BUSY_EVERY_MS = 2000
+REPORT_EVERY_MS = 1000  # temperatures while a heating wait runs, as Marlin
 _ANY_TOOL = command_key("T", -1)  # the handler of every T<n>
 RX_BYTES = 256
 
 
 class Halted(Exception):
     """Raised out of a wait when the printer halted meanwhile (M112, heater fault)."""
+
+
+class Stopped(Halted):
+    """Raised out of a wait when M410 dropped the queued moves meanwhile."""
 
 
 class Resend(Exception):
@@ -52,9 +59,19 @@ def _is_command(buf, i, n, number):
     return buf[i:end] == digits and (end >= n or not 48 <= buf[end] <= 57)
 
 
-def _is_m112(scan, n):
-    """Does this line start (after an optional N<number>) with M112?"""
-    return _is_command(scan, _after_line_number(scan, 0, n), n, 112)
+# Commands acted on as soon as their line arrives, before the lines queued ahead of
+# them; when their turn comes they do nothing more.
+EMERGENCY = (112, 108, 410, 876)
+
+
+def _emergency(scan, n):
+    """The M number if this line starts (after an optional N<number>) with an emergency
+    command, else 0."""
+    i = _after_line_number(scan, 0, n)
+    for number in EMERGENCY:
+        if _is_command(scan, i, n, number):
+            return number
+    return 0
 
 
 class Channel:
@@ -90,8 +107,9 @@ class Channel:
             rx[(self.head + self.count) % RX_BYTES] = c
             self.count += 1
             if c == 10:
-                if _is_m112(self.scan, self.scan_n):
-                    printer.emergency_stop()
+                number = _emergency(self.scan, self.scan_n)
+                if number:
+                    printer.emergency(number)
                 self.scan_n = 0
             elif self.scan_n < 16:
                 self.scan[self.scan_n] = c
@@ -127,6 +145,18 @@ class Printer:
         self.current = None  # channel whose command is running
         self.background = []  # fn(now_ms), run from the main loop and every wait
         self.on_halt = []  # run first when the printer halts: heaters off, motion stop
+        self.on_quick_stop = []  # M410: drop the queued moves, the heaters stay on
+        self.busy_every_ms = BUSY_EVERY_MS  # M113; 0: no busy lines
+        # M108s received, and those that ended a wait or whose turn has passed: an
+        # M108 ends the heating wait running when it arrives, or one still ahead of
+        # it in the ring; once its own line runs, no later wait sees it.
+        self.breaks_received = 0
+        self.breaks_used = 0
+        self._breaks_run = 0
+        self.stop_count = 0  # M410s done
+        self._cmd_stop_count = 0
+        self._stop_pending = False
+        self.message = ""  # M117's text, for a display or a status report
         self.finish = []  # run when the last channel closes (simulation)
         self.halted = None  # reason, while halted
         self.halt_count = 0
@@ -139,6 +169,10 @@ class Printer:
         for name, fn, text in (
             ("M110", self.m110, "set the line number: M110 N<n>"),
             ("M112", self.m112, "emergency stop"),
+            ("M108", self.m108, "end a heating wait"),
+            ("M410", self.m410, "quick stop: drop the queued moves, heaters stay on"),
+            ("M876", self.m876, "answer a host prompt: S<choice>"),
+            ("M113", self.m113, "busy keep-alive interval S<s> (0: none)"),
             ("M999", self.m999, "clear a halt and resume"),
             ("M932", self.m932, "refuse commands after the first error"),
             ("M933", self.m933, "leave refuse-after-error mode"),
@@ -195,24 +229,40 @@ class Printer:
 
     def idle(self):
         """Let time pass inside a command: the step loop runs, background tasks run,
-        input is read (M112 acts at once), and the host hears `busy:` every 2 s.
-        Raises Halted if the printer halted since the command started."""
+        input is read (emergency commands act at once), and the host hears `busy:`
+        every busy_every_ms. Raises Halted if the printer halted since the command
+        started, Stopped if M410 dropped the moves."""
         self.machine_idle()
         self._run_background()
         self.pump_all()
-        if self.current is not None:
+        self._quick_stop_if_asked()
+        if self.current is not None and self.busy_every_ms:
             now = time.ticks_ms()
-            if time.ticks_diff(now, self._busy_at_ms) >= BUSY_EVERY_MS:
+            if time.ticks_diff(now, self._busy_at_ms) >= self.busy_every_ms:
                 self._busy_at_ms = now
                 self.current.write("busy: processing\n")
         if self.halt_count != self._cmd_halt_count:
             raise Halted(self.halted)
+        if self.stop_count != self._cmd_stop_count:
+            raise Stopped("quick stop (M410)")
 
-    def wait_until(self, done):
-        """Wait until done() is true. Returns False if the printer halted meanwhile."""
+    def wait_until(self, done, breakable=False, report=None):
+        """Wait until done() is true. Returns False if the printer halted or M410
+        stopped it meanwhile. breakable: M108 ends the wait (heating waits, as in
+        Marlin). report: fn() -> a line for the host every second meanwhile (it stands
+        in for `busy:`)."""
+        report_at_ms = time.ticks_ms()
         try:
             while not done():
+                if breakable and self.breaks_received > self.breaks_used:
+                    self.breaks_used = self.breaks_received
+                    return True
                 self.idle()
+                if report is not None:
+                    now = time.ticks_ms()
+                    if time.ticks_diff(now, report_at_ms) >= REPORT_EVERY_MS:
+                        report_at_ms = self._busy_at_ms = now
+                        self.reply(report())
         except Halted:
             return False
         return True
@@ -229,6 +279,29 @@ class Printer:
     def emergency_stop(self):
         if not self.halted or "M112" not in self.halted:
             self.halt("emergency stop (M112)")
+
+    def emergency(self, number):
+        """An emergency command has just arrived (see EMERGENCY)."""
+        if number == 112:
+            self.emergency_stop()
+        elif number == 108:
+            self.breaks_received += 1
+        elif number == 410:
+            # Done between commands or at a wait, never inside the planner's work.
+            self._stop_pending = True
+        # M876: no prompt of ours waits for an answer (Cap:PROMPT_SUPPORT:0).
+
+    def _quick_stop_if_asked(self):
+        if self._stop_pending:
+            self._stop_pending = False
+            self.quick_stop()
+
+    def quick_stop(self):
+        """M410: drop every queued move now; the position becomes where the axes
+        stopped. Heaters, targets and the file print's state stay."""
+        for fn in self.on_quick_stop:
+            fn()
+        self.stop_count += 1
 
     def clear_halt(self):
         self.halted = None
@@ -266,7 +339,20 @@ class Printer:
             ch.last_n = number
         elif star >= 0 and not numbered:
             raise Resend("No Line Number with checksum, Last Line: %d" % ch.last_n)
-        return self.parser.parse(buf, end)
+        return self._parse(buf, end)
+
+    def _parse(self, buf, end):
+        """The parsed line. Bad words after a command we don't know are not an error:
+        the command is answered as unknown, since its arguments may be free text."""
+        try:
+            return self.parser.parse(buf, end)
+        except GcodeError:
+            key = self.parser.command_of_failed()
+            if not key or key in self.commands or (
+                    key // 10000 == 84 and _ANY_TOOL in self.commands):
+                raise
+            self.reply('echo:Unknown command: "%s%d"' % (chr(key // 10000), key % 10000))
+            return None
 
     def _line_number(self, buf, i, end):
         i = _skip_blanks(buf, i, end)
@@ -303,6 +389,7 @@ class Printer:
         intake = ch.intake
         self.current = ch
         self._cmd_halt_count = self.halt_count
+        self._cmd_stop_count = self.stop_count
         self._busy_at_ms = time.ticks_ms()
         suffix = None
         try:
@@ -317,6 +404,8 @@ class Printer:
         except Resend as e:
             self.reply("Error:%s" % e)
             self.reply("Resend: %d" % (ch.last_n + 1))
+        except Stopped as e:
+            self.reply("echo:command stopped: %s" % e)
         except Halted as e:
             self.reply("Error:command stopped: %s" % e)
         except ValueError as e:  # GcodeError, MixError, PlanError: bad input
@@ -362,6 +451,7 @@ class Printer:
             job.done()
             return
         self._cmd_halt_count = self.halt_count
+        self._cmd_stop_count = self.stop_count
         try:
             line = self.parser.parse(data, len(data))
             self.run_line(line)
@@ -377,6 +467,7 @@ class Printer:
         left."""
         while self.channels or self.listeners:
             self.pump_all()
+            self._quick_stop_if_asked()
             did = False
             for ch in self.channels:
                 status = ch.next_line()
@@ -411,6 +502,35 @@ class Printer:
     # M112: emergency stop. The receive path acts on it before it is queued.
     def m112(self, line):
         self.emergency_stop()
+
+    # M108: end the heating wait (M109, M190, M116) running when it arrives, or one
+    # that arrived before it and has yet to start; the targets stay. From a file it
+    # does nothing, as no wait runs beside it.
+    def m108(self, line):
+        if self.current is not None:
+            self._breaks_run += 1
+            if self.breaks_used < self._breaks_run:
+                self.breaks_used = self._breaks_run
+
+    # M410: quick stop. Queued moves are dropped at once and the position is where the
+    # axes stopped; heaters stay on. Acted on when the line arrives from a host; from
+    # a file it runs in its turn.
+    def m410(self, line):
+        if self.current is None:
+            self.quick_stop()
+
+    # M876 S<choice>: a host's answer to a prompt. This firmware opens none
+    # (Cap:PROMPT_SUPPORT:0), so there is nothing to answer. Example: M876 S0
+    def m876(self, line):
+        pass
+
+    # M113 [S<seconds>]: how often a long command sends `busy: processing` (0: never,
+    # at most 60); alone, report. Example: M113 S2
+    def m113(self, line):
+        if not line.has("S"):
+            self.reply("echo:M113 S%d" % (self.busy_every_ms // 1000))
+            return
+        self.busy_every_ms = line.int("S", lo=0, hi=60) * 1000
 
     # M999: clear a halt; moves and heating are accepted again.
     def m999(self, line):
