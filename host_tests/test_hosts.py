@@ -107,3 +107,44 @@ def test_printcore_prints_a_real_file_over_the_pty(board):
         host.close()
     finally:
         bridge.close()
+
+
+def test_printcore_host_commands_over_the_pty(tmp_path):
+    # In real time, so M108 arrives while M109 waits, as when a user cancels.
+    (tmp_path / "files").mkdir()
+    bridge = serve.PtyBridge(realtime=1, config=tmp_path / "mixstep.cfg",
+                             files=tmp_path / "files")
+    thread = threading.Thread(target=bridge.run, daemon=True)
+    thread.start()
+    try:
+        host = Host(bridge.path)
+        reply = host.ask("M115")
+        assert reply[0].startswith("FIRMWARE_NAME:mixstep")
+        assert "Cap:EMERGENCY_PARSER:1" in reply and "Cap:AUTOREPORT_TEMP:1" in reply
+        assert "Cap:EEPROM:1" in reply and "Cap:SDCARD:1" in reply
+        assert host.ask("M117 Printing...") == ["ok"]
+        assert host.ask("M118 E1 layer 3") == ["echo:layer 3", "ok"]
+        assert host.ask("M21") == ["echo:SD card ok", "ok"]
+        assert host.ask("M500") == ["ok"]
+        # Heating: the host hears the temperature every second, and M108 ends the wait.
+        start = len(host.lines)
+        host.core.send_now("M109 S210")
+        time.sleep(2.5)
+        host.core.send_now("M108")
+        deadline = time.time() + 10
+        while len([l for l in host.lines[start:] if l.startswith("ok")]) < 2:
+            assert time.time() < deadline, host.lines[start:]
+            time.sleep(0.05)
+        waited = host.lines[start:]
+        temps = [l for l in waited if l.startswith("T:")]
+        assert 1 <= len(temps) <= 4 and all(" /210.0 " in t for t in temps), waited
+        assert not [l for l in waited if l.startswith("Error")]
+        # M155: temperatures without asking.
+        start = len(host.lines)
+        assert "ok" in host.ask("M155 S1")  # its first report may follow the ok at once
+        time.sleep(2.5)
+        assert len([l for l in host.lines[start:] if l.startswith("T:")]) >= 2
+        assert "ok" in host.ask("M155 S0")
+        host.close()
+    finally:
+        bridge.close()

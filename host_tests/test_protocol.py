@@ -631,9 +631,14 @@ def words(line):
                     pass
     line.require("S") if line.number == 163 else None
 
-p = Printer(96, lambda: None)
+def text(line):
+    line.args_text.encode()
+
+p = Printer(96, lambda: None, (("M", 117), ("M", 118)))
 for name in ("G0", "G1", "G4", "G28", "G90", "G91", "G92", "M104", "M106", "M114", "M163", "T"):
     p.register(name, words, "fuzz", guarded=True)
+p.register("M117", text, "fuzz")
+p.register("M118", text, "fuzz")
 p.add_channel(Feed(sys.stdin.buffer.read()))
 p.serve()
 sys.stdout.write("//done\\n")
@@ -664,13 +669,33 @@ def _mutate(line):
         lambda t: line[:t[0]] + t[1].replace(b"\n", b"?") + line[t[0]:])
 
 
+# Free text after the commands that take it, and after ones we don't know (M0).
+_text_line = st.tuples(
+    st.sampled_from(["M117", "m117", "M118", "M118 E1", "M118 A1", "M118 A1 E1 P0", "M118 P2",
+                     "M0", "M1", "M9998"]),
+    # M118 sends its text back: one that reads as a reply of the protocol ("ok ...")
+    # would be one to the host as well.
+    st.text(alphabet=[chr(c) for c in range(32, 127)], max_size=70).filter(
+        lambda t: not any(w in t.lower() for w in ("ok", "error", "resend", "busy"))),
+).map(lambda t: ("%s %s" % t).encode())
 _line = st.one_of(
     _gcode.map(lambda s: s.encode("latin-1")),
     _numbered().map(lambda s: s.encode("latin-1")),
     st.binary(max_size=140).map(lambda b: b.replace(b"\n", b"")),
+    _text_line,
     st.sampled_from([b"M112", b"M999", b"M932", b"M933", b"M110 N5", b"M110", b"N-1 M110 N-1*125",
+                     b"M108", b"M410", b"M876 S1", b"M113 S1", b"N3 M108*0",
                      b"G1 X" + b"1" * 120, b" " * 97, b";" + b"\xff" * 200]),
 ).flatmap(lambda b: st.one_of(st.just(b), _mutate(b)))
+
+
+def _is_text_command(line):
+    """A plain M117/M118 or unknown-command line whose text no rule of the intake or
+    the protocol refuses: its answer must never be Error:."""
+    if intake_verdict(line) or b"*" in line.split(b";")[0]:
+        return False
+    words = line.replace(b"\r", b"").split(b";")[0].split()
+    return bool(words) and words[0].upper() in (b"M117", b"M118", b"M0", b"M1", b"M9998")
 
 
 def intake_verdict(line):
@@ -710,6 +735,9 @@ def check_answers(lines, out, reports=False):
         verdict = intake_verdict(line)
         if verdict:
             assert body == [verdict], (line, a)
+        if _is_text_command(line):
+            assert not [t for t in body if t.startswith("Error:") and t != HALT_BROADCAST
+                        and "halted" not in t and "refused" not in t], (line, a)
 
 
 def test_fuzz_intake_parser_and_protocol(mp):
@@ -734,7 +762,8 @@ def test_fuzz_intake_parser_and_protocol(mp):
 _SAFE = {("G", 0), ("G", 1), ("G", 90), ("G", 91), ("G", 92), ("G", 20), ("G", 21),
          ("M", 82), ("M", 83), ("M", 105), ("M", 106), ("M", 107), ("M", 110), ("M", 112),
          ("M", 114), ("M", 115), ("M", 119), ("M", 163), ("M", 164),
-         ("M", 932), ("M", 933), ("M", 999), ("T", None)}
+         ("M", 932), ("M", 933), ("M", 999), ("T", None),
+         ("M", 117), ("M", 118), ("M", 108), ("M", 410), ("M", 876), ("M", 113)}
 
 
 def _safe_for_full_firmware(line):
