@@ -6,13 +6,15 @@ from mixfw import stepper as st
 RAW_COMMANDS = (("M", 117), ("M", 118))
 
 # What hosts may rely on, in Marlin's M115 form. EEPROM and SDCARD depend on the
-# printer (Reports): a simulation without storage says 0.
+# printer (Reports): a simulation without storage says 0. HOST_ACTION_COMMANDS is
+# left out: OctoPrint reads ":0" as "supported but disabled" and warns the user to
+# turn on what this firmware doesn't have.
 CAPABILITIES = (
     ("SERIAL_XON_XOFF", 0), ("VOLUMETRIC", 0), ("AUTOREPORT_TEMP", 1),
     ("PROGRESS", 0), ("PRINT_JOB", 1), ("AUTOLEVEL", 0), ("Z_PROBE", 0),
     ("LEVELING_DATA", 0), ("BUILD_PERCENT", 0), ("SOFTWARE_POWER", 0),
     ("TOGGLE_LIGHTS", 0), ("CASE_LIGHT_BRIGHTNESS", 0), ("EMERGENCY_PARSER", 1),
-    ("HOST_ACTION_COMMANDS", 0), ("PROMPT_SUPPORT", 0), ("AUTOREPORT_SD_STATUS", 0),
+    ("PROMPT_SUPPORT", 0), ("AUTOREPORT_SD_STATUS", 0),
     ("THERMAL_PROTECTION", 1), ("MIXING_EXTRUDER", 1),
 )
 
