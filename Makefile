@@ -43,7 +43,7 @@ clean:
 # Cost of one step-loop call (viper vs bytecode vs an empty viper call) on the unix port.
 .PHONY: step-cost
 step-cost: setup
-	MICROPYPATH=firmware:boards/sim $(VENV)/bin/micropython bench/step_cost.py
+	MICROPYPATH=firmware:boards/sim $${MIXSTEP_MICROPYTHON:-$(VENV)/bin/micropython} bench/step_cost.py
 
 # Onto a board: make deploy BOARD=pico PORT=/dev/ttyACM0 (DRY_RUN=1 prints the
 # mpremote commands), make freeze BOARD=esp32_devkit, make board-check BOARD=... PORT=...

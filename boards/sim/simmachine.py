@@ -6,8 +6,12 @@
 # min endstops read triggered at or below position 0, where the axes start.
 #
 # Edge records are 64-bit words: time_us << 8 | gpio << 1 | level, flushed to a file
-# in native byte order outside the step loop. Recording never allocates, so the step
-# loop can run with the heap locked.
+# in native (little-endian) byte order outside the step loop. Recording never
+# allocates, so the step loop can run with the heap locked, on a 32-bit port too: no
+# value the step loop's callbacks compute reaches 2**30, where a 31-bit small int
+# would become a heap-allocated big int. For that, the loops keep the time modulo
+# 2**30 (_now_w) beside now_us (which outgrows 2**30 after 18 simulated minutes), and
+# records are built from 16-bit pieces.
 from array import array
 import gc
 import micropython
@@ -31,10 +35,17 @@ _CAPACITY = 8192
 _FLUSH_AT = _CAPACITY - 256  # one tick writes far fewer edges than this
 
 now_us = 0
-quantum_us = 1000  # virtual time one idle() call advances
+quantum_us = 1000  # virtual time one idle() call advances; below 2**24
+_W30 = 0x3FFFFFFF  # times modulo 2**30: small ints on every port
+_now_w = 0  # now_us & _W30, kept by whatever sets now_us
+# now_us at the start of the idle quantum, as (now_us >> 24, now_us & 0xFFFFFF): every
+# edge until the next quantum falls less than 2**24 us after it, so a record's time
+# is this plus at most one carry.
+_base_hi = 0
+_base_lo = 0
 heap_lock_ticks = False  # lock the heap around every timer callback
 
-_edges = array("Q", bytes(8 * _CAPACITY))
+_edges = array("H", bytes(8 * _CAPACITY))  # 4 pieces per record, low first
 _n = 0
 _out = None
 _levels = bytearray(GPIO_COUNT)
@@ -92,7 +103,7 @@ def attach_world(pin_map, step_names_in_order, inverted=()):
 
 
 def buffer_bytes():
-    return len(_edges) * 8
+    return len(_edges) * 2
 
 
 def record_to(path):
@@ -103,7 +114,7 @@ def record_to(path):
 def flush():
     global _n
     if _out is not None and _n:
-        _out.write(memoryview(_edges)[0:_n])
+        _out.write(memoryview(_edges)[0:4 * _n])
     _n = 0
 
 
@@ -153,10 +164,10 @@ def _apply_bank():
 
 
 # The PIO state machine (boards/sim/rp2.py): words of pin levels waiting for their
-# output time, in a ring; the real FIFO holds 8. Times are kept modulo 2**31 in an
-# array('i'), as reading an array('q') would allocate under the heap lock.
+# output time, in a ring; the real FIFO holds 8. Times are kept modulo 2**30 (_W30),
+# as pio_put runs in the step loop, under the heap lock.
 _PIO_SLOTS = 64
-_WRAP = 0x7FFFFFFF
+_HALF = 0x20000000  # a wrapped difference at or above this is negative
 _pio_time = array("i", bytes(4 * _PIO_SLOTS))
 _pio_word = array("i", bytes(4 * _PIO_SLOTS))
 _pio_head = 0
@@ -164,7 +175,7 @@ _pio_tail = 0
 _pio_base = 0  # first GPIO
 _pio_count = 0  # GPIOs
 _pio_period_us = 0  # one word's time
-_pio_next_us = 0  # earliest time the next word can come out
+_pio_next_w = 0  # earliest time the next word can come out, modulo 2**30
 pio_overflows = 0
 
 
@@ -176,31 +187,32 @@ def attach_pio(base_gpio, count, period_us):
 
 
 def pio_put(word):
-    global _pio_head, _pio_next_us, pio_overflows
+    global _pio_head, _pio_next_w, pio_overflows
     head = _pio_head
     nxt = head + 1 if head + 1 < _PIO_SLOTS else 0
     if nxt == _pio_tail:
         pio_overflows += 1
         return
-    at = _pio_next_us if _pio_next_us > now_us else now_us
-    _pio_time[head] = at & _WRAP
+    at = _pio_next_w if ((_pio_next_w - _now_w) & _W30) < _HALF else _now_w
+    _pio_time[head] = at
     _pio_word[head] = word
-    _pio_next_us = at + _pio_period_us
+    _pio_next_w = (at + _pio_period_us) & _W30
     _pio_head = nxt
 
 
 def _pio_output(until_us):
     """Output every word due by until_us, at its own time."""
-    global now_us, _pio_tail
+    global now_us, _now_w, _pio_tail
     tail = _pio_tail
     if tail == _pio_head:
         return
     keep = now_us
     while tail != _pio_head:
-        late = (until_us - _pio_time[tail]) & _WRAP
-        if late > 0x3FFFFFFF:  # not due yet
+        late = (until_us - _pio_time[tail]) & _W30
+        if late >= _HALF:  # not due yet
             break
         now_us = until_us - late
+        _now_w = now_us & _W30
         word = _pio_word[tail]
         bit = 0
         while bit < _pio_count:
@@ -209,19 +221,36 @@ def _pio_output(until_us):
         tail = tail + 1 if tail + 1 < _PIO_SLOTS else 0
     _pio_tail = tail
     now_us = keep
+    _now_w = now_us & _W30
+
+
+def _set_now(t_us):
+    """Move virtual time to t_us outside the tick loops."""
+    global now_us, _now_w, _base_hi, _base_lo
+    now_us = t_us
+    _now_w = t_us & _W30
+    _base_hi = t_us >> 24
+    _base_lo = t_us & 0xFFFFFF
 
 
 def drain_pio():
     """Let the state machine output everything it holds (end of a run)."""
-    global now_us
     if _pio_head != _pio_tail:
-        _pio_output(_pio_next_us)
-        now_us = max(now_us, _pio_next_us)
+        ahead_us = (_pio_next_w - _now_w) & _W30
+        end = now_us + (ahead_us if ahead_us < _HALF else 0)
+        _pio_output(end)
+        _set_now(end)
 
 
 def _record(gpio, level):
     global _n
-    _edges[_n] = (now_us << 8) | (gpio << 1) | level
+    lo = _now_w & 0xFFFFFF
+    hi = _base_hi + 1 if lo < _base_lo else _base_hi
+    i = 4 * _n
+    _edges[i] = ((lo & 0xFF) << 8) | (gpio << 1) | level
+    _edges[i + 1] = lo >> 8
+    _edges[i + 2] = hi & 0xFFFF
+    _edges[i + 3] = hi >> 16
     _n += 1
     if _n >= _CAPACITY:  # a flush outside idle() would be a bug: drop nothing, stop
         raise RuntimeError("edge buffer overflow")
@@ -336,7 +365,8 @@ class Timer:
 
 def idle():
     """Advance virtual time by quantum_us, firing due timer callbacks."""
-    global now_us, _idle_calls, heap_peak_bytes
+    global now_us, _now_w, _idle_calls, heap_peak_bytes
+    _set_now(now_us)  # the quantum's base for the records
     _idle_calls += 1
     if _idle_calls >= _HEAP_EVERY:
         _idle_calls = 0
@@ -357,11 +387,14 @@ def idle():
                 if _pio_head != _pio_tail:  # a call per tick would cost more than the tick
                     _pio_output(nxt)
                 now_us = nxt
+                _now_w = nxt & _W30
                 micropython.heap_lock()
-                cb(t)
-                if _bank is not None:
-                    _apply_bank()
-                micropython.heap_unlock()
+                try:  # an error must reach the firmware's handlers with the heap open
+                    cb(t)
+                    if _bank is not None:
+                        _apply_bank()
+                finally:
+                    micropython.heap_unlock()
                 nxt += per
                 if _n > _FLUSH_AT:
                     flush()
@@ -370,6 +403,7 @@ def idle():
                 if _pio_head != _pio_tail:
                     _pio_output(nxt)
                 now_us = nxt
+                _now_w = nxt & _W30
                 cb(t)
                 if _bank is not None:
                     _apply_bank()
@@ -378,7 +412,7 @@ def idle():
                     flush()
         t._next = nxt
     _pio_output(end)
-    now_us = end
+    _set_now(end)
     for hook in _world_hooks:
         hook(end)
     if realtime_factor:
@@ -394,7 +428,7 @@ def _fire_late(t, end):
     raised if need be so it runs at least 1 us after that one: callbacks keep their
     order, as a late interrupt delays the next. A callback whose time falls after end
     waits for the next quantum."""
-    global now_us
+    global now_us, _now_w
     cb = t._cb
     per = t.period_us
     nxt = t._next
@@ -403,13 +437,16 @@ def _fire_late(t, end):
         at = nxt + late
         _pio_output(at)
         now_us = at
+        _now_w = at & _W30
         if heap_lock_ticks:
             micropython.heap_lock()
-        cb(t)
-        if _bank is not None:
-            _apply_bank()
-        if heap_lock_ticks:
-            micropython.heap_unlock()
+        try:
+            cb(t)
+            if _bank is not None:
+                _apply_bank()
+        finally:
+            if heap_lock_ticks:
+                micropython.heap_unlock()
         if _n > _FLUSH_AT:
             flush()
         nxt += per

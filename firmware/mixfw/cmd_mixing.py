@@ -5,6 +5,7 @@
 from mixfw.gcode import GcodeError
 from mixfw.mixer import normalize
 from mixfw.gradient import Gradient, ALONG_Z, ALONG_E
+from mixfw.planner import NM_PER_MM
 
 _MARLIN_LETTERS = "ABCDHI"  # Marlin's letters for drives 0..5 in M165
 
@@ -27,7 +28,9 @@ class Mixing:
         self.palette = None  # Ovenbird's mixing matrix: rows of drive shares; None: identity
         self.gradient = None
         self.gradient_on = False
-        self.extruded_mm = 0.0  # printing extrusion since the gradient was set (ALONG_E)
+        # Printing extrusion since the gradient was set (ALONG_E), in integer nm: a sum
+        # over a whole print, which 32-bit floats would let drift.
+        self.extruded_nm = 0
         self._activate(0)
 
     def filament_used_mm(self):
@@ -79,7 +82,7 @@ class Mixing:
         else:
             self.reply("echo:T%d mix set; M500 keeps it after a restart" % tool)
 
-    def before_extrude(self, z_mm, e_mm):
+    def before_extrude(self, z_mm, e_nm):
         """Called by motion before each move that extrudes: a gradient sets the mix the
         move prints with, taken at the middle of the move."""
         g = self.gradient
@@ -88,9 +91,9 @@ class Mixing:
         if g.along == ALONG_Z:
             pos = z_mm
         else:
-            pos = self.extruded_mm + max(e_mm, 0.0) / 2
-            if e_mm > 0:
-                self.extruded_mm += e_mm
+            pos = (self.extruded_nm + max(e_nm, 0) // 2) / NM_PER_MM
+            if e_nm > 0:
+                self.extruded_nm += e_nm
         mix = g.weights_at(pos)
         if mix != self.mix:
             self.mix = mix
@@ -153,7 +156,7 @@ class Mixing:
             raise GcodeError("M169 needs stops: Z<pos>:<tool>,... or E<mm>:<tool>,...")
         self.gradient = Gradient(stops, along, alias, self.drives)
         self.gradient_on = True
-        self.extruded_mm = 0.0
+        self.extruded_nm = 0
         self._after_gradient_change()
 
     def _after_gradient_change(self):

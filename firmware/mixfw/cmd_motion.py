@@ -1,13 +1,15 @@
 # Motion commands: G0/G1, G4, G28, G90/G91, G92, G20/G21, M82/M83, M400, M17/M18/M84.
 # Handlers parse and check; the planner does the work.
 from mixfw.gcode import GcodeError, letter_index
-from mixfw.planner import steps_from_mm
+from mixfw.planner import steps_from_mm, nm_from_mm, NM_PER_MM
 from mixfw import stepper as st
 
 AXIS_LETTERS = "XYZE"
 _AXIS_INDEX = tuple(letter_index(ch) for ch in AXIS_LETTERS)
 _AXIS_BITS = sum(1 << i for i in _AXIS_INDEX)  # in a parsed line's present mask
 _F_INDEX = letter_index("F")
+_E_INDEX = letter_index("E")
+_NM_DECIMALS = 6  # E words are read as exact nanometres
 # retract_policy: retractions follow the mix and run it exactly backwards, or pull every
 # drive equally (and push them back equally), or take back exactly the steps each drive
 # made in the latest extrusion (and push exactly those back).
@@ -24,8 +26,13 @@ class Motion:
         self.planner = planner
         self.queue = planner  # where moves go: the planner, or Transitions in front of it
         self.pins = pins
-        self.pos_mm = [0.0, 0.0, 0.0, 0.0]  # logical, as G-code sees it
-        self.offset_mm = [0.0, 0.0, 0.0, 0.0]  # machine = logical + offset (G92)
+        # Logical X Y Z, as G-code sees it, and their G92 offsets (machine = logical +
+        # offset). pos_mm[3] mirrors e_nm for reports: E itself is kept in integers
+        # (nanometres), as it adds up over a whole print.
+        self.pos_mm = [0.0, 0.0, 0.0, 0.0]
+        self.offset_mm = [0.0, 0.0, 0.0, 0.0]
+        self.e_nm = 0  # logical E
+        self.e_offset_nm = 0  # filament = logical E + offset (G92 E, G10/G11)
         self.absolute = True
         self.absolute_e = True
         self.feed_mm_s = settings["default_feed_mm_s"]
@@ -37,7 +44,7 @@ class Motion:
         self.soft_limits = settings.get("soft_limits", True)
         # Longest E move accepted, as Marlin's PREVENT_LENGTHY_EXTRUDE.
         self.max_extrude_mm = settings.get("max_extrude_mm", 200.0)
-        self.retracted_mm = 0.0  # retraction not yet undone (equal and replay policies)
+        self.retracted_nm = 0  # retraction not yet undone (equal and replay policies)
         self.fw_retracted = False
         self._retraction_settings(settings)
         # Called before a move that extrudes; each raises GcodeError to refuse it
@@ -69,6 +76,7 @@ class Motion:
         self.retract_policy = settings.get("retract_policy", RETRACT_FOLLOW_MIX)
         self.planner.keep_extrusion = self.retract_policy == RETRACT_REPLAY
         self.retract_mm = settings.get("retract_mm", 2.0)
+        self.retract_nm = nm_from_mm(self.retract_mm)
         self.retract_feed_mm_s = settings.get("retract_feed_mm_s", 40.0)
         self.unretract_feed_mm_s = settings.get("unretract_feed_mm_s", 40.0)
 
@@ -124,13 +132,16 @@ class Motion:
         pos = self.pos_mm
         target = list(pos)
         moved = 0
-        for i in range(4):
+        for i in range(3):
             k = _AXIS_INDEX[i]
             if (present >> k) & 1:
                 v = line.float_at(k)
-                relative = not (self.absolute_e if i == 3 else self.absolute)
-                target[i] = target[i] + v if relative else v
+                target[i] = v if self.absolute else target[i] + v
                 moved |= 1 << i
+        target_e_nm = self.e_nm
+        if (present >> _E_INDEX) & 1:
+            v = line.fixed_at(_E_INDEX, _NM_DECIMALS)
+            target_e_nm = v if self.absolute_e else target_e_nm + v
         if self.soft_limits:
             for i in range(3):
                 mm = target[i] + self.offset_mm[i]
@@ -138,60 +149,67 @@ class Motion:
                     raise GcodeError("move to %s%.3f is outside the soft limits 0..%g mm"
                                      % (AXIS_LETTERS[i], target[i], self.travel_mm[i]))
         steps = self._steps(target)
-        e_mm = target[3] - pos[3]
+        e_nm = target_e_nm - self.e_nm
         at = self.queue.position_steps
         xyz = (steps[0] != at[0]) | (steps[1] != at[1]) << 1 | (steps[2] != at[2]) << 2
-        if xyz or e_mm:
-            if e_mm:
+        if xyz or e_nm:
+            if e_nm:
                 for fn in self.before_extrude:
-                    fn((pos[2] + target[2]) / 2, e_mm)
-            self._queue(steps, xyz, e_mm, self.feed_mm_s)
+                    fn((pos[2] + target[2]) / 2, e_nm)
+            self._queue(steps, xyz, e_nm, self.feed_mm_s)
+        self._set_e(target_e_nm)
+        target[3] = self.pos_mm[3]
         self.pos_mm = target
         return None
 
-    def _queue(self, steps, xyz, e_mm, feed_mm_s):
-        """Queue a move of X Y Z (axes in xyz) to steps, with e_mm of filament."""
-        if e_mm:
-            if abs(e_mm) > self.max_extrude_mm:
+    def _set_e(self, e_nm):
+        self.e_nm = e_nm
+        self.pos_mm[3] = e_nm / NM_PER_MM
+
+    def _queue(self, steps, xyz, e_nm, feed_mm_s):
+        """Queue a move of X Y Z (axes in xyz) to steps, with e_nm of filament."""
+        if e_nm:
+            e_mm = abs(e_nm) / NM_PER_MM
+            if e_mm > self.max_extrude_mm:
                 raise GcodeError("extrusion of %.1f mm in one move is over max_extrude_mm %g"
-                                 % (abs(e_mm), self.max_extrude_mm))
+                                 % (e_mm, self.max_extrude_mm))
             for guard in self.extrusion_guards:
                 guard()
-        self.enable_for(xyz | (8 if e_mm else 0))
+        self.enable_for(xyz | (8 if e_nm else 0))
         q = self.queue
         policy = self.retract_policy
-        if not xyz and policy == RETRACT_EQUAL and (e_mm < 0 or self.retracted_mm > 0):
+        if not xyz and policy == RETRACT_EQUAL and (e_nm < 0 or self.retracted_nm > 0):
             # A retraction, or the unretraction after it: every drive pulls equally, and
             # as drives are planned from absolute positions, pushes back exactly.
-            q.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_mm=e_mm,
+            q.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_nm=e_nm,
                        mix=(q.mix_id, (1,) * self.drives))
-            self.retracted_mm = max(0.0, self.retracted_mm - e_mm)
-        elif policy == RETRACT_REPLAY and (e_mm < 0 or (not xyz and self.retracted_mm > 0)):
+            self.retracted_nm = max(0, self.retracted_nm - e_nm)
+        elif policy == RETRACT_REPLAY and (e_nm < 0 or (not xyz and self.retracted_nm > 0)):
             # Wipes (retraction while moving) count as retraction too.
-            q.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_mm=e_mm, replay=True)
-            self.retracted_mm = max(0.0, self.retracted_mm - e_mm)
+            q.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_nm=e_nm, replay=True)
+            self.retracted_nm = max(0, self.retracted_nm - e_nm)
         else:
-            if policy == RETRACT_REPLAY and e_mm > 0:
-                self.retracted_mm = 0.0  # as the planner forgets them on extrusion
-            q.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_mm=e_mm)
+            if policy == RETRACT_REPLAY and e_nm > 0:
+                self.retracted_nm = 0  # as the planner forgets them on extrusion
+            q.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_nm=e_nm)
 
     # G10: firmware retraction by retract_mm at retract_feed_mm_s; the logical E stays.
     def g10(self, line):
         if self.fw_retracted:
             return
-        self._fw_retract(-self.retract_mm, self.retract_feed_mm_s)
+        self._fw_retract(-self.retract_nm, self.retract_feed_mm_s)
         self.fw_retracted = True
 
     # G11: undo G10.
     def g11(self, line):
         if not self.fw_retracted:
             return
-        self._fw_retract(self.retract_mm, self.unretract_feed_mm_s)
+        self._fw_retract(self.retract_nm, self.unretract_feed_mm_s)
         self.fw_retracted = False
 
-    def _fw_retract(self, e_mm, feed_mm_s):
-        self.offset_mm[3] += e_mm  # the filament moves; the logical E does not
-        self._queue(self.machine_steps(), 0, e_mm, feed_mm_s)
+    def _fw_retract(self, e_nm, feed_mm_s):
+        self.e_offset_nm += e_nm  # the filament moves; the logical E does not
+        self._queue(self.machine_steps(), 0, e_nm, feed_mm_s)
 
     # G4 P<ms> | S<s>: dwell after the queued moves. Example: G4 P500
     def g4(self, line):
@@ -248,6 +266,11 @@ class Motion:
     def g92(self, line):
         named = [i for i in range(4) if line.has(AXIS_LETTERS[i])]
         for i in named or range(4):
+            if i == 3:
+                v = line.fixed_at(_E_INDEX, _NM_DECIMALS, 0)
+                self.e_offset_nm += self.e_nm - v
+                self._set_e(v)
+                continue
             v = line.float(AXIS_LETTERS[i], 0.0)
             self.offset_mm[i] += self.pos_mm[i] - v
             self.pos_mm[i] = v

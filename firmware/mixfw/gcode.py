@@ -58,6 +58,22 @@ class Line:
         d = self.decimals[i]
         return self.mant[i] / _POW10[d] if d else float(self.mant[i])
 
+    def fixed_at(self, i, decimals, default=None):
+        """The number of the letter with letter_index i as an exact integer count of
+        10**-decimals: kept in integers, positions add up the same on every port (a
+        32-bit float would drift). Further decimals round half away from zero."""
+        if not (self.valued >> i) & 1:
+            if (self.present >> i) & 1 and default is None:
+                raise GcodeError("parameter %s needs a number" % chr(65 + i))
+            return default
+        d = self.decimals[i]
+        m = self.mant[i]
+        if d <= decimals:
+            return m * _POW10[decimals - d]
+        div = _POW10[d - decimals]
+        q = (2 * (m if m >= 0 else -m) + div) // (2 * div)
+        return q if m >= 0 else -q
+
     def int(self, ch, default=None, lo=None, hi=None):
         i = letter_index(ch)
         if not (self.valued >> i) & 1:

@@ -35,9 +35,15 @@ assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _BLOCK_BASE, _B_WORDS, _B_N, _B_STEPS, _B_D
 MAX_PERIOD = 20000
 
 _INF = 1e30
+# Filament is counted in integers, never summed in floats: a chip's 32-bit float
+# would drift by steps over a print. E in nanometres, and steps/mm in millionths, so a
+# drive's target step is an exact integer rounding (integers beyond 2**30 become big
+# ints on the chips: fine in the main loop).
+NM_PER_MM = const(1000000)
+SPM_SCALE = const(1000000)
 # How much of the latest extrusion retract_policy 2 remembers: enough blocks for the
 # longest retraction the options allow, within a bounded memory.
-REPLAY_MM = 50.0
+REPLAY_NM = 50 * NM_PER_MM
 REPLAY_BLOCKS = 64
 
 
@@ -49,6 +55,22 @@ def round_steps(v):
 def steps_from_mm(mm, steps_per_mm):
     """Absolute millimetres -> absolute steps."""
     return round_steps(mm * steps_per_mm)
+
+
+def div_round(a, b):
+    """a / b for integers (b > 0), rounded as round_steps does: half away from zero."""
+    q = (2 * (a if a >= 0 else -a) + b) // (2 * b)
+    return q if a >= 0 else -q
+
+
+def nm_from_mm(mm):
+    """A length from the settings (floats) in the integer unit E is counted in."""
+    return round_steps(mm * NM_PER_MM)
+
+
+def spm_fixed(steps_per_mm):
+    """Steps/mm as an integer count of 1/SPM_SCALE steps/mm."""
+    return round_steps(steps_per_mm * SPM_SCALE)
 
 
 def block_weights(counts):
@@ -163,8 +185,12 @@ class Planner:
         self.drives = settings["drives"]
         self.drive_steps_per_mm = list(settings.get("drive_steps_per_mm") or
                                        [self.steps_per_mm[3]] * self.drives)
-        # drive_mm is replaced, never changed in place: _plan_e knows its lists apart.
-        self.drive_mm = [0.0] * self.drives
+        self._spm_fixed = [spm_fixed(v) for v in self.drive_steps_per_mm]
+        # Each drive's exact filament is drive_nm[i] + drive_rem[i] / rem_total nm: the
+        # part of a share below a nanometre is carried, not dropped. The tuple
+        # (drive_nm, drive_rem, rem_total) is replaced, never changed in place: _plan_e
+        # knows its plans apart.
+        self.drive_pos = ([0] * self.drives, [0] * self.drives, 1)
         self.drive_steps = [0] * self.drives
         self._targets_of = None
         self._targets = None
@@ -202,7 +228,7 @@ class Planner:
         self.position_steps = [m[st.S_POS + i] for i in range(4)]
         for i in range(self.drives):
             self.drive_steps[i] = m[st.S_DRIVE_POS + i]
-        self._drive_mm_from_steps()
+        self._drive_pos_from_steps()
         self.prev_unit = None
         self.prev_nominal = 0.0
         self.extruded = []
@@ -219,55 +245,69 @@ class Planner:
         it is, counted in the new unit."""
         self.synchronize()
         self.drive_steps_per_mm = list(drive_steps_per_mm)
-        self._drive_mm_from_steps()
+        self._spm_fixed = [spm_fixed(v) for v in self.drive_steps_per_mm]
+        self._drive_pos_from_steps()
 
-    def _drive_mm_from_steps(self):
-        self.drive_mm = [self.drive_steps[i] / self.drive_steps_per_mm[i]
-                         for i in range(self.drives)]
+    def _nm_of_steps(self, i, steps):
+        return div_round(steps * (NM_PER_MM * SPM_SCALE), self._spm_fixed[i])
 
-    def _plan_e(self, e_mm, weights=None):
-        """Per-drive exact filament and step targets after an E move of e_mm."""
+    def _drive_pos_from_steps(self):
+        self.drive_pos = ([self._nm_of_steps(i, self.drive_steps[i])
+                           for i in range(self.drives)], [0] * self.drives, 1)
+
+    def _plan_e(self, e_nm, weights=None):
+        """Per-drive exact filament (a new drive_pos) and step counts after an E move of
+        e_nm nanometres shared by the weights."""
         w = weights or self.tool_mix
         total = sum(w)
-        spm = self.drive_steps_per_mm
-        now_mm = self.drive_mm
+        spm = self._spm_fixed
+        now = self.drive_pos
+        now_nm, now_rem, now_total = now
         now_steps = self.drive_steps
         # A drive with no share in the move stays where it is, and so does its target
-        # step: taken from the last plan while drive_mm is still that plan's list.
-        known = self._targets if self._targets_of is now_mm else None
+        # step: taken from the last plan while drive_pos is still that plan's.
+        known = self._targets if self._targets_of is now else None
         drives = self.drives
-        drive_mm = [0.0] * drives
+        drive_nm = [0] * drives
+        drive_rem = [0] * drives
         targets = [0] * drives
         counts = [0] * drives
+        unit = NM_PER_MM * SPM_SCALE * total
         for i in range(drives):
-            if w[i] or known is None:
-                mm = now_mm[i] + e_mm * w[i] / total
-                target = steps_from_mm(mm, spm[i])
+            rem = now_rem[i]
+            if now_total != total and rem:
+                rem = div_round(rem * total, now_total)  # below a nanometre either way
+            if (w[i] and e_nm) or known is None:
+                num = e_nm * w[i] + rem
+                nm = now_nm[i] + num // total
+                rem = num % total
+                target = div_round((nm * total + rem) * spm[i], unit)
             else:
-                mm = now_mm[i]
+                nm = now_nm[i]
                 target = known[i]
-            drive_mm[i] = mm
+            drive_nm[i] = nm
+            drive_rem[i] = rem
             targets[i] = target
             counts[i] = target - now_steps[i]
-        self._targets_of = drive_mm
+        pos = (drive_nm, drive_rem, total)
+        self._targets_of = pos
         self._targets = targets
-        return drive_mm, counts
+        return pos, counts
 
-    def _replay_counts(self, e_mm):
-        """Per-drive steps of a retraction (e_mm < 0) that takes back exactly the drive
-        steps of the latest e_mm of extrusion, newest first, or of an unretraction that
+    def _replay_counts(self, e_nm):
+        """Per-drive steps of a retraction (e_nm < 0) that takes back exactly the drive
+        steps of the latest e_nm of extrusion, newest first, or of an unretraction that
         pushes back exactly what retractions took, oldest first. What the record does
         not cover follows the active mix."""
-        back = e_mm < 0
+        back = e_nm < 0
         take = self.extruded if back else self.retracted
         give = self.retracted if back else self.extruded
-        spm = self.drive_steps_per_mm
-        need_mm = abs(e_mm)
+        need_nm = e_nm if e_nm >= 0 else -e_nm
         counts = [0] * self.drives
-        while take and need_mm > 1e-9:
-            w, start, end, part, mm = take[-1]
-            if mm > need_mm + 1e-9:
-                k = round_steps(need_mm * (end - start) / mm)
+        while take and need_nm > 0:
+            w, start, end, part, nm = take[-1]
+            if nm > need_nm:
+                k = div_round(need_nm * (end - start), nm)
                 if k == 0:
                     break
                 # A part of the stretch: its newest steps go back first, and come
@@ -278,30 +318,35 @@ class Planner:
                 take[-1] = first if back else second
                 mine = second if back else first
                 give.append(mine)
-                part, mm = mine[3], mine[4]
+                part, nm = mine[3], mine[4]
             else:
                 give.append(take.pop())
             for i in range(self.drives):
                 counts[i] += part[i]
-            need_mm -= mm
+            need_nm -= nm
         # The drives' exact positions move by the replayed steps, and the rest by the
-        # mix: the step targets then follow from those positions as for any move.
+        # mix. The replayed steps are exact: they are the targets, not a rounding of the
+        # new positions (which a half step could tip the other way).
         sign = -1 if back else 1
-        self.drive_mm = [self.drive_mm[i] + sign * counts[i] / spm[i] for i in range(self.drives)]
-        return self._plan_e(sign * need_mm if need_mm > 1e-9 else 0.0)
+        now_nm, now_rem, now_total = self.drive_pos
+        pos = ([now_nm[i] + sign * self._nm_of_steps(i, counts[i]) for i in range(self.drives)],
+               now_rem, now_total)
+        self.drive_pos = pos
+        self._targets_of = pos
+        self._targets = [self.drive_steps[i] + sign * counts[i] for i in range(self.drives)]
+        return self._plan_e(sign * need_nm if need_nm > 0 else 0)
 
     def _stretch(self, weights, start, end, counts=None):
         """A record of steps [start, end) of a block's schedule, with its per-drive
-        steps and its filament in mm."""
+        steps and its filament in nm."""
         if counts is None:
             a = schedule_counts(weights, start)
             b = schedule_counts(weights, end)
             counts = [b[i] - a[i] for i in range(len(weights))]
-        spm = self.drive_steps_per_mm
-        mm = 0.0
+        nm = 0
         for i in range(self.drives):
-            mm += counts[i] / spm[i]
-        return (weights, start, end, counts, mm)
+            nm += self._nm_of_steps(i, counts[i])
+        return (weights, start, end, counts, nm)
 
     def _remember_extrusion(self, weights, counts):
         """Keep the latest extrusion for retract_policy 2: at most REPLAY_BLOCKS blocks,
@@ -309,10 +354,10 @@ class Planner:
         ext = self.extruded
         ext.append(self._stretch(weights, 0, sum(counts), counts))
         self.retracted = []
-        total = 0.0
+        total = 0
         for stretch in ext:
             total += stretch[4]
-        while len(ext) > REPLAY_BLOCKS or (len(ext) > 1 and total - ext[0][4] >= REPLAY_MM):
+        while len(ext) > REPLAY_BLOCKS or (len(ext) > 1 and total - ext[0][4] >= REPLAY_NM):
             total -= ext.pop(0)[4]
 
     def set_position_steps(self, steps):
@@ -356,41 +401,44 @@ class Planner:
         self.prev_unit = None
         self.prev_nominal = 0.0
 
-    def add_move(self, target_steps, feed_mm_s, homing_axes=0, dir_masks=None, e_mm=0.0,
+    def add_move(self, target_steps, feed_mm_s, homing_axes=0, dir_masks=None, e_nm=0,
                  mix=None, replay=False):
         """Queue a straight move to absolute X Y Z step targets (target_steps[:3]) with
-        e_mm of filament shared by the drives in the active mix. Returns False if the
+        e_nm (an integer) of filament shared by the drives in the active mix. Returns False if the
         move is shorter than one step on every axis (nothing to do). mix: (id, weights)
         for this move instead of the active one. replay: a retraction or unretraction
         that replays the latest extrusion exactly (retract_policy 2)."""
         # The mixer gives every drive exactly its count in a block of at most
         # MAX_PERIOD E steps (each drive's count rounds by up to a step: hence the
         # margin), so a longer extrusion, such as a purge, goes in equal pieces.
-        pieces = int(abs(e_mm) * max(self.drive_steps_per_mm) / (MAX_PERIOD - 2 * MAX_DRIVES)) + 1
+        pieces = (abs(e_nm) * max(self._spm_fixed)
+                  // (NM_PER_MM * SPM_SCALE * (MAX_PERIOD - 2 * MAX_DRIVES))) + 1
         if pieces == 1:
-            return self._add_block(target_steps, feed_mm_s, homing_axes, dir_masks, e_mm,
+            return self._add_block(target_steps, feed_mm_s, homing_axes, dir_masks, e_nm,
                                    mix, replay)
         start = self.position_steps
         added = False
         for k in range(1, pieces + 1):
-            point = [start[i] + round_steps((target_steps[i] - start[i]) * k / pieces)
+            point = [start[i] + div_round((target_steps[i] - start[i]) * k, pieces)
                      for i in range(3)]
-            added = self._add_block(point, feed_mm_s, homing_axes, dir_masks, e_mm / pieces,
+            piece_nm = e_nm * k // pieces - e_nm * (k - 1) // pieces
+            added = self._add_block(point, feed_mm_s, homing_axes, dir_masks, piece_nm,
                                     mix, replay) or added
         return added
 
-    def _add_block(self, target_steps, feed_mm_s, homing_axes, dir_masks, e_mm, mix, replay):
+    def _add_block(self, target_steps, feed_mm_s, homing_axes, dir_masks, e_nm, mix, replay):
         if feed_mm_s <= 0:
             raise PlanError("feed rate must be > 0")
         # Builtins (abs, min, max) and module attributes are lookups by name: the
         # arithmetic below is written out, as it runs for every line of G-code.
         pos = self.position_steps
-        saved_mm = self.drive_mm
-        if replay and e_mm:
-            drive_mm, counts = self._replay_counts(e_mm)
-            self.drive_mm = saved_mm
+        saved = self.drive_pos
+        if replay and e_nm:
+            drive_pos, counts = self._replay_counts(e_nm)
+            self.drive_pos = saved
         else:
-            drive_mm, counts = self._plan_e(e_mm, mix[1] if mix else None)
+            drive_pos, counts = self._plan_e(e_nm, mix[1] if mix else None)
+        e_mm = e_nm / NM_PER_MM  # for speeds only: steps come from the integers
         e_steps = sum(counts)
         dx = target_steps[0] - pos[0]
         dy = target_steps[1] - pos[1]
@@ -402,7 +450,7 @@ class Planner:
             if k > n:
                 n = k
         if n == 0:
-            self.drive_mm = drive_mm  # less than a step: it counts toward the next move
+            self.drive_pos = drive_pos  # less than a step: it counts toward the next move
             return False
         if n >= 0x3FFFFFFF:
             raise PlanError("move too long: %d steps" % n)
@@ -498,7 +546,7 @@ class Planner:
         self._recalculate(slot)
         self._commit(slot)
         self.position_steps = [target_steps[0], target_steps[1], target_steps[2], pos[3] + e_steps]
-        self.drive_mm = drive_mm
+        self.drive_pos = drive_pos
         drive_steps = self.drive_steps
         for i in range(self.drives):
             drive_steps[i] += given[i]

@@ -143,10 +143,11 @@ def _pio_ahead(mem: ptr32) -> int:
 
 
 @micropython.viper
-def _pio_put(mem: ptr32, out, count: int):
+def _pio_put(mem_buf, out, count: int):
     """Hand the state machine count words of the current levels, one tick each."""
+    mem = ptr32(mem_buf)
     word = mem[S_LEVELS] >> mem[S_PIO_SHIFT]
-    mem[S_PIO_DRAIN] = (mem[S_TICKS] + int(_pio_ahead(mem)) + count) & 0x3FFFFFFF
+    mem[S_PIO_DRAIN] = (mem[S_TICKS] + int(_pio_ahead(mem_buf)) + count) & 0x3FFFFFFF
     while count > 0:
         out(word)
         count -= 1
@@ -163,8 +164,9 @@ def _finish(mem: ptr32):
 
 
 @micropython.viper
-def _start(mem: ptr32, b: int) -> int:
+def _start(mem_buf, b: int) -> int:
     """Begin the block at word b. Returns the DIR pins whose level changed."""
+    mem = ptr32(mem_buf)
     mem[S_ACTIVE] = 1
     mem[S_EVENT] = 0
     mem[S_HOME_STOP] = 0
@@ -183,7 +185,7 @@ def _start(mem: ptr32, b: int) -> int:
     mem[S_RATE] = mem[b + B_RATE_INIT] + (mem[b + B_ACCEL] >> 1)
     mem[S_RAMP_TICKS] = 0
     if mem[b + B_STEPS + E] != 0 and mem[b + B_MIX] != mem[MIX_BASE]:
-        mix_load(mem, MIX_BASE, b + B_MIX)
+        mix_load(mem_buf, MIX_BASE, b + B_MIX)
     old = mem[S_DIR]
     new = (old & (0 - 1 - mem[b + B_DIR_CLR])) | mem[b + B_DIR_SET]
     changed = old ^ new
@@ -195,19 +197,24 @@ def _start(mem: ptr32, b: int) -> int:
 
 
 @micropython.viper
-def tick(mem: ptr32, out, endstops) -> int:
+def tick(mem_buf, out, endstops) -> int:
     """One timer tick. Returns 1 if a step was taken.
 
     A stepping tick has the mixer and the pin writes inline, because a viper call
     costs as much as a whole idle tick: the tick works out the levels (set_mask,
-    clr_mask) first and writes them at one place, the end."""
+    clr_mask) first and writes them at one place, the end.
+
+    The helpers it calls get the array object (mem_buf), never the ptr32: viper boxes
+    a pointer it passes on as an int, and an address above 2**30 (any RAM of a 32-bit
+    unix port, some chips' too) would be a big int allocated in the interrupt."""
+    mem = ptr32(mem_buf)
     mem[S_TICKS] = (mem[S_TICKS] + 1) & 0x3FFFFFFF
     if mem[S_PIO]:
         # The levels the last tick left, for the state machine; the burst goes on
         # while there is work.
         left = mem[S_PIO_LEFT]
         if left > 0:
-            _pio_put(mem, out, 1)
+            _pio_put(mem_buf, out, 1)
             if mem[S_ACTIVE] or mem[S_TAIL] != mem[S_HEAD] or mem[S_PULSE_LEFT]:
                 left = mem[S_PIO_LATENCY] + 2
             mem[S_PIO_LEFT] = left - 1
@@ -228,7 +235,7 @@ def tick(mem: ptr32, out, endstops) -> int:
                 return 0  # idle
             run = 0
         else:
-            changed = int(_start(mem, b))
+            changed = int(_start(mem_buf, b))
             if changed:
                 dirs = mem[S_DIR]
                 set_mask = dirs & changed
@@ -240,10 +247,10 @@ def tick(mem: ptr32, out, endstops) -> int:
         if wait > 0:
             mem[S_WAIT] = wait - 1
             if wait == 1 and (flags & F_DWELL):
-                _finish(mem)
+                _finish(mem_buf)
             run = 0
         elif flags & F_DWELL:  # a zero-length dwell
-            _finish(mem)
+            _finish(mem_buf)
             run = 0
     if run:
         # Velocity ramp, per tick so speed is linear in time.
@@ -279,7 +286,7 @@ def tick(mem: ptr32, out, endstops) -> int:
         stopped = mem[S_HOME_STOP] | (int(endstops()) & homing)
         mem[S_HOME_STOP] = stopped
         if stopped == homing:
-            _finish(mem)
+            _finish(mem_buf)
             run = 0
     if run:
         stepped = 1
@@ -378,7 +385,7 @@ def tick(mem: ptr32, out, endstops) -> int:
         event = mem[S_EVENT] + 1
         mem[S_EVENT] = event
         if event >= n:
-            _finish(mem)
+            _finish(mem_buf)
     if (set_mask | clr_mask) == 0:
         return stepped
     # The writes: set_mask pins high, clr_mask pins low.
@@ -399,9 +406,9 @@ def tick(mem: ptr32, out, endstops) -> int:
         if mem[S_PIO_LEFT] == 0:
             # A burst starts: old levels until the latency is queued, so this
             # tick's levels come out exactly LATENCY ticks from now.
-            fill = mem[S_PIO_LATENCY] - int(_pio_ahead(mem))
+            fill = mem[S_PIO_LATENCY] - int(_pio_ahead(mem_buf))
             if fill > 0:
-                _pio_put(mem, out, fill)
+                _pio_put(mem_buf, out, fill)
         mem[S_LEVELS] = (mem[S_LEVELS] | set_mask) & (0 - 1 - clr_mask)
         mem[S_PIO_LEFT] = mem[S_PIO_LATENCY] + 2
         return stepped
