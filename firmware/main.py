@@ -5,6 +5,7 @@
 from array import array
 import sys
 import machine
+import micropython
 import board
 from mixfw import stepper as st, mixer
 from mixfw.pins import Pins
@@ -16,6 +17,7 @@ from mixfw.files import Files
 from mixfw.thermal import Thermal
 from mixfw.transition import Transitions, l0_mm
 from mixfw import cmd_motion, cmd_mixing, cmd_thermal, cmd_report, cmd_config, cmd_files, cmd_trace
+from mixfw import safety
 
 # Commands whose arguments are text, not numbers.
 RAW_COMMANDS = (cmd_config.RAW_COMMANDS + cmd_files.RAW_COMMANDS + cmd_mixing.RAW_COMMANDS
@@ -169,7 +171,10 @@ def run(consoles=None, listeners=(), printer=None, warnings=None):
     if printer is None:
         warnings = []
         printer = build(load_config(warn=warnings.append))
-    timer = start_timer(printer, printer.settings["tick_us"])
+    settings = printer.settings
+    timer = start_timer(printer, settings["tick_us"])
+    printer.add_background(safety.StepWatch(printer, printer.mem, settings["step_stall_ms"]))
+    safety.start_watchdog(machine, printer, settings["watchdog_ms"])
     if consoles is None:
         consoles, listeners = board_consoles(printer.settings)
         printer.max_channels = len(consoles) + printer.settings.get("tcp_max_clients", 4)
@@ -179,10 +184,15 @@ def run(consoles=None, listeners=(), printer=None, warnings=None):
         for text in warnings or ():
             console.write(text + "\n")
     printer.listeners.extend(listeners)
+    # A host's 0x03 byte on the USB console is data, not Ctrl-C: it must not stop a
+    # print (and leave the heaters as they were).
+    micropython.kbd_intr(-1)
     try:
         printer.serve()
     finally:
         timer.deinit()
+        safety.all_off(printer)
+        micropython.kbd_intr(3)
     return printer
 
 

@@ -27,6 +27,7 @@ import gc
 import json
 import simmachine
 import simtime
+import simanalog
 
 sys.modules["machine"] = simmachine
 sys.modules["time"] = simtime
@@ -125,6 +126,12 @@ class LoggedListener:
         return console if console is None else LoggedConsole(console, self.log)
 
 
+def _drivers_enabled(board):
+    active = 0 if board.SETTINGS.get("enable_active_low") else 1
+    return any(simmachine._levels[gpio] == active
+               for name, gpio in board.PINS.items() if name.endswith("_enable"))
+
+
 def _heap_bytes():
     """Live heap: what stays allocated after a full collection."""
     gc.collect()
@@ -163,6 +170,7 @@ def main():
     # Imported after the firmware: it uses the firmware's parser, whose code is the
     # firmware's share.
     import simthermal
+    import simfaults
     data_from = _heap_bytes()
     interactive = opts["tcp"] is not None or opts["realtime"] is not None
     consoles = []
@@ -186,6 +194,7 @@ def main():
     heap_data_at_rest = _heap_bytes() - data_from
     before = _heap_bytes()
     simthermal.install(simmachine, board, printer)
+    simfaults.install(printer)
     # The last STEP pulse ends a few ticks after the queue empties, and a PIO state
     # machine still holds its last words: let the chip finish them before stopping.
     printer.finish.append(simmachine.idle)
@@ -195,6 +204,9 @@ def main():
     simmachine.heap_peak_bytes = 0
     simmachine.heap_lock_ticks = opts["heap_lock"]
     firmware.run(consoles, listeners, printer, warnings)
+    # The print is over: a chip would go on to its REPL (and its watchdog would reset
+    # it); the simulation only finishes its trace.
+    simmachine.release_watchdogs()
     simmachine.drain_pio()
     simmachine.close()
     heap_after = _heap_bytes()
@@ -219,6 +231,11 @@ def main():
         # What the simulated chip itself holds (edge buffer), not the firmware's.
         "sim_buffer_bytes": simmachine.buffer_bytes(),
         "heap_locked": opts["heap_lock"],
+        # What the outputs were left at when the firmware's main loop ended: heater
+        # PWM duty (0..1) and whether any driver's ENABLE pin was active.
+        "heater_duty_at_exit": {b.name: simanalog.duty_of(b.heater_gpio)
+                                for b in simthermal.world.bodies},
+        "drivers_enabled_at_exit": _drivers_enabled(board),
     }
     sys.stdout.write("//sim " + json.dumps(report) + "\n")
 

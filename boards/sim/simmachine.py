@@ -15,6 +15,7 @@
 from array import array
 import gc
 import micropython
+import sys
 import time as walltime  # the real clock; firmware sees simtime instead
 
 GPIO_COUNT = 40  # 0..29 like an RP2040 for the step path, more for heaters and fans
@@ -376,50 +377,95 @@ def idle():
             heap_peak_bytes = used
     end = now_us + quantum_us
     for t in _timers:
-        if _jitter_max_us:
-            _fire_late(t, end)
-            continue
-        cb = t._cb
-        per = t.period_us
-        nxt = t._next
-        if heap_lock_ticks:
-            while nxt <= end:
-                if _pio_head != _pio_tail:  # a call per tick would cost more than the tick
-                    _pio_output(nxt)
-                now_us = nxt
-                _now_w = nxt & _W30
-                micropython.heap_lock()
-                try:  # an error must reach the firmware's handlers with the heap open
-                    cb(t)
-                    if _bank is not None:
-                        _apply_bank()
-                finally:
-                    micropython.heap_unlock()
-                nxt += per
-                if _n > _FLUSH_AT:
-                    flush()
-        else:
-            while nxt <= end:
-                if _pio_head != _pio_tail:
-                    _pio_output(nxt)
-                now_us = nxt
-                _now_w = nxt & _W30
-                cb(t)
-                if _bank is not None:
-                    _apply_bank()
-                nxt += per
-                if _n > _FLUSH_AT:
-                    flush()
-        t._next = nxt
+        try:
+            if _jitter_max_us:
+                _fire_late(t, end)
+            else:
+                _fire_on_time(t, end)
+        except Exception as e:
+            # As MicroPython does with an interrupt handler that raised: report it and
+            # disable the handler. The timer never fires again.
+            _timers.remove(t)
+            sys.stderr.write("simmachine: uncaught exception in timer callback, timer "
+                             "disabled: %r\n" % (e,))
+            break
     _pio_output(end)
     _set_now(end)
     for hook in _world_hooks:
         hook(end)
+    for w in _watchdogs:
+        if end - w.fed_us > w.timeout_us:
+            _watchdog_reset(w)
     if realtime_factor:
         ahead_us = (end - _virtual_start_us) / realtime_factor - walltime.ticks_diff(
             walltime.ticks_us(), _wall_start_us)
         if ahead_us > 2000:
             walltime.sleep_us(int(ahead_us))
+
+
+def _fire_on_time(t, end):
+    """idle()'s timer loop: every callback due up to end, at its due time."""
+    global now_us, _now_w
+    cb = t._cb
+    per = t.period_us
+    nxt = t._next
+    if heap_lock_ticks:
+        while nxt <= end:
+            if _pio_head != _pio_tail:  # a call per tick would cost more than the tick
+                _pio_output(nxt)
+            now_us = nxt
+            _now_w = nxt & _W30
+            micropython.heap_lock()
+            try:  # an error must reach the firmware's handlers with the heap open
+                cb(t)
+                if _bank is not None:
+                    _apply_bank()
+            finally:
+                micropython.heap_unlock()
+            nxt += per
+            if _n > _FLUSH_AT:
+                flush()
+    else:
+        while nxt <= end:
+            if _pio_head != _pio_tail:
+                _pio_output(nxt)
+            now_us = nxt
+            _now_w = nxt & _W30
+            cb(t)
+            if _bank is not None:
+                _apply_bank()
+            nxt += per
+            if _n > _FLUSH_AT:
+                flush()
+    t._next = nxt
+
+
+# The chip's watchdog (machine.WDT): a reset when the firmware stops feeding it. Like
+# a real reset it stops everything at once: the run ends with status 3 after one
+# `//sim watchdog reset` line.
+_watchdogs = []
+
+
+class WDT:
+    def __init__(self, id=0, timeout=5000):
+        if timeout < 1:
+            raise ValueError("watchdog timeout below 1 ms")
+        self.timeout_us = timeout * 1000
+        self.fed_us = now_us
+        _watchdogs.append(self)
+
+    def feed(self):
+        self.fed_us = now_us
+
+
+def release_watchdogs():
+    del _watchdogs[:]
+
+
+def _watchdog_reset(w):
+    flush()
+    sys.stdout.write("//sim watchdog reset at_us=%d fed_us=%d\n" % (now_us, w.fed_us))
+    sys.exit(3)
 
 
 def _fire_late(t, end):

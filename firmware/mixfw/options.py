@@ -31,6 +31,10 @@ FIRMWARE_DEFAULTS = {
     # 3 KB of RAM held from boot for a debugging aid: enough for a short burst (about
     # 128 steps); a longer capture sets more and restarts.
     "trace_records": 256,
+    # A main loop stuck this long resets the board (rp2 allows up to 8388 ms); 0: none.
+    "watchdog_ms": 4000,
+    # The step loop counts as stopped after this long without a tick.
+    "step_stall_ms": 250,
 }
 
 
@@ -178,6 +182,10 @@ SCHEMA = (
      "mix of this virtual tool, drive weights w0:w1:... (M164/M165/M567 set it)"),
     ("trace_records",              "",     "int",   0,       100000,      True,
      "step events the on-board trace ring holds (M7300/M7301), 12 bytes each"),
+    ("watchdog_ms",                "",     "int",   0,       8000,        True,
+     "a main loop stuck this long resets the board (hardware watchdog), 0 for none"),
+    ("step_stall_ms",              "",     "int",   10,      10000,       True,
+     "no step-loop tick for this long halts the printer, heaters off"),
     ("console_uart",               "",     "int",   -1,      4,           True,
      "UART id of a serial console besides USB, -1 for none"),
     ("console_baud",               "",     "int",   300,     4000000,     True,

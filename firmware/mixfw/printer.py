@@ -15,6 +15,7 @@ from mixfw.intake import Intake, LINE_OK, LINE_CUT
 
 BUSY_EVERY_MS = 2000
 REPORT_EVERY_MS = 1000  # temperatures while a heating wait runs, as Marlin
+BACKGROUND_EVERY_MS = 10  # background tasks at least this often, however busy
 _ANY_TOOL = command_key("T", -1)  # the handler of every T<n>
 RX_BYTES = 256
 
@@ -144,6 +145,7 @@ class Printer:
         self.max_channels = 8
         self.current = None  # channel whose command is running
         self.background = []  # fn(now_ms), run from the main loop and every wait
+        self._background_at_ms = time.ticks_ms()
         self.on_halt = []  # run first when the printer halts: heaters off, motion stop
         self.on_quick_stop = []  # M410: drop the queued moves, the heaters stay on
         self.busy_every_ms = BUSY_EVERY_MS  # M113; 0: no busy lines
@@ -213,10 +215,16 @@ class Printer:
         self.background.append(fn)
 
     def _run_background(self):
-        if self.background:
-            now = time.ticks_ms()
-            for fn in self.background:
-                fn(now)
+        now = time.ticks_ms()
+        self._background_at_ms = now
+        for fn in self.background:
+            fn(now)
+
+    def _background_if_due(self):
+        """Between lines that need no wait: heater control, the step-loop check and the
+        watchdog must not starve while a host streams such lines back to back."""
+        if time.ticks_diff(time.ticks_ms(), self._background_at_ms) >= BACKGROUND_EVERY_MS:
+            self._run_background()
 
     def pump_all(self):
         for lst in self.listeners:
@@ -475,9 +483,11 @@ class Printer:
                     self.answer(ch, status)
                     did = True
             if did:
+                self._background_if_due()
                 continue
             if self.job is not None and not self.job.paused:
                 self.run_job_line()
+                self._background_if_due()
                 continue
             closed = [ch for ch in self.channels if not ch.open and not ch.count]
             for ch in closed:

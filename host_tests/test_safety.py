@@ -1,0 +1,78 @@
+"""What keeps the board safe when the firmware itself fails (mixfw/safety.py): a step
+timer that stopped halts the printer with the heaters off, a main loop that hangs is
+reset by the watchdog, and every way out of the main loop leaves heaters and drivers
+off. The faults are injected by the simulated board (boards/sim/simfaults.py)."""
+import json
+import subprocess
+
+from mixstep import paths
+from mixstep.simprinter import SIM_MAIN, SimPrinter
+
+STALL = "Error:step timer stopped (no tick for 250 ms); restart the board"
+
+
+def test_a_dead_step_timer_halts_with_the_heaters_off():
+    p = SimPrinter()
+    assert p.send("M104 S200") == ["ok"]
+    assert p.send("G91") == ["ok"]
+    assert p.send("G1 X10 F3000") == ["ok"]
+    assert p.send("M400") == ["ok"]
+    assert p.send("M7101") == ["ok"]  # the next tick raises; the timer is disabled
+    # The move never finishes: within the stall time the printer halts, heaters off.
+    got = p.send("G1 X10")
+    got += p.send("M400")
+    assert STALL in got, got
+    assert "/0.0 B:" in p.send("M105")[-1]  # the hot end's target is gone
+    assert p.send("G1 X1")[0].startswith("Error:printer halted (step timer stopped")
+    # M999 can't bring a dead timer back: the check halts again.
+    assert p.send("M999") == ["ok"]
+    got = p.send("G4 P500")
+    assert STALL in got, got
+    report = p.finish()
+    assert report["heater_duty_at_exit"] == {"hotend": 0.0, "bed": 0.0}
+    assert report["steps"]["x"] < 20 * 80
+
+
+def test_a_running_step_timer_never_trips_the_check():
+    # A long print with waits, dwell and idle stretches: no false alarm.
+    p = SimPrinter()
+    for line in ("G91", "G1 X100 F600", "G4 S3", "M400", "G1 X-100 F6000", "M400"):
+        replies = p.send(line)
+        assert not [r for r in replies if r.startswith("Error")], (line, replies)
+    report = p.finish()
+    assert report["steps"]["x"] == 0
+
+
+def _run(lines):
+    proc = subprocess.run([paths.micropython(), "-X", "heapsize=2M", str(SIM_MAIN)],
+                          input=("\n".join(lines) + "\n").encode(), capture_output=True,
+                          env=paths.micropython_env("sim"), timeout=120)
+    return proc.returncode, proc.stdout.decode().splitlines()
+
+
+def test_the_watchdog_resets_a_main_loop_that_hangs():
+    # The board's watchdog_ms is 4000: a 3.5 s hang is survived, a 5 s one is not.
+    code, out = _run(["M104 S200", "M7102 S3500", "M105", "M7102 S5000", "M105"])
+    assert code == 3
+    assert out[-1].startswith("//sim watchdog reset at_us=")
+    at_us = int(out[-1].split("at_us=")[1].split()[0])
+    fed_us = int(out[-1].split("fed_us=")[1])
+    assert 4000000 <= at_us - fed_us <= 4002000
+    # The line after the reset never ran.
+    assert [l for l in out if l.startswith("ok")] == ["ok", "ok", "ok T:%s" % out[3][5:]]
+
+
+def test_back_to_back_lines_feed_the_watchdog():
+    # Lines that never wait still let the main loop feed the watchdog (and run the
+    # heater control): 3 s hangs, each under the timeout, 8 s in all.
+    code, out = _run(["M7102 S3000", "M117 one", "M7102 S3000", "M117 two", "M7102 S2000"])
+    assert code == 0, out[-3:]
+
+
+def test_the_main_loop_leaves_heaters_and_drivers_off():
+    p = SimPrinter()
+    for line in ("M104 S200", "M140 S60", "M106 S255", "G1 X10 F3000", "G4 S2"):
+        p.send(line)
+    report = p.finish()  # the host went away: the main loop ends
+    assert report["heater_duty_at_exit"] == {"hotend": 0.0, "bed": 0.0}
+    assert report["drivers_enabled_at_exit"] is False
