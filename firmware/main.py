@@ -26,6 +26,8 @@ RAW_COMMANDS = (cmd_config.RAW_COMMANDS + cmd_files.RAW_COMMANDS + cmd_mixing.RA
 FILES_ROOT = "/"
 # Where the configuration lives on the board's flash filesystem.
 CONFIG_PATH = "/mixstep.cfg"
+# Left by M997: the next boot skips the firmware once and leaves the REPL to mpremote.
+REPL_FLAG = "/mixstep.repl"
 
 
 def _ticks(us, tick_us):
@@ -167,7 +169,9 @@ def board_consoles(settings):
     return consoles, listeners
 
 
-def run(consoles=None, listeners=(), printer=None, warnings=None):
+def run(consoles=None, listeners=(), printer=None, warnings=None, repl_flag=REPL_FLAG):
+    """Serve until every console closes or M997; repl_flag: where M997 leaves its flag
+    before the reset (None: no flag, no reset; the simulation)."""
     if printer is None:
         warnings = []
         printer = build(load_config(warn=warnings.append))
@@ -193,8 +197,23 @@ def run(consoles=None, listeners=(), printer=None, warnings=None):
         timer.deinit()
         safety.all_off(printer)
         micropython.kbd_intr(3)
+    if printer.leaving == "M997" and repl_flag:
+        with open(repl_flag, "w") as f:
+            f.write("M997\n")
+        machine.reset()
     return printer
 
 
-if __name__ == "__main__":
+def repl_boot(flag=REPL_FLAG):
+    """True once after M997: the flag is taken away and the firmware stays off."""
+    import os
+    try:
+        os.remove(flag)
+    except OSError:
+        return False
+    print("mixstep: not started (M997 asked for the REPL); reset to start it again")
+    return True
+
+
+if __name__ == "__main__" and not repl_boot():
     run()

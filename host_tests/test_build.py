@@ -99,8 +99,9 @@ def test_deploy_refuses_the_sim_and_broken_maps(capsys):
 def test_board_check_dry_run(capsys):
     assert cli.main(["board-check", "--board", "pico2", "--port", "COM3", "--dry-run"]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert lines[0].endswith("connect COM3 cp %s :board.py" % (paths.BOARDS / "pico2" / "board.py"))
-    assert lines[1].endswith("connect COM3 run %s" % (paths.BOARDS / "board_check.py"))
+    assert lines[0] == "# send M997 on COM3: a running mixstep restarts into the REPL once"
+    assert lines[1].endswith("connect COM3 cp %s :board.py" % (paths.BOARDS / "pico2" / "board.py"))
+    assert lines[2].endswith("connect COM3 run %s" % (paths.BOARDS / "board_check.py"))
 
 
 @pytest.mark.parametrize("name,make", [

@@ -76,3 +76,38 @@ def test_the_main_loop_leaves_heaters_and_drivers_off():
     report = p.finish()  # the host went away: the main loop ends
     assert report["heater_duty_at_exit"] == {"hotend": 0.0, "bed": 0.0}
     assert report["drivers_enabled_at_exit"] is False
+
+
+def test_m997_leaves_the_firmware_once_for_an_update(tmp_path, mp):
+    # Ctrl-C bytes are data while serving, so mpremote can't stop the firmware: M997
+    # finishes the moves, turns everything off and leaves; on a board the next boot
+    # then skips the firmware once (main.repl_boot).
+    code, out = _run(["G1 X10 F3000", "M104 S200", "M997", "G1 X20"])
+    assert code == 0
+    report = json.loads(out[-1][6:])
+    assert report["steps"]["x"] == 800  # the queued move finished; the line after did not run
+    assert report["heater_duty_at_exit"]["hotend"] == 0.0
+    assert report["drivers_enabled_at_exit"] is False
+    flag = tmp_path / "mixstep.repl"
+    flag.write_text("M997\n")
+    got = mp.run("""
+        import sys, simmachine
+        sys.modules['machine'] = simmachine
+        import main
+        print(main.repl_boot(%r), main.repl_boot(%r))
+    """ % (str(flag), str(flag)))
+    assert got.splitlines()[-1] == "True False" and not flag.exists()
+
+
+def test_deploy_asks_a_running_firmware_to_step_aside():
+    from mixstep import deploy, serve
+    import threading
+    bridge = serve.PtyBridge(realtime=0)
+    thread = threading.Thread(target=bridge.run, daemon=True)
+    thread.start()
+    try:
+        assert deploy.send_m997(bridge.path) is True
+        thread.join(20)
+        assert bridge.proc.wait(10) == 0  # the firmware left on M997
+    finally:
+        bridge.close()

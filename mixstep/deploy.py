@@ -2,8 +2,9 @@
 
 deploy compiles every module of firmware/mixfw with mpy-cross for the board's chip
 into build/<board>/, checks that the board's MicroPython loads that .mpy version,
-copies the files with mpremote and resets the board. main.py and board.py stay
-source: MicroPython runs main.py at boot only as a .py file, and board.py is the file
+copies the files with mpremote and resets the board. A board running mixstep is
+first asked with M997 to restart into the REPL, as it ignores mpremote's Ctrl-C.
+main.py and board.py stay source: MicroPython runs main.py at boot only as a .py file, and board.py is the file
 one edits on the board (pins, settings) without a host.
 """
 import json
@@ -182,6 +183,46 @@ def _run(cmd, capture=False):
     return proc.stdout
 
 
+def stop_firmware(port, wait_s=10.0):
+    """A board running mixstep ignores mpremote's Ctrl-C (a host's 0x03 must not stop a
+    print), so ask it with M997 to restart into the REPL once, and wait for its port to
+    come back. A board that is not running mixstep just sees a line at its REPL."""
+    if send_m997(port):
+        wait_for_port(port, wait_s)
+
+
+def send_m997(port):
+    """True if mixstep answered M997 on port (it then leaves and the board resets)."""
+    import serial  # pyserial, which mpremote needs too
+    import time
+    try:
+        with serial.Serial(port, 115200, timeout=0.2) as link:
+            link.write(b"\nM997\n")
+            link.flush()
+            deadline = time.monotonic() + 3.0
+            text = b""
+            while time.monotonic() < deadline and b"ok" not in text and b">>>" not in text:
+                text += link.read(256)
+    except (serial.SerialException, OSError) as e:
+        raise DeployError("could not open %s: %s" % (port, e))
+    return b"ok" in text
+
+
+def wait_for_port(port, wait_s):
+    """A board that resets drops its USB serial port and brings it back."""
+    import serial
+    import time
+    deadline = time.monotonic() + wait_s
+    time.sleep(0.5)
+    while time.monotonic() < deadline:
+        try:
+            serial.Serial(port, 115200, timeout=0.2).close()
+            return
+        except (serial.SerialException, OSError):
+            time.sleep(0.2)
+    raise DeployError("%s did not come back after M997 within %.0f s" % (port, wait_s))
+
+
 def deploy_commands(out, port):
     """The mpremote commands that put build dir `out` onto the board."""
     c = _connect(port)
@@ -200,10 +241,12 @@ def deploy(board, port, dry_run=False):
     if dry_run:
         print("# built %s (%d modules, -march=%s); on the board this would run:"
               % (out, len(headers), MARCH[chip]))
+        print("# send M997 on %s: a running mixstep restarts into the REPL once" % port)
         print("# check the board's MicroPython (version, .mpy ABI) before copying:")
         for cmd in [info_cmd] + commands:
             _show(cmd)
         return 0
+    stop_firmware(port)
     info = _json_line(_run(info_cmd, capture=True))
     check_board_info(info, chip)
     check_mpy_compatible(info.get("mpy"), headers)
@@ -272,9 +315,11 @@ def board_check(board, port, dry_run=False):
     push = c + ["cp", paths.BOARDS / board / "board.py", ":board.py"]
     run = c + ["run", paths.BOARDS / "board_check.py"]
     if dry_run:
+        print("# send M997 on %s: a running mixstep restarts into the REPL once" % port)
         for cmd in (push, run):
             _show(cmd)
         return 0
+    stop_firmware(port)
     _run(push)
     report = _json_line(_run(run, capture=True))
     print(json.dumps(report))

@@ -203,7 +203,7 @@ def main():
     data_from += _heap_bytes() - before
     simmachine.heap_peak_bytes = 0
     simmachine.heap_lock_ticks = opts["heap_lock"]
-    firmware.run(consoles, listeners, printer, warnings)
+    firmware.run(consoles, listeners, printer, warnings, repl_flag=None)
     # The print is over: a chip would go on to its REPL (and its watchdog would reset
     # it); the simulation only finishes its trace.
     simmachine.release_watchdogs()

@@ -161,6 +161,7 @@ class Printer:
         self.message = ""  # M117's text, for a display or a status report
         self.finish = []  # run when the last channel closes (simulation)
         self.halted = None  # reason, while halted
+        self.leaving = None  # the command that asked serve() to end (M997)
         self.halt_count = 0
         self._cmd_halt_count = 0
         self._busy_at_ms = 0
@@ -176,6 +177,7 @@ class Printer:
             ("M876", self.m876, "answer a host prompt: S<choice>"),
             ("M113", self.m113, "busy keep-alive interval S<s> (0: none)"),
             ("M999", self.m999, "clear a halt and resume"),
+            ("M997", self.m997, "stop serving and restart into the REPL (for an update)"),
             ("M932", self.m932, "refuse commands after the first error"),
             ("M933", self.m933, "leave refuse-after-error mode"),
         ):
@@ -473,7 +475,7 @@ class Printer:
     def serve(self):
         """Answer lines from every channel until all have closed and no listener is
         left."""
-        while self.channels or self.listeners:
+        while (self.channels or self.listeners) and not self.leaving:
             self.pump_all()
             self._quick_stop_if_asked()
             did = False
@@ -541,6 +543,12 @@ class Printer:
             self.reply("echo:M113 S%d" % (self.busy_every_ms // 1000))
             return
         self.busy_every_ms = line.int("S", lo=0, hi=60) * 1000
+
+    # M997: finish the queued moves, then leave the firmware: heaters and drivers off,
+    # and the board restarts into the MicroPython REPL once, so `mixstep deploy`
+    # (mpremote) can reach it: while serving, Ctrl-C bytes are data. Example: M997
+    def m997(self, line):
+        self.leaving = "M997"
 
     # M999: clear a halt; moves and heating are accepted again.
     def m999(self, line):
