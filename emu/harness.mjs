@@ -39,7 +39,7 @@ try {
 } catch (e) {
   die('the npm package rp2040js is not installed: run `make emu-setup` (npm ci in emu/)');
 }
-const { Simulator, USBCDC, GPIOPinState } = rp2040js;
+const { Simulator, USBCDC, GPIOPinState, ConsoleLogger, LogLevel } = rp2040js;
 
 if (process.argv.length !== 3) die('usage: node emu/harness.mjs RUN.json');
 const run = JSON.parse(fs.readFileSync(process.argv[2], 'utf8'));
@@ -87,6 +87,7 @@ const sim = new Simulator(); // for its RP2040 and clock; the loop below runs it
 const clock = sim.clock;
 const mcu = sim.rp2040;
 const core = mcu.core;
+mcu.logger = new ConsoleLogger(LogLevel.Error); // its default logs every SEV and USB transfer
 mcu.loadBootrom(await loadBootrom(run.bootrom));
 const uf2Blocks = loadUf2(mcu, run.uf2);
 if (run.fs_image) mcu.flash.set(fs.readFileSync(run.fs_image), run.fs_offset);
@@ -221,7 +222,7 @@ cdc.onSerialData = (buf) => {
 const gcode = fs.readFileSync(run.gcode, 'latin1').split('\n');
 if (gcode.length && gcode[gcode.length - 1] === '') gcode.pop();
 const result = {
-  lines: 0, errors: [], boot_lines: [], diagnostics: [], uf2_blocks: uf2Blocks,
+  lines: 0, errors: [], console: [], boot_lines: [], diagnostics: [], uf2_blocks: uf2Blocks,
   connected_emu_s: null, start_emu_s: null, end_emu_s: null, stopped: null,
 };
 const diagEvery = run.diag_every || 0;
@@ -243,8 +244,9 @@ const host = {
   line(text) {
     if (this.state === 'boot') { result.boot_lines.push(text); return; }
     this.replies.push(text);
-    if (text.startsWith('Error:') && this.awaiting === 'file') {
-      result.errors.push(`line ${this.next}: ${text}`);
+    if (this.awaiting === 'file') {
+      if (text.startsWith('Error:')) result.errors.push(`line ${this.next}: ${text}`);
+      if (text !== 'ok' && result.console.length < 1000) result.console.push(`line ${this.next}: ${text}`);
     }
     if (text === 'ok' || text.startsWith('ok ')) this.answered();
   },
@@ -296,6 +298,8 @@ let stopped = false;
 const wall0 = performance.now();
 const maxEmuNs = (run.max_emu_s ?? 600) * 1e9;
 const maxWallMs = (run.max_wall_s ?? 3600) * 1e3;
+const said = () => result.boot_lines.concat(host.replies).slice(-8).join(' | ');
+const HELLO_NS = 20e9; // boot, USB and main.py's answer to M115 take about 1 s
 function halt(reason) { if (!stopped) { stopped = true; result.stopped = reason; } }
 
 function slice() {
@@ -312,7 +316,17 @@ function slice() {
       }
     }
     if (host.state === 'done') { stopped = true; break; }
-    if (core.waiting && clock.nanosToNextAlarm <= 0) { halt('the chip sleeps with nothing left to wake it'); break; }
+    if (core.waiting && clock.nanosToNextAlarm <= 0) {
+      halt(`the chip sleeps with nothing left to wake it (${host.state}; it said: ${said() || 'nothing'})`);
+      break;
+    }
+    if (host.state !== 'print' && host.state !== 'done' && clock.nanos > HELLO_NS &&
+        (connectedNs == null || clock.nanos - connectedNs > HELLO_NS)) {
+      halt(connectedNs == null
+        ? `the USB console did not come up within ${HELLO_NS / 1e9} emulated s: is the image MicroPython for the Pico?`
+        : `main.py did not answer M115 within ${HELLO_NS / 1e9} emulated s (it said: ${said() || 'nothing'})`);
+      break;
+    }
     if (clock.nanos > maxEmuNs) { halt(`emulated-time limit of ${run.max_emu_s} s reached (${host.state}, line ${host.next})`); break; }
     const now = performance.now();
     if (now - wall0 > maxWallMs) { halt(`wall-time limit of ${run.max_wall_s} s reached (${host.state}, line ${host.next})`); break; }

@@ -62,15 +62,16 @@ def image_files(image_dir=None):
     uf2 = folder / "firmware.uf2"
     if not uf2.exists():
         raise EmuError("no firmware.uf2 in %s: pass --image DIR with MicroPython's Pico "
-                       "firmware as firmware.uf2 (the official v1.28 RPI_PICO .uf2 from "
-                       "micropython.org/download/RPI_PICO works)" % folder)
+                       "firmware as firmware.uf2, e.g. the v1.28 RPI_PICO .uf2 from "
+                       "micropython.org/download/RPI_PICO" % folder)
     for name in ("bootrom.js", "bootrom.bin"):
         if (folder / name).exists():
             return uf2, folder / name
     raise EmuError("no boot ROM (bootrom.js or bootrom.bin) in %s: MicroPython calls the "
                    "RP2040's ROM functions, which rp2040js's npm package does not ship. "
                    "Take demo/bootrom.ts of github.com/wokwi/rp2040js as bootrom.js, or "
-                   "b1.bin of github.com/raspberrypi/pico-bootrom as bootrom.bin" % folder)
+                   "b1.bin built from github.com/raspberrypi/pico-bootrom-rp2040 (tag b1) "
+                   "as bootrom.bin" % folder)
 
 
 def make_fs_image(src_dir, out_path):
@@ -177,6 +178,8 @@ def summarize(res, board, gcode_path, steps):
         "steps": steps,
         "heaters_c": {h["name"]: round(h["temp_c"], 1) for h in res["heaters"]},
         "boot_lines": res["boot_lines"],
+        # What the firmware answered to the file's lines besides `ok` (the first 1000).
+        "console": res["console"],
         "edges": res["edges"],
     }
     if res.get("print"):
@@ -206,6 +209,8 @@ def _print(args):
     print(json.dumps(summary, indent=2))
     for e in report["errors"][:20]:
         print(e, file=sys.stderr)
+    if report["stopped"]:
+        print("mixstep emu: stopped early: %s" % report["stopped"], file=sys.stderr)
     return 1 if report["errors"] or report["stopped"] else 0
 
 
