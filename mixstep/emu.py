@@ -174,6 +174,8 @@ def summarize(res, board, gcode_path, steps):
         "emulator_wall_seconds": round(res["wall_seconds"], 3),
         "underruns": last.get("underruns"),
         "mem_free_min_bytes": min((d["mem_free_collected"] for d in diags), default=None),
+        # gc.mem_free() as M122 found it, before its collection: garbage included.
+        "mem_free_uncollected_min_bytes": min((d["mem_free"] for d in diags), default=None),
         "mem_free_samples": len(diags),
         "steps": steps,
         "heaters_c": {h["name"]: round(h["temp_c"], 1) for h in res["heaters"]},
