@@ -38,7 +38,27 @@ serve: setup
 		$(if $(FILES),--files $(FILES))
 
 clean:
-	rm -rf $(VENV) $(HOSTS_VENV) out build *.egg-info
+	rm -rf $(VENV) $(HOSTS_VENV) out build *.egg-info emu/node_modules
+
+# The firmware on an emulated Pico: make emu [GCODE=file] [IMAGE=dir] [TRACE=..] [REPORT=..].
+# Without GCODE it prints a short excerpt of the example (the whole example would take
+# hours of wall time). emu-setup installs rp2040js into emu/node_modules with npm ci.
+EMU_STAMP := emu/node_modules/.installed
+EMU_GCODE = $(if $(filter file,$(origin GCODE)),testdata/part_3tool_emu_excerpt.gcode,$(GCODE))
+EMU_TRACE = $(if $(filter file,$(origin TRACE)),out/emu.vcd,$(TRACE))
+EMU_REPORT = $(if $(filter file,$(origin REPORT)),out/emu.json,$(REPORT))
+.PHONY: emu emu-setup
+emu-setup: $(EMU_STAMP)
+
+$(EMU_STAMP): emu/package.json emu/package-lock.json
+	@command -v node >/dev/null && command -v npm >/dev/null || { echo "node and npm not found: install Node.js 18 or newer with npm (e.g. apt-get install nodejs npm)"; exit 2; }
+	cd emu && npm ci --no-audit --no-fund
+	touch $(EMU_STAMP)
+
+emu: setup emu-setup
+	@mkdir -p $(dir $(EMU_TRACE)) $(dir $(EMU_REPORT))
+	$(VENV)/bin/mixstep emu print $(EMU_GCODE) --board pico --trace $(EMU_TRACE) \
+		--report $(EMU_REPORT) $(if $(IMAGE),--image $(IMAGE))
 
 # Cost of one step-loop call (viper vs bytecode vs an empty viper call) on the unix port.
 .PHONY: step-cost

@@ -77,6 +77,8 @@ def main(argv=None):
     boards.add_parser(sub)
     from mixstep import deploy  # `mixstep deploy|freeze|board-check`: onto a board
     deploy.add_parser(sub)
+    from mixstep import emu  # `mixstep emu print`: the firmware on an emulated Pico
+    emu.add_parser(sub)
     args = parser.parse_args(argv)
     return args.run(args)
 

@@ -6,7 +6,8 @@ from mixstep import paths
 
 
 def read_edges(path):
-    """(time_us, gpio, level) arrays from the simulation's edge file."""
+    """(time, gpio, level) arrays from an edge file: the simulation's (time in us) or
+    the emulated chip's (`mixstep emu`, time in ns)."""
     words = np.fromfile(path, dtype="<u8")
     return words >> 8, ((words >> 1) & 0x7F).astype(np.int64), (words & 1).astype(np.int8)
 
@@ -18,11 +19,12 @@ def signal_names(board="sim"):
             if name.endswith(("_step", "_dir", "_enable"))}
 
 
-def write_vcd(edges_path, vcd_path, board="sim"):
+def write_vcd(edges_path, vcd_path, board="sim", timescale="1 us", date="mixstep simulation"):
+    """timescale: the unit of the edge file's times."""
     times, gpios, levels = read_edges(edges_path)
     names = signal_names(board)
     order = sorted(names, key=lambda g: _name_order(names[g]))
-    with open(vcd_path, "w") as f, vcd.VCDWriter(f, timescale="1 us", date="mixstep simulation",
+    with open(vcd_path, "w") as f, vcd.VCDWriter(f, timescale=timescale, date=date,
                                                  version="mixstep") as w:
         first = {}
         for g in order:

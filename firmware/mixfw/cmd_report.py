@@ -1,5 +1,6 @@
 # Reports and messages: M114 (position), M115 (firmware and capabilities), M117
-# (message), M118 (echo to the host). M117 and M118 take free text.
+# (message), M118 (echo to the host), M122 (diagnostics). M117 and M118 take free text.
+import gc
 from mixfw import stepper as st
 
 # The text after these is the argument, whatever letters it holds.
@@ -60,6 +61,15 @@ class Reports:
         for cap in self.capabilities:
             self.printer.reply("Cap:%s:%d" % cap)
 
+    # M122: diagnostics, as RepRapFirmware's: the planner's underruns (the step loop
+    # ran dry between two moves with no wait between them) and the free heap, as it is
+    # and after a full collection (what the firmware really holds). Example: M122
+    def m122(self, line):
+        free = gc.mem_free()
+        gc.collect()
+        self.printer.reply("echo:underruns:%d mem_free:%d mem_free_collected:%d" % (
+            self.planner.underruns, free, gc.mem_free()))
+
     # M117 <text>: the status message, kept for a display or a report; M117 alone
     # clears it. Example: M117 Printing...
     def m117(self, line):
@@ -83,5 +93,6 @@ class Reports:
 def register(printer, reports):
     printer.register("M114", reports.m114, "report position")
     printer.register("M115", reports.m115, "firmware info")
+    printer.register("M122", reports.m122, "diagnostics: underruns, free heap")
     printer.register("M117", reports.m117, "status message: M117 <text>")
     printer.register("M118", reports.m118, "send text to the host: M118 [A1] [E1] [Pn] <text>")

@@ -202,6 +202,9 @@ class Planner:
         self.keep_extrusion = False
         self.extruded = []
         self.retracted = []
+        # Times the step loop ran dry between two moves with no wait between them
+        # (M122): the host or the planner did not keep up, and the axes stopped.
+        self.underruns = 0
 
     # --- queue state, shared with the step loop ---
     def busy(self):
@@ -379,6 +382,8 @@ class Planner:
                 break
             self.idle()
         if not self.busy():
+            if self.prev_unit is not None:
+                self.underruns += 1
             self.prev_unit = None
             self.prev_nominal = 0.0
         return m[_S_HEAD]
