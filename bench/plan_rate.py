@@ -15,29 +15,9 @@ import simmachine
 sys.modules["machine"] = simmachine
 import board
 import main
-from mixfw import stepper as st
+from plan_only import retire_one, retire_all
 
 SKIPPED = (b"M109", b"M190", b"M116")
-
-
-def retire_one(mem, queue_blocks):
-    def wait():
-        if mem[st.S_TAIL] != mem[st.S_HEAD]:
-            tail = mem[st.S_TAIL] + 1
-            mem[st.S_TAIL] = 0 if tail >= queue_blocks else tail
-        mem[st.S_ACTIVE] = 0
-        mem[st.S_HOME_STOP] = 7  # homing: every endstop is hit at once
-
-    return wait
-
-
-def retire_all(mem, queue_blocks):
-    def wait():
-        mem[st.S_TAIL] = mem[st.S_HEAD]
-        mem[st.S_ACTIVE] = 0
-        mem[st.S_HOME_STOP] = 7
-
-    return wait
 
 
 def is_move(buf, i):

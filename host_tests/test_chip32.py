@@ -37,7 +37,7 @@ SLICER_FILES = ("part_3tool_prusaslicer_rel.gcode", "part_3tool_prusaslicer_abs.
 STEP_NAMES = ["x", "y", "z"] + ["e%d" % d for d in range(6)]
 
 # Every line through the firmware's parser and command table into the planner, with
-# no stepping: the planner's wait retires one block at a time (as bench/plan_rate.py).
+# no stepping: the planner's wait retires one block at a time (boards/sim/plan_only.py).
 # Prints the steps the planner handed the step loop for every axis and drive.
 PLAN = """
 import sys, json
@@ -45,19 +45,11 @@ import simmachine
 sys.modules["machine"] = simmachine
 import board
 import main
-from mixfw import stepper as st
+from plan_only import retire_one
 names = ["x", "y", "z"] + ["e%%d" %% i for i in range(board.SETTINGS["drives"])]
 simmachine.attach_world(board.PINS, names)
 printer = main.build(files_root=None)
-mem = printer.mem
-q = printer.planner.queue
-def wait():
-    if mem[st.S_TAIL] != mem[st.S_HEAD]:
-        tail = mem[st.S_TAIL] + 1
-        mem[st.S_TAIL] = 0 if tail >= q else tail
-    mem[st.S_ACTIVE] = 0
-    mem[st.S_HOME_STOP] = 7  # homing: every endstop is hit at once
-printer.planner.idle = wait
+printer.planner.idle = retire_one(printer.mem, printer.planner.queue)
 replies = []
 printer.reply = replies.append
 errors = []
