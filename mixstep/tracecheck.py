@@ -56,15 +56,25 @@ from mixstep import paths
 # mixfw's pure modules import on CPython: one implementation of parsing, mixing and
 # step rounding, shared with the firmware.
 from mixfw import cmd_config, cmd_files, cmd_mixing
-from mixfw.gcode import GcodeError, Parser
+from fractions import Fraction
+
+from mixfw.gcode import GcodeError, Parser, letter_index
 from mixfw.mixer import MixError, default_tool_mixes, normalize
-from mixfw.planner import steps_from_mm
+from mixfw.planner import steps_from_mm, spm_fixed, SPM_SCALE, NM_PER_MM
 
 AXES = ("x", "y", "z")
 RATE_RUN = 20  # steps over which the step rate is measured
 CHUNK_BYTES = 1 << 20  # larger chunks are no faster, and numpy's temporaries grow with them
 _MARLIN_LETTERS = "ABCDHI"
 _UNITS_S = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "ps": 1e-12, "fs": 1e-15}
+
+
+_E = letter_index("E")
+
+
+def _exact_e(ln):
+    """The line's E word in mm, exactly, rounded to the nanometre as the firmware reads it."""
+    return Fraction(ln.fixed_at(_E, 6), NM_PER_MM)
 
 
 class TraceError(Exception):
@@ -87,12 +97,17 @@ def expected_from_gcode(gcode_path, settings):
     mixes = list(default_tool_mixes(drives, settings.get("virtual_tools", 16)))
     parser = Parser(cmd_config.RAW_COMMANDS + cmd_files.RAW_COMMANDS
                     + cmd_mixing.RAW_COMMANDS)
-    pos = [0.0] * 4
-    off = [0.0] * 4
+    pos = [0.0, 0.0, 0.0, Fraction(0)]
+    off = [0.0, 0.0, 0.0, Fraction(0)]
     absolute = absolute_e = True
     tool = 0
     collector = [0.0] * drives
-    drive_mm = [0.0] * drives
+    # E and each drive's filament are exact (fractions of mm), as the firmware keeps
+    # them in integers: E words to the nanometre, steps/mm to a millionth, so a share
+    # that lands exactly on half a step rounds as the firmware's does, not as a float
+    # that happens to fall either side of it.
+    e_spm = Fraction(spm_fixed(spm[3]), SPM_SCALE)
+    drive_mm = [Fraction(0)] * drives
     drive_steps = [0] * drives
     moves = []
     moved = set()
@@ -110,13 +125,14 @@ def expected_from_gcode(gcode_path, settings):
                     for i, ch in enumerate("XYZE"):
                         if ln.has_value(ch):
                             rel = not (absolute_e if i == 3 else absolute)
-                            target[i] = target[i] + ln.float(ch) if rel else ln.float(ch)
+                            v = _exact_e(ln) if i == 3 else ln.float(ch)
+                            target[i] = target[i] + v if rel else v
                     e_mm = target[3] - pos[3]
                     if e_mm:
                         w = mixes[tool]
                         total = sum(w)
                         drive_mm = [drive_mm[i] + e_mm * w[i] / total for i in range(drives)]
-                        now = [steps_from_mm(drive_mm[i], spm[3]) for i in range(drives)]
+                        now = [steps_from_mm(drive_mm[i], e_spm) for i in range(drives)]
                         if now != drive_steps:
                             moves.append((number, w, tuple(now)))
                             moved.update("e%d" % d for d in range(drives)
@@ -131,7 +147,8 @@ def expected_from_gcode(gcode_path, settings):
                 elif cmd == "G92":
                     named = [i for i in range(4) if ln.has("XYZE"[i])]
                     for i in named or range(4):
-                        v = ln.float("XYZE"[i], 0.0)
+                        v = (_exact_e(ln) if ln.has_value("E") else Fraction(0)) if i == 3 \
+                            else ln.float("XYZE"[i], 0.0)
                         off[i] += pos[i] - v
                         pos[i] = v
                 elif cmd == "G28":
