@@ -116,6 +116,56 @@ let excNow = 0, excMark = 0, sleptNanos = 0;
   };
 }
 
+// ---------------------------------------------------------------- PIO on the emulated clock
+// rp2040js 1.4.1 runs the PIO state machines from Node's event loop, 1000 instructions
+// at a time whatever the emulated time, skips instructions' delay cycles, ignores the
+// clock divider and never joins the FIFOs. Here each enabled state machine runs one
+// cycle per clk_sys / CLKDIV on the emulated clock (the fractional divider spreading
+// its cycles over whole clk_sys cycles, as the chip's does), an instruction's delay
+// cycles pass before the next one, and FJOIN gives the joined FIFO 8 words.
+const SM_SHIFTCTRL = 0x0d0 - 0x0c8; // a state machine's registers, from its CLKDIV
+const FJOIN_TX = 1 << 30, FJOIN_RX = 1 << 31;
+for (const pio of mcu.pio) {
+  pio.run = () => {}; // its event-loop runner; the alarms below run it instead
+  for (const sm of pio.machines) {
+    const Fifo = sm.txFIFO.constructor;
+    const write = sm.writeUint32.bind(sm);
+    sm.writeUint32 = (offset, value) => {
+      write(offset, value);
+      if (offset === SM_SHIFTCTRL) { // changing FJOIN empties both FIFOs
+        sm.txFIFO = new Fifo(value & FJOIN_TX ? 8 : value & FJOIN_RX ? 0 : 4);
+        sm.rxFIFO = new Fifo(value & FJOIN_RX ? 8 : value & FJOIN_TX ? 0 : 4);
+      }
+    };
+    // 1/256 clk_sys cycles into the divider; delay cycles left; an alarm pending
+    let phase = 0, owed = 0, running = false;
+    sm.clkDivRestart = () => { phase = 0; };
+    const alarm = clock.createAlarm(() => {
+      if (!sm.enabled) { running = false; return; } // CTRL's next enable starts it again
+      if (owed > 0) owed--;
+      else {
+        const c0 = sm.cycles;
+        sm.step();
+        owed = Math.max(0, sm.cycles - c0 - 1);
+      }
+      pio.checkChangedPins();
+      next();
+    });
+    const next = () => {
+      const div = ((sm.clockDivInt || 0x10000) << 8) + sm.clockDivFrac;
+      const whole = (phase + div) >> 8;
+      phase = (phase + div) & 0xff;
+      alarm.schedule(whole * cycleNs);
+    };
+    sm.clocked = () => { if (sm.enabled && !running) { running = true; next(); } };
+  }
+  const write = pio.writeUint32.bind(pio);
+  pio.writeUint32 = (offset, value) => {
+    write(offset, value);
+    for (const sm of pio.machines) sm.clocked();
+  };
+}
+
 // ---------------------------------------------------------------- pins: record, endstops
 let edges = new Float64Array(1 << 20), nEdges = 0; // (time_ns, gpio, level) triples
 function record(gpio, level) {
