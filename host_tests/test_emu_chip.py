@@ -138,8 +138,8 @@ def test_moves_queued_while_the_timer_runs_end_exactly(chip):
     sequence ends, by M114's Count and by the trace, is exact. Moves are whole steps
     of 0.05 mm (4 X/Y steps, 20 Z steps) and 0.2 mm of filament (83 e0 steps)."""
     c = chip(max_emu_s=60)
-    for line in ("M302 P1", "M211 S0", "G91"):
-        assert c.command(line) == ["ok"]
+    for line in ("M302 P1", "M211 S0", "G91"):  # M211 S0: anywhere, off the bed too
+        assert c.command(line)[-1] == "ok"
     at = {"x": 0, "y": 0, "z": 0, "e0": 0}
 
     @settings(max_examples=4, deadline=None, derandomize=True, database=None)
@@ -184,9 +184,9 @@ def test_m112_mid_move_stops_motion_at_once(chip):
     # Steps ran at 4000/s until the firmware read M112 (it polls the USB console
     # between lines and in every wait, here within 2 ms) and none came after that:
     # the last one comes before the Error: is sent, none in the 200 ms after.
-    assert 0.3 * 1e9 < x[-1] - x[0] < 0.35 * 1e9
-    assert x[-1] <= error_at * 1e9
-    assert x[-1] - sent_at * 1e9 < 2e6
+    x = x.astype(np.float64)
+    assert sent_at * 1e9 < x[-1] < sent_at * 1e9 + 2e6
+    assert x[-1] < error_at * 1e9
     assert np.max(np.diff(x[-50:])) <= 6 * TICK_NS  # cruising right up to the stop
     assert halted["x"] == len(x) == net_steps_until(edges, c.now * 1e9)["x"] < 8000
     assert c.command("M999") == ["ok"]
