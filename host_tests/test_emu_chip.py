@@ -141,10 +141,12 @@ def test_moves_queued_while_the_timer_runs_end_exactly(chip):
     for line in ("M302 P1", "M211 S0", "G91"):  # M211 S0: anywhere, off the bed too
         assert c.command(line)[-1] == "ok"
     at = {"x": 0, "y": 0, "z": 0, "e0": 0}
+    sequences = []
 
     @settings(max_examples=4, deadline=None, derandomize=True, database=None)
     @given(st.lists(MOVE, min_size=2, max_size=4))
     def ends_exactly(moves):
+        sequences.append(moves)
         for dx, dy, dz, de, feed in moves:
             words = "G1 X%.2f Y%.2f Z%.2f E%.1f F%d" % (dx * 0.05, dy * 0.05, dz * 0.05,
                                                         de * 0.2, feed)
@@ -160,6 +162,7 @@ def test_moves_queued_while_the_timer_runs_end_exactly(chip):
         assert {a: net[a] for a in at} == at
 
     ends_exactly()
+    assert len(sequences) == 4
 
 
 def test_m112_mid_move_stops_motion_at_once(chip):

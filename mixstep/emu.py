@@ -153,9 +153,10 @@ class Chip:
     def __init__(self, board="pico", image_dir=None, settings=None, files=None,
                  max_emu_s=600.0, max_wall_s=3600.0):
         check_setup()
-        if deploy.board_chip(board) != "rp2040":
+        chip = deploy.board_chip(board)
+        if chip != "rp2040":
             raise EmuError("the emulator is an RP2040 (rp2040js); board %s is %s"
-                           % (board, deploy.board_chip(board)))
+                           % (board, chip))
         self.board = board
         self.settings = dict(settings or {})
         spec = board_spec(board, self.settings)
@@ -168,6 +169,7 @@ class Chip:
         self.final = None
         self._edge_files = 0
         self.proc = None
+        self._stderr = None
         try:
             build = deploy.build(board, self.dir / "flash")
             if self.settings:
@@ -275,11 +277,14 @@ class Chip:
         return trace.net_steps(self.edges_path, self.board)
 
     def cleanup(self):
+        """Stop the emulator if it still runs and remove the run's files."""
         if self.proc and self.proc.poll() is None:
             self.proc.kill()
             self.proc.wait()
+        if self._stderr:
+            self._stderr.close()
         keep = os.environ.get("MIXSTEP_EMU_KEEP")  # a folder to keep the run's files in
-        if keep:
+        if keep and self.dir.exists():
             shutil.copytree(self.dir, keep, dirs_exist_ok=True)
         self._tmp.cleanup()
 
