@@ -1,7 +1,10 @@
 #!/usr/bin/env node
 // mixstep's firmware on an emulated Raspberry Pi Pico (rp2040js), driven as a host
-// drives a printer. `mixstep emu print` writes the run's description (RUN.json) and
-// reads back what this script writes; run it by hand only to debug:
+// drives a printer. mixstep.emu.Chip writes the run's description (RUN.json), starts
+// this script, and then drives it with requests on stdin (see "the controller" below):
+// send bytes over the emulated USB CDC port, run the chip until an answer or for a
+// while, read the pin edges. It boots the chip first and answers once main.py has
+// answered M115.
 //
 //   node emu/harness.mjs RUN.json
 //
@@ -9,23 +12,21 @@
 //   uf2, bootrom       MicroPython's firmware.uf2 for the Pico; the RP2040 boot ROM
 //                      (bootrom.js exporting bootromB1, or a raw 16 KiB bootrom .bin)
 //   fs_image, fs_offset  littlefs image of the Pico's filesystem and its flash offset
-//   gcode              the file to print, streamed one line per `ok` over USB CDC
-//   edges              out: every level change of the recorded pins, little-endian
-//                      u64 words (time_ns << 8 | gpio << 1 | level), mixstep.trace's form
-//   result             out: JSON with the console's answers and the emulator's figures
-//   record_pins        GPIOs to record (STEP, DIR, ENABLE)
+//   record_pins        GPIOs to record (STEP, DIR, ENABLE); the edge files hold every
+//                      level change as little-endian u64 words (time_ns << 8 | gpio << 1
+//                      | level), mixstep.trace's form
 //   endstops           [{axis, min_gpio, step_gpio, dir_gpio, forward_level, active_high}]:
 //                      each min endstop is triggered while the axis is at or below 0
 //                      steps, counted from the STEP/DIR pins (the axes start at home)
 //   heaters            [{name, heater_gpio, adc_channel, pullup_ohm, r25_ohm, beta,
 //                      capacity_j_k, heater_w, loss_w_k, fan_loss_w_k}], fan_gpio:
 //                      a first-order thermal model per heater, read through the ADC
-//   diag_every         send M122 after every this many lines of the file (0: at the end only)
 //   max_emu_s, max_wall_s   give up after this much emulated / wall time
 //
 // Time is the emulator's: the chip runs at its own clock whatever the host machine
 // does, and the host answers at once, so a run is repeatable.
 import fs from 'node:fs';
+import readline from 'node:readline';
 import { pathToFileURL } from 'node:url';
 
 function die(msg, code = 2) {
@@ -114,9 +115,55 @@ let excNow = 0, excMark = 0, sleptNanos = 0;
     ret(r);
   };
 }
-function cpuSnapshot() {
-  excNanos[excNow] += clock.nanos - excMark; excMark = clock.nanos;
-  return { nanos: clock.nanos, slept: sleptNanos, exc: Float64Array.from(excNanos), entries: Float64Array.from(excEntries) };
+
+// ---------------------------------------------------------------- PIO on the emulated clock
+// rp2040js 1.4.1 runs the PIO state machines from Node's event loop, 1000 instructions
+// at a time whatever the emulated time, skips instructions' delay cycles, ignores the
+// clock divider and never joins the FIFOs. Here each enabled state machine runs one
+// cycle per clk_sys / CLKDIV on the emulated clock (the fractional divider spreading
+// its cycles over whole clk_sys cycles, as the chip's does), an instruction's delay
+// cycles pass before the next one, and FJOIN gives the joined FIFO 8 words.
+const SM_SHIFTCTRL = 0x0d0 - 0x0c8; // a state machine's registers, from its CLKDIV
+const FJOIN_TX = 1 << 30, FJOIN_RX = 1 << 31;
+for (const pio of mcu.pio) {
+  pio.run = () => {}; // its event-loop runner; the alarms below run it instead
+  for (const sm of pio.machines) {
+    const Fifo = sm.txFIFO.constructor;
+    const write = sm.writeUint32.bind(sm);
+    sm.writeUint32 = (offset, value) => {
+      write(offset, value);
+      if (offset === SM_SHIFTCTRL) { // changing FJOIN empties both FIFOs
+        sm.txFIFO = new Fifo(value & FJOIN_TX ? 8 : value & FJOIN_RX ? 0 : 4);
+        sm.rxFIFO = new Fifo(value & FJOIN_RX ? 8 : value & FJOIN_TX ? 0 : 4);
+      }
+    };
+    // 1/256 clk_sys cycles into the divider; delay cycles left; an alarm pending
+    let phase = 0, owed = 0, running = false;
+    sm.clkDivRestart = () => { phase = 0; };
+    const alarm = clock.createAlarm(() => {
+      if (!sm.enabled) { running = false; return; } // CTRL's next enable starts it again
+      if (owed > 0) owed--;
+      else {
+        const c0 = sm.cycles;
+        sm.step();
+        owed = Math.max(0, sm.cycles - c0 - 1);
+      }
+      pio.checkChangedPins();
+      next();
+    });
+    const next = () => {
+      const div = ((sm.clockDivInt || 0x10000) << 8) + sm.clockDivFrac;
+      const whole = (phase + div) >> 8;
+      phase = (phase + div) & 0xff;
+      alarm.schedule(whole * cycleNs);
+    };
+    sm.clocked = () => { if (sm.enabled && !running) { running = true; next(); } };
+  }
+  const write = pio.writeUint32.bind(pio);
+  pio.writeUint32 = (offset, value) => {
+    write(offset, value);
+    for (const sm of pio.machines) sm.clocked();
+  };
 }
 
 // ---------------------------------------------------------------- pins: record, endstops
@@ -196,9 +243,13 @@ mcu.usbCtrl.onEndpointRead = (endpoint, size) => {
   if (!toDevice.length) { armed = size; return; }
   deliver(size);
 };
+// What crossed the USB, stamped with emulated seconds, since the last answer to the
+// controller: [t, '>', bytes delivered to the chip] and [t, '<', a line it sent].
+let events = [];
 function deliver(size) {
   const chunk = Uint8Array.from(toDevice.slice(0, size));
   toDevice = toDevice.slice(size);
+  events.push([clock.nanos / 1e9, '>', Buffer.from(chunk).toString('latin1')]);
   mcu.usbCtrl.endpointReadDone(cdc.outEndpoint, chunk);
 }
 function send(text) {
@@ -206,7 +257,7 @@ function send(text) {
   if (armed != null) { const s = armed; armed = null; deliver(s); }
 }
 let connectedNs = null;
-cdc.onDeviceConnected = () => { connectedNs = clock.nanos; host.connected(); };
+cdc.onDeviceConnected = () => { connectedNs = clock.nanos; };
 let rxText = '';
 cdc.onSerialData = (buf) => {
   rxText += Buffer.from(buf).toString('latin1');
@@ -214,157 +265,148 @@ cdc.onSerialData = (buf) => {
   while ((k = rxText.indexOf('\n')) >= 0) {
     const line = rxText.slice(0, k).replace(/\r$/, '');
     rxText = rxText.slice(k + 1);
-    host.line(line);
+    events.push([clock.nanos / 1e9, '<', line]);
+    if (goal && goal.line) goal.line(line);
   }
 };
 
-// ---------------------------------------------------------------- the host
-const gcode = fs.readFileSync(run.gcode, 'latin1').split('\n');
-if (gcode.length && gcode[gcode.length - 1] === '') gcode.pop();
-const result = {
-  lines: 0, errors: [], console: [], boot_lines: [], diagnostics: [], uf2_blocks: uf2Blocks,
-  connected_emu_s: null, start_emu_s: null, end_emu_s: null, stopped: null,
-};
-const diagEvery = run.diag_every || 0;
-let printStart = null, printEnd = null;
-const host = {
-  state: 'boot', // boot -> hello -> print -> drain -> diag -> done
-  next: 0, sinceDiag: 0, replies: [], awaiting: null,
-  connected() {
-    // main.py's `start` went out before the host was there, as on a board plugged in
-    // late: ask who is there, as hosts do, and begin once it answers.
-    this.state = 'hello';
-    this.sendLine('M115', 'hello');
-  },
-  sendLine(text, what) {
-    this.awaiting = what;
-    this.replies = [];
-    send(text + '\n');
-  },
-  line(text) {
-    if (this.state === 'boot') { result.boot_lines.push(text); return; }
-    this.replies.push(text);
-    if (this.awaiting === 'file') {
-      if (text.startsWith('Error:')) result.errors.push(`line ${this.next}: ${text}`);
-      if (text !== 'ok' && result.console.length < 1000) result.console.push(`line ${this.next}: ${text}`);
-    }
-    if (text === 'ok' || text.startsWith('ok ')) this.answered();
-  },
-  answered() {
-    const what = this.awaiting;
-    this.awaiting = null;
-    if (what === 'hello') {
-      result.boot_lines.push(...this.replies);
-      this.startPrint();
-    } else if (what === 'diag' || what === 'final-diag') {
-      const d = this.replies.find((l) => l.startsWith('echo:underruns:'));
-      if (d) result.diagnostics.push({ line: this.next, emu_s: clock.nanos / 1e9, text: d });
-      if (what === 'final-diag') { this.state = 'done'; return; }
-      this.sendNext();
-    } else if (what === 'file') {
-      result.lines++;
-      this.sendNext();
-    } else if (what === 'drain') {
-      printEnd = cpuSnapshot();
-      this.sendLine('M122', 'final-diag');
-    }
-  },
-  startPrint() {
-    this.state = 'print';
-    printStart = cpuSnapshot();
-    result.start_emu_s = clock.nanos / 1e9;
-    this.sendNext();
-  },
-  sendNext() {
-    if (diagEvery && this.sinceDiag >= diagEvery) {
-      this.sinceDiag = 0;
-      this.sendLine('M122', 'diag');
-      return;
-    }
-    if (this.next >= gcode.length) {
-      this.sendLine('M400', 'drain');
-      return;
-    }
-    const text = gcode[this.next].replace(/\r$/, '');
-    this.next++;
-    this.sinceDiag++;
-    this.sendLine(text, 'file');
-  },
-};
-host.line = host.line.bind(host);
-
-// ---------------------------------------------------------------- run
-let stopped = false;
+// ---------------------------------------------------------------- running the chip
+// The chip runs only toward a goal (the boot, or the controller's `run`): between goals
+// its clock stands still, so whatever the controller does in between costs no
+// emulated time, and the same requests give the same run.
+let goal = null; // {met, deadline (ns), line(text)?, connected()?}
+let stopped = null; // why the emulation can't go on: a limit, a breakpoint
 const wall0 = performance.now();
 const maxEmuNs = (run.max_emu_s ?? 600) * 1e9;
 const maxWallMs = (run.max_wall_s ?? 3600) * 1e3;
-const said = () => result.boot_lines.concat(host.replies).slice(-8).join(' | ');
-const HELLO_NS = 20e9; // boot, USB and main.py's answer to M115 take about 1 s
-function halt(reason) { if (!stopped) { stopped = true; result.stopped = reason; } }
+function halt(reason) { if (!stopped) stopped = reason; }
+const isOk = (text) => text === 'ok' || text.startsWith('ok ');
 
-function slice() {
-  const t0 = performance.now();
-  while (!stopped) {
-    for (let i = 0; i < 20000; i++) {
-      if (core.waiting) {
-        const dt = clock.nanosToNextAlarm;
-        if (dt <= 0) { clock.tick(0); if (core.waiting) break; continue; }
-        clock.tick(dt);
-        sleptNanos += dt;
-      } else {
-        clock.tick(core.executeInstruction() * cycleNs);
+// Run until g.met, g.deadline (ns) or a stop; resolves with g.
+function runToward(g) {
+  goal = g;
+  return new Promise((resolve) => {
+    const slice = () => {
+      const t0 = performance.now();
+      while (!g.met && !stopped) {
+        for (let i = 0; i < 20000 && !g.met; i++) {
+          const left = g.deadline - clock.nanos;
+          if (left <= 0) break;
+          if (core.waiting) {
+            const dt = clock.nanosToNextAlarm;
+            if (dt <= 0) { clock.tick(0); if (core.waiting) break; continue; }
+            const step = Math.min(dt, left);
+            clock.tick(step);
+            sleptNanos += step;
+          } else {
+            clock.tick(core.executeInstruction() * cycleNs);
+          }
+        }
+        if (g.met) break;
+        if (clock.nanos >= g.deadline) { if (g.byTime) g.met = true; break; }
+        if (core.waiting && clock.nanosToNextAlarm <= 0) {
+          halt(`the chip sleeps with nothing left to wake it (it said: ${lastSaid()})`);
+          break;
+        }
+        if (clock.nanos > maxEmuNs) { halt(`emulated-time limit of ${run.max_emu_s} s reached`); break; }
+        const now = performance.now();
+        if (now - wall0 > maxWallMs) { halt(`wall-time limit of ${run.max_wall_s} s reached`); break; }
+        if (now - t0 > 50) { setImmediate(slice); return; }
       }
-    }
-    if (host.state === 'done') { stopped = true; break; }
-    if (core.waiting && clock.nanosToNextAlarm <= 0) {
-      halt(`the chip sleeps with nothing left to wake it (${host.state}; it said: ${said() || 'nothing'})`);
-      break;
-    }
-    if (host.state !== 'print' && host.state !== 'done' && clock.nanos > HELLO_NS &&
-        (connectedNs == null || clock.nanos - connectedNs > HELLO_NS)) {
-      halt(connectedNs == null
-        ? `the USB console did not come up within ${HELLO_NS / 1e9} emulated s: is the image MicroPython for the Pico?`
-        : `main.py did not answer M115 within ${HELLO_NS / 1e9} emulated s (it said: ${said() || 'nothing'})`);
-      break;
-    }
-    if (clock.nanos > maxEmuNs) { halt(`emulated-time limit of ${run.max_emu_s} s reached (${host.state}, line ${host.next})`); break; }
-    const now = performance.now();
-    if (now - wall0 > maxWallMs) { halt(`wall-time limit of ${run.max_wall_s} s reached (${host.state}, line ${host.next})`); break; }
-    if (now - t0 > 50) { setImmediate(slice); return; }
-  }
-  finish();
+      goal = null;
+      resolve(g);
+    };
+    slice();
+  });
+}
+const lastSaid = () => events.filter((e) => e[1] === '<').slice(-8).map((e) => e[2]).join(' | ') || 'nothing';
+
+// Until a line starting with `match`, `oks` lines `ok`, or `for_s` emulated seconds
+// (whichever first); at most `max_s`.
+function goalFor(op) {
+  const now = clock.nanos;
+  const g = { met: false, byTime: op.for_s != null, oks: op.oks || 0, match: op.match ?? null };
+  g.deadline = Math.min(op.for_s != null ? now + op.for_s * 1e9 : Infinity,
+    now + (op.max_s ?? 60) * 1e9, maxEmuNs + 1);
+  g.line = (text) => {
+    if (g.match != null && text.startsWith(g.match)) g.met = true;
+    if (g.oks && isOk(text) && --g.oks === 0) g.met = true;
+  };
+  return g;
 }
 
-function finish() {
-  const wall = (performance.now() - wall0) / 1e3;
-  const end = printEnd || cpuSnapshot();
-  result.connected_emu_s = connectedNs == null ? null : connectedNs / 1e9;
-  result.end_emu_s = end.nanos / 1e9;
-  result.emu_seconds = clock.nanos / 1e9;
-  result.wall_seconds = wall;
-  result.clk_sys_hz = 1e9 / cycleNs;
-  result.cycles = core.cycles;
-  if (printStart) {
-    const exc = {};
-    for (let n = 0; n < 64; n++) {
-      const ns = end.exc[n] - printStart.exc[n];
-      if (ns > 0) exc[n] = { seconds: ns / 1e9, entries: end.entries[n] - printStart.entries[n] };
-    }
-    result.print = { emu_seconds: (end.nanos - printStart.nanos) / 1e9,
-      slept_seconds: (end.slept - printStart.slept) / 1e9, exceptions: exc };
+const HELLO_NS = 20e9; // boot, USB and main.py's answer to M115 take about 1 s
+async function boot() {
+  const up = await runToward({ met: false, deadline: HELLO_NS, connected() { this.met = true; } });
+  if (!up.met) {
+    halt(`the USB console did not come up within ${HELLO_NS / 1e9} emulated s: is the image MicroPython for the Pico?`);
+    return;
   }
-  result.heaters = bodies.map((b) => { b.advance(clock.nanos); return { name: b.name, temp_c: b.temp_c }; });
+  // main.py's `start` went out before the host was there, as on a board plugged in
+  // late: ask who is there, as hosts do, and begin once it answers.
+  send('M115\n');
+  const g = { met: false, deadline: clock.nanos + HELLO_NS, line(text) { if (isOk(text)) this.met = true; } };
+  if (!(await runToward(g)).met) halt(`main.py did not answer M115 within ${HELLO_NS / 1e9} emulated s (it said: ${lastSaid()})`);
+}
+cdc.onDeviceConnected = () => { connectedNs = clock.nanos; if (goal && goal.connected) goal.connected(); };
+
+// ---------------------------------------------------------------- the controller
+// mixstep.emu.Chip sends one JSON request a line on stdin; each gets one answer on
+// stdout, a line starting with ANSWER (anything else there is not ours), holding the
+// emulated time, the USB traffic since the last answer (events) and `stopped`.
+//   {op: "send", data}                  bytes (latin1) to the chip; they go as soon as
+//                                       its USB reads, within the next run
+//   {op: "run", oks, match, for_s, max_s}  run the chip; answers met: true/false
+//   {op: "cpu"}                         emulated time per exception so far (cpu)
+//   {op: "edges", path}                 the pin edges so far into path
+//   {op: "end", edges}                  the edges into edges, the heaters, the wall
+//                                       time; then the harness exits
+const ANSWER = '@emu ';
+function answer(obj) {
+  const out = { emu_s: clock.nanos / 1e9, stopped, ...obj, events };
+  events = [];
+  process.stdout.write(ANSWER + JSON.stringify(out) + '\n');
+}
+
+function writeEdges(path) {
   const words = new BigUint64Array(nEdges);
   for (let i = 0; i < nEdges; i++) {
     words[i] = (BigInt(Math.round(edges[i * 3])) << 8n) | BigInt((edges[i * 3 + 1] << 1) | edges[i * 3 + 2]);
   }
-  fs.writeFileSync(run.edges, words);
-  result.edges = nEdges;
-  fs.writeFileSync(run.result, JSON.stringify(result, null, 1) + '\n');
-  process.exit(result.stopped ? 1 : 0);
+  fs.writeFileSync(path, words);
+  return nEdges;
 }
-process.on('SIGINT', () => { halt('interrupted'); finish(); });
-process.on('SIGTERM', () => { halt('terminated'); finish(); });
+
+async function serve(op) {
+  switch (op.op) {
+    case 'send':
+      send(op.data);
+      return answer({});
+    case 'run':
+      if (stopped) return answer({ met: false });
+      return answer({ met: (await runToward(goalFor(op))).met });
+    case 'cpu':
+      return answer({ cpu: cpuSnapshot() });
+    case 'edges':
+      return answer({ edges: writeEdges(op.path) });
+    case 'end': {
+      const heaters = bodies.map((b) => { b.advance(clock.nanos); return { name: b.name, temp_c: b.temp_c }; });
+      answer({ edges: writeEdges(op.edges), heaters, wall_seconds: (performance.now() - wall0) / 1e3,
+        clk_sys_hz: 1e9 / cycleNs, cycles: core.cycles });
+      process.exit(0);
+    }
+    default:
+      die(`unknown request ${JSON.stringify(op)}`);
+  }
+}
+function cpuSnapshot() {
+  excNanos[excNow] += clock.nanos - excMark; excMark = clock.nanos;
+  return { nanos: clock.nanos, slept: sleptNanos, exc: Array.from(excNanos), entries: Array.from(excEntries) };
+}
 
 core.PC = FLASH_START; // boot2 and then MicroPython, as after the boot ROM's own start
-slice();
+await boot();
+answer({ ready: !stopped, uf2_blocks: uf2Blocks, connected_emu_s: connectedNs == null ? null : connectedNs / 1e9 });
+const requests = readline.createInterface({ input: process.stdin });
+for await (const text of requests) await serve(JSON.parse(text));
+process.exit(0); // the controller went away

@@ -48,7 +48,12 @@ def _name_order(name):
 def net_steps(edges_path, board="sim"):
     """Net steps per STEP signal, counted from rising edges and the DIR level then
     (DIR high is forward, low for the board's invert_dir motors)."""
-    times, gpios, levels = read_edges(edges_path)
+    return net_steps_of(*read_edges(edges_path), board)
+
+
+def net_steps_of(times, gpios, levels, board="sim"):
+    """net_steps() of edges already read (read_edges' arrays, or a part of them from
+    the start)."""
     spec = paths.load_board(board)
     pins = spec["PINS"]
     inverted = spec["SETTINGS"].get("invert_dir", ())
