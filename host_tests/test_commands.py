@@ -140,7 +140,7 @@ def test_m17_m18_drive_the_enable_pins(session, board):
     _, x = session.edges_of(board["PINS"]["x_enable"])
     _, y = session.edges_of(board["PINS"]["y_enable"])
     assert list(x) == [1, 0, 1]  # active low: off at #0, on at M17, off at M18 X
-    assert list(y) == [1, 0]
+    assert list(y) == [1, 0, 1]  # ... and every driver off when the main loop ends
 
 
 def test_look_ahead_keeps_speed_through_collinear_segments(session, board):

@@ -1,7 +1,7 @@
 # Motion commands: G0/G1, G4, G28, G90/G91, G92, G20/G21, M82/M83, M400, M17/M18/M84.
 # Handlers parse and check; the planner does the work.
 from mixfw.gcode import GcodeError, letter_index
-from mixfw.planner import steps_from_mm, nm_from_mm, NM_PER_MM
+from mixfw.planner import nm_from_mm, div_round, spm_fixed, NM_PER_MM, SPM_SCALE
 from mixfw import stepper as st
 
 AXIS_LETTERS = "XYZE"
@@ -9,7 +9,8 @@ _AXIS_INDEX = tuple(letter_index(ch) for ch in AXIS_LETTERS)
 _AXIS_BITS = sum(1 << i for i in _AXIS_INDEX)  # in a parsed line's present mask
 _F_INDEX = letter_index("F")
 _E_INDEX = letter_index("E")
-_NM_DECIMALS = 6  # E words are read as exact nanometres
+_NM_DECIMALS = 6  # axis words are read as exact nanometres
+_NM_SPM_SCALE = NM_PER_MM * SPM_SCALE  # nm times fixed steps/mm -> steps
 # retract_policy: retractions follow the mix and run it exactly backwards, or pull every
 # drive equally (and push them back equally), or take back exactly the steps each drive
 # made in the latest extrusion (and push exactly those back).
@@ -26,17 +27,18 @@ class Motion:
         self.planner = planner
         self.queue = planner  # where moves go: the planner, or Transitions in front of it
         self.pins = pins
-        # Logical X Y Z, as G-code sees it, and their G92 offsets (machine = logical +
-        # offset). pos_mm[3] mirrors e_nm for reports: E itself is kept in integers
-        # (nanometres), as it adds up over a whole print.
-        self.pos_mm = [0.0, 0.0, 0.0, 0.0]
-        self.offset_mm = [0.0, 0.0, 0.0, 0.0]
+        # Logical X Y Z as G-code sees it, and their G92 offsets (machine = logical +
+        # offset), in integers (nanometres) as E is: relative moves add up over a whole
+        # print, and a chip's 32-bit floats would drift.
+        self.pos_nm = [0, 0, 0]
+        self.offset_nm = [0, 0, 0]
+        self._xyz_spm = [spm_fixed(s) for s in planner.steps_per_mm[:3]]
         self.e_nm = 0  # logical E
         self.e_offset_nm = 0  # filament = logical E + offset (G92 E, G10/G11)
         self.absolute = True
         self.absolute_e = True
         self.feed_mm_s = settings["default_feed_mm_s"]
-        self.travel_mm = settings["travel_mm"]
+        self._travel(settings["travel_mm"])
         self.homing_feed_mm_s = settings["homing_feed_mm_s"]
         self.drives = settings["drives"]
         self.dir_masks = pins.axis_dir_masks()
@@ -65,12 +67,23 @@ class Motion:
         p.acceleration_mm_s2 = settings["acceleration_mm_s2"]
         p.retract_acceleration_mm_s2 = settings["retract_acceleration_mm_s2"]
         p.junction_deviation_mm = settings["junction_deviation_mm"]
+        self._xyz_spm = [spm_fixed(s) for s in p.steps_per_mm[:3]]
         p.set_position_steps(self.machine_steps())
-        self.travel_mm = settings["travel_mm"]
+        self._travel(settings["travel_mm"])
         self.homing_feed_mm_s = settings["homing_feed_mm_s"]
         self.soft_limits = settings.get("soft_limits", True)
         self.max_extrude_mm = settings.get("max_extrude_mm", 200.0)
         self._retraction_settings(settings)
+
+    def _travel(self, travel_mm):
+        self.travel_mm = travel_mm
+        self._travel_nm = [nm_from_mm(t) for t in travel_mm]
+
+    @property
+    def pos_mm(self):
+        """The logical X Y Z E in mm, for reports."""
+        n = self.pos_nm
+        return (n[0] / NM_PER_MM, n[1] / NM_PER_MM, n[2] / NM_PER_MM, self.e_nm / NM_PER_MM)
 
     def _retraction_settings(self, settings):
         self.retract_policy = settings.get("retract_policy", RETRACT_FOLLOW_MIX)
@@ -83,20 +96,24 @@ class Motion:
     def resync(self):
         """After the queue was dropped: the logical X Y Z are where the axes are. E keeps
         its logical value; the drives' own positions were taken by the planner."""
-        p = self.planner
-        steps = p.position_steps
+        steps = self.planner.position_steps
         for i in range(3):
-            self.pos_mm[i] = steps[i] / p.steps_per_mm[i] - self.offset_mm[i]
+            # Back to the same steps when planned again: half a nanometre is far below
+            # a step at any steps/mm the options allow.
+            self.pos_nm[i] = div_round(steps[i] * _NM_SPM_SCALE, self._xyz_spm[i]) \
+                - self.offset_nm[i]
 
     def machine_steps(self):
         """X Y Z as absolute steps from the logical position; E as planned (drive steps)."""
-        return self._steps(self.pos_mm)
+        return self._steps(self.pos_nm)
 
-    def _steps(self, pos_mm):
-        spm = self.planner.steps_per_mm
-        off = self.offset_mm
-        return [steps_from_mm(pos_mm[0] + off[0], spm[0]), steps_from_mm(pos_mm[1] + off[1], spm[1]),
-                steps_from_mm(pos_mm[2] + off[2], spm[2]), self.planner.position_steps[3]]
+    def _steps(self, pos_nm):
+        spm = self._xyz_spm
+        off = self.offset_nm
+        return [div_round((pos_nm[0] + off[0]) * spm[0], _NM_SPM_SCALE),
+                div_round((pos_nm[1] + off[1]) * spm[1], _NM_SPM_SCALE),
+                div_round((pos_nm[2] + off[2]) * spm[2], _NM_SPM_SCALE),
+                self.planner.position_steps[3]]
 
     def enable_for(self, axes_mask):
         want = axes_mask & 7
@@ -129,13 +146,13 @@ class Motion:
             self.feed_mm_s = f / 60.0
         if not present & _AXIS_BITS:
             return None
-        pos = self.pos_mm
+        pos = self.pos_nm
         target = list(pos)
         moved = 0
         for i in range(3):
             k = _AXIS_INDEX[i]
             if (present >> k) & 1:
-                v = line.float_at(k)
+                v = line.fixed_at(k, _NM_DECIMALS)
                 target[i] = v if self.absolute else target[i] + v
                 moved |= 1 << i
         target_e_nm = self.e_nm
@@ -144,10 +161,11 @@ class Motion:
             target_e_nm = v if self.absolute_e else target_e_nm + v
         if self.soft_limits:
             for i in range(3):
-                mm = target[i] + self.offset_mm[i]
-                if (moved >> i) & 1 and not -1e-6 <= mm <= self.travel_mm[i] + 1e-6:
+                nm = target[i] + self.offset_nm[i]
+                if (moved >> i) & 1 and not -1 <= nm <= self._travel_nm[i] + 1:
                     raise GcodeError("move to %s%.3f is outside the soft limits 0..%g mm"
-                                     % (AXIS_LETTERS[i], target[i], self.travel_mm[i]))
+                                     % (AXIS_LETTERS[i], target[i] / NM_PER_MM,
+                                        self.travel_mm[i]))
         steps = self._steps(target)
         e_nm = target_e_nm - self.e_nm
         at = self.queue.position_steps
@@ -155,16 +173,11 @@ class Motion:
         if xyz or e_nm:
             if e_nm:
                 for fn in self.before_extrude:
-                    fn((pos[2] + target[2]) / 2, e_nm)
+                    fn((pos[2] + target[2]) / (2 * NM_PER_MM), e_nm)
             self._queue(steps, xyz, e_nm, self.feed_mm_s)
-        self._set_e(target_e_nm)
-        target[3] = self.pos_mm[3]
-        self.pos_mm = target
+        self.e_nm = target_e_nm
+        self.pos_nm = target
         return None
-
-    def _set_e(self, e_nm):
-        self.e_nm = e_nm
-        self.pos_mm[3] = e_nm / NM_PER_MM
 
     def _queue(self, steps, xyz, e_nm, feed_mm_s):
         """Queue a move of X Y Z (axes in xyz) to steps, with e_nm of filament."""
@@ -244,8 +257,8 @@ class Motion:
             steps = list(planner.position_steps)
             steps[i] = 0
             planner.set_position_steps(steps)
-            self.pos_mm[i] = 0.0
-            self.offset_mm[i] = 0.0
+            self.pos_nm[i] = 0
+            self.offset_nm[i] = 0
         return None
 
     # G90 / G91: absolute / relative coordinates (E follows, as in Marlin).
@@ -266,14 +279,13 @@ class Motion:
     def g92(self, line):
         named = [i for i in range(4) if line.has(AXIS_LETTERS[i])]
         for i in named or range(4):
+            v = line.fixed_at(_AXIS_INDEX[i], _NM_DECIMALS, 0)
             if i == 3:
-                v = line.fixed_at(_E_INDEX, _NM_DECIMALS, 0)
                 self.e_offset_nm += self.e_nm - v
-                self._set_e(v)
-                continue
-            v = line.float(AXIS_LETTERS[i], 0.0)
-            self.offset_mm[i] += self.pos_mm[i] - v
-            self.pos_mm[i] = v
+                self.e_nm = v
+            else:
+                self.offset_nm[i] += self.pos_nm[i] - v
+                self.pos_nm[i] = v
 
     # G20: inches are refused; G21: millimetres, the only unit.
     def g20(self, line):
