@@ -223,6 +223,7 @@ print(json.dumps({"names": [o.name for o in c.options],
     expected = [k + "_" + a for k, ax in axes.items() for a in ax] + [
         "acceleration_mm_s2", "retract_acceleration_mm_s2", "junction_deviation_mm",
         "default_feed_mm_s", "soft_limits", "max_extrude_mm", "retract_policy", "retract_mm", "trace_records",
+        "watchdog_ms", "step_stall_ms",
         "retract_feed_mm_s", "unretract_feed_mm_s", "transition_l1_mm", "transition_l2_mm",
         "drives", "virtual_tools", "queue_blocks",
         "line_buffer_bytes", "tick_us", "step_pulse_us", "dir_setup_us",
