@@ -204,9 +204,12 @@ def test_m108_from_a_host_ends_m109_in_real_time(realtime_printer):
 
 def _serve_process(args, tmp_path):
     env = dict(os.environ)
+    # As from a terminal: SIGINT is Ctrl-C even where the test runner was started in
+    # the background, which leaves it ignored for its children.
     proc = subprocess.Popen([sys.executable, "-m", "mixstep.cli", "serve"] + args,
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, cwd=tmp_path,
-                            env=env, text=True)
+                            env=env, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     first = proc.stdout.readline()
     assert first.startswith("mixstep: simulated printer on"), first
     return proc
