@@ -229,23 +229,30 @@ def _port_is_free(port):
 def test_serve_ends_cleanly_with_its_firmware(tmp_path, how):
     port = free_port()
     proc = _serve_process(["--tcp", "127.0.0.1:%d" % port, "--realtime", "0"], tmp_path)
-    host = TcpHost(port)
-    # The default flash is under out/printer/ where serve runs: M500 and M20 work.
-    assert host.ask("M500") == ["ok"]
-    assert host.ask("M21") == ["echo:SD card ok", "ok"]
-    host.close()
-    proc.send_signal(how)
-    out, _ = proc.communicate(timeout=20)
-    assert proc.returncode == 0
-    assert "Traceback" not in out and "mixstep: stopped" in out
-    assert (tmp_path / "out" / "printer" / "mixstep.cfg").exists()
-    assert _port_is_free(port), "the firmware still holds its port"
-    # And the next serve starts on the same port.
-    again = _serve_process(["--tcp", "127.0.0.1:%d" % port, "--realtime", "0"], tmp_path)
-    TcpHost(port).close()
-    again.send_signal(signal.SIGTERM)
-    again.communicate(timeout=20)
-    assert again.returncode == 0
+    again = None
+    try:
+        host = TcpHost(port)
+        # The default flash is under out/printer/ where serve runs: M500 and M20 work.
+        assert host.ask("M500") == ["ok"]
+        assert host.ask("M21") == ["echo:SD card ok", "ok"]
+        host.close()
+        proc.send_signal(how)
+        out, _ = proc.communicate(timeout=20)
+        assert proc.returncode == 0
+        assert "Traceback" not in out and "mixstep: stopped" in out
+        assert (tmp_path / "out" / "printer" / "mixstep.cfg").exists()
+        assert _port_is_free(port), "the firmware still holds its port"
+        # And the next serve starts on the same port.
+        again = _serve_process(["--tcp", "127.0.0.1:%d" % port, "--realtime", "0"], tmp_path)
+        TcpHost(port).close()
+        again.send_signal(signal.SIGTERM)
+        again.communicate(timeout=20)
+        assert again.returncode == 0
+    finally:
+        for p in (proc, again):
+            if p is not None and p.poll() is None:
+                p.kill()  # its firmware follows (it dies with its parent)
+                p.wait()
 
 
 def test_serve_pty_dies_with_a_killed_parent(tmp_path):
