@@ -15,7 +15,6 @@ import os
 import re
 import secrets
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -26,6 +25,7 @@ import uuid
 from pathlib import Path
 
 from mixstep import paths
+from net import free_port
 
 HOSTS_VENV = paths.ROOT / ".venv-hosts"
 OCTOPRINT = HOSTS_VENV / "bin" / "octoprint"
@@ -89,12 +89,6 @@ axes:
   z: {{speed: 200, inverted: false}}
   e: {{speed: 300, inverted: false}}
 """
-
-
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def mixstep_command():

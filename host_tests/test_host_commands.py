@@ -14,7 +14,8 @@ import pytest
 
 from mixstep import paths, serve
 from mixstep.simprinter import SimPrinter
-from test_protocol import TcpHost, free_port, group
+from net import free_port
+from test_protocol import TcpHost, group
 
 X_SPM = 80
 

@@ -1,6 +1,5 @@
 """Real host software against the simulated printer: Printrun's printcore streams a
 real slicer file over the TCP console and over a pseudo-terminal."""
-import socket
 import threading
 import time
 
@@ -9,26 +8,9 @@ from printrun.printcore import printcore
 
 from mixstep import paths, serve
 from gcode_model import expected_steps
+from net import free_port, wait_for_port
 
 GCODE = paths.ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
-
-
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def wait_for_port(address, timeout_s=20):
-    host, port = address.rsplit(":", 1)
-    deadline = time.time() + timeout_s
-    while True:
-        try:
-            socket.create_connection((host, int(port)), timeout=1).close()
-            return
-        except OSError:
-            assert time.time() < deadline, "simulated printer did not listen on " + address
-            time.sleep(0.1)
 
 
 class Host:

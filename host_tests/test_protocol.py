@@ -18,6 +18,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 from mixstep import paths, serve, trace
 from mixstep.simprinter import SIM_MAIN, SimPrinter
+from net import free_port
 
 X_SPM = 80  # steps/mm on X and Y of the simulated board
 LINE_BYTES = 96
@@ -328,12 +329,6 @@ def test_flood_of_unnumbered_lines_mixed_with_garbage():
 # ---------------------------------------------------------------------------------
 # 3. The TCP console: one hostile connection, then two flooding at once
 # ---------------------------------------------------------------------------------
-
-def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
 
 class TcpHost:
     def __init__(self, port):

@@ -385,7 +385,7 @@ def test_pull_over_tcp_from_the_served_printer_passes_trace_check(tmp_path, caps
     one's ok, and waits for the moves (M400); `mixstep trace pull --tcp` then fetches
     the ring over a second connection, and the VCD it writes passes `mixstep trace
     check` against those lines, step for step."""
-    from test_hosts import free_port, wait_for_port
+    from net import free_port, wait_for_port
     gcode = tmp_path / "start.gcode"
     gcode.write_text("".join(PRINT.read_text().splitlines(keepends=True)[:45]))
     address = "127.0.0.1:%d" % free_port()

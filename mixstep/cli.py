@@ -1,6 +1,5 @@
 """The `mixstep` command."""
 import argparse
-import json
 import sys
 
 from mixstep import paths
@@ -13,11 +12,7 @@ def _sim(args):
     report = sim.run(args.gcode or paths.EXAMPLE_GCODE, args.trace, args.report,
                      heap_lock=args.heap_lock, board=args.board, config_path=config,
                      files_dir=files)
-    summary = {k: report[k] for k in ("lines", "sim_seconds", "wall_seconds", "steps")}
-    summary["errors"] = len(report["errors"])
-    print(json.dumps(summary, indent=2))
-    for e in report["errors"][:20]:
-        print(e, file=sys.stderr)
+    sim.print_summary(report, ("lines", "sim_seconds", "wall_seconds", "steps"))
     return 1 if report["errors"] else 0
 
 

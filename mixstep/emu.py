@@ -17,7 +17,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from mixstep import boards, deploy, paths, trace
+from mixstep import boards, deploy, paths, sim, trace
 
 EMU = paths.ROOT / "emu"
 HARNESS = EMU / "harness.mjs"
@@ -415,14 +415,9 @@ def _print(args):
     except (EmuError, deploy.DeployError) as e:
         print("mixstep emu: %s" % e, file=sys.stderr)
         return 2
-    keys = ("lines", "emulated_seconds", "emulator_wall_seconds", "wall_seconds",
-            "cpu_step_fraction", "cpu_busy_fraction", "mem_free_min_bytes", "underruns",
-            "stopped")
-    summary = {k: report.get(k) for k in keys}
-    summary["errors"] = len(report["errors"])
-    print(json.dumps(summary, indent=2))
-    for e in report["errors"][:20]:
-        print(e, file=sys.stderr)
+    sim.print_summary(report, ("lines", "emulated_seconds", "emulator_wall_seconds",
+                               "wall_seconds", "cpu_step_fraction", "cpu_busy_fraction",
+                               "mem_free_min_bytes", "underruns", "stopped"))
     if report["stopped"]:
         print("mixstep emu: stopped early: %s" % report["stopped"], file=sys.stderr)
     return 1 if report["errors"] or report["stopped"] else 0

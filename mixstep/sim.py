@@ -2,6 +2,7 @@
 `ok` as a host does, and write the GPIO trace (VCD) and a JSON report."""
 import json
 import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -67,6 +68,15 @@ def run(gcode_path, trace_path=None, report_path=None, heap_lock=False, edges_pa
         Path(report_path).write_text(json.dumps(report, indent=2) + "\n")
     tmp.cleanup()
     return report
+
+
+def print_summary(report, keys):
+    """A run's chosen figures as JSON on stdout, its first errors on stderr."""
+    summary = {k: report.get(k) for k in keys}
+    summary["errors"] = len(report["errors"])
+    print(json.dumps(summary, indent=2))
+    for e in report["errors"][:20]:
+        print(e, file=sys.stderr)
 
 
 def code_heap(modules, board="sim"):

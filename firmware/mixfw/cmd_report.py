@@ -46,6 +46,7 @@ class Reports:
         self.planner = planner
         self.board_name = board_name
         self.capabilities = CAPABILITIES + (("EEPROM", int(storage)), ("SDCARD", int(files)))
+        self.message = ""  # M117's text, for a display or a status report
 
     # M114: logical position and step counts, in Marlin's form.
     def m114(self, line):
@@ -73,7 +74,7 @@ class Reports:
     # M117 <text>: the status message, kept for a display or a report; M117 alone
     # clears it. Example: M117 Printing...
     def m117(self, line):
-        self.printer.message = line.args_text
+        self.message = line.args_text
 
     # M118 [A1] [E1] [P<port>] <text>: send the text to the host, after "echo:" with
     # E1 and "//" (an action command) with A1; P0 to every host, otherwise to the one

@@ -158,7 +158,6 @@ class Printer:
         self.stop_count = 0  # M410s done
         self._cmd_stop_count = 0
         self._stop_pending = False
-        self.message = ""  # M117's text, for a display or a status report
         self.finish = []  # run when the last channel closes (simulation)
         self.halted = None  # reason, while halted
         self.leaving = None  # the command that asked serve() to end (M997)
