@@ -185,11 +185,12 @@ def test_m112_mid_move_stops_motion_at_once(chip):
     edges = c.edges()
     x = rises(edges, "x_step")
     # Steps ran at 4000/s until the firmware read M112 (it polls the USB console
-    # between lines and in every wait, here within 2 ms) and none came after that:
-    # the last one comes before the Error: is sent, none in the 200 ms after.
+    # between lines and in every wait; USB delivery adds a few ms of virtual time
+    # that vary with the host's load) and none came after that: the last one comes
+    # before the Error: is sent, none in the 200 ms after.
     x = x.astype(np.float64)
-    assert sent_at * 1e9 < x[-1] < sent_at * 1e9 + 2e6
-    assert x[-1] < error_at * 1e9
+    assert error_at - sent_at < 0.010
+    assert sent_at * 1e9 < x[-1] < error_at * 1e9
     assert np.max(np.diff(x[-50:])) <= 6 * TICK_NS  # cruising right up to the stop
     assert halted["x"] == len(x) == net_steps_until(edges, c.now * 1e9)["x"] < 8000
     assert c.command("M999") == ["ok"]
