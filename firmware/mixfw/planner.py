@@ -5,6 +5,7 @@
 #
 # Pure logic: the hooks that touch the chip (waiting, masking the interrupt) are
 # passed in by main.py, so host tools can plan on CPython too.
+from array import array
 from math import sqrt
 from mixfw.compat import const
 from mixfw import stepper as st
@@ -26,10 +27,22 @@ _B_FLAGS = const(7)
 _B_DWELL = const(14)
 _B_MIX = const(15)
 _F_NEG = const(4)
+_F_DWELL = const(1)
+_B_RATE_INIT = const(8)
+_B_RATE_NOM = const(9)
+_B_RATE_FINAL = const(10)
+_B_ACCEL = const(11)
+_B_ACCEL_UNTIL = const(12)
+_B_DECEL_AFTER = const(13)
+_B_RATE_DECEL = const(22)
 assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _BLOCK_BASE, _B_WORDS, _B_N, _B_STEPS, _B_DIR_SET,
-        _B_DIR_CLR, _B_FLAGS, _B_DWELL, _B_MIX, _F_NEG) == (
+        _B_DIR_CLR, _B_FLAGS, _B_DWELL, _B_MIX, _F_NEG, _F_DWELL, _B_RATE_INIT, _B_RATE_NOM,
+        _B_RATE_FINAL, _B_ACCEL, _B_ACCEL_UNTIL, _B_DECEL_AFTER, _B_RATE_DECEL) == (
     st.S_HEAD, st.S_TAIL, st.S_ACTIVE, st.BLOCK_BASE, st.B_WORDS, st.B_N, st.B_STEPS,
-    st.B_DIR_SET, st.B_DIR_CLR, st.B_FLAGS, st.B_DWELL, st.B_MIX, st.F_NEG)
+    st.B_DIR_SET, st.B_DIR_CLR, st.B_FLAGS, st.B_DWELL, st.B_MIX, st.F_NEG, st.F_DWELL,
+    st.B_RATE_INIT, st.B_RATE_NOM, st.B_RATE_FINAL, st.B_ACCEL, st.B_ACCEL_UNTIL,
+    st.B_DECEL_AFTER, st.B_RATE_DECEL)
+_ONE_F = float(st.ONE)
 
 # Largest schedule period the step loop's mixer takes: its products stay below 2**30.
 MAX_PERIOD = 20000
@@ -99,10 +112,11 @@ def _gcd(a, b):
     return a
 
 
-def ramp_ticks(n, r0, r_nom, r1, acc):
+def ramp_ticks(n, r0, r_nom, r1, acc, out=None, at=0):
     """The step loop's schedule (B_ACCEL_UNTIL, B_DECEL_AFTER, B_RATE_DECEL) for the
     trapezoid of a record: n lead steps from rate r0 up to r_nom (or the peak where
     the ramps meet) and down to r1 at acc per tick, all in the step loop's fixed point.
+    Returned as a tuple, or written to out[at:at + 3] (no tuple to allocate).
 
     Tick i (from 1) moves by the speed's mean over it. The step loop starts at
     r0 + acc/2 and adds acc per tick until ACCEL_UNTIL, the tick holding the end of
@@ -110,31 +124,55 @@ def ramp_ticks(n, r0, r_nom, r1, acc):
     holding the start of deceleration, sets the rate for the tick after, the first
     wholly decelerating one, which then falls by acc per tick. Only the two corner
     ticks then differ from the trapezoid, by less than acc each, so the position
-    stays on the plan to well under a step, however slow the end of the block."""
-    dist = n * float(st.ONE)
-    a = float(acc)
-    v0 = float(r0)
+    stays on the plan to well under a step, however slow the end of the block.
+
+    Written for the chips: every float operation allocates there, so the common
+    cases take the fewest (a block that cruises throughout takes two)."""
     vn = float(r_nom)
-    v1 = float(r1)
-    two_a = 2.0 * a
-    d_acc = max(0.0, (vn * vn - v0 * v0) / two_a)
-    d_dec = max(0.0, (vn * vn - v1 * v1) / two_a)
-    if d_acc + d_dec > dist:  # the ramps meet below r_nom
-        peak2 = max(v0 * v0, v1 * v1, a * dist + (v0 * v0 + v1 * v1) * 0.5)
-        vn = sqrt(peak2)
-        d_acc = min(max((peak2 - v0 * v0) / two_a, 0.0), dist)
-        d_dec = dist - d_acc
-    accel_s = (vn - v0) / a  # in ticks, as every time here
-    decel_s = accel_s + (dist - d_acc - d_dec) / vn
-    accel_until = _ceil(accel_s)
-    decel_after = max(1, _ceil(decel_s))
-    r_decel = int(vn - a * (decel_after + 0.5 - decel_s) + 0.5)
-    return min(accel_until, _MAX_TICK), min(decel_after, _MAX_TICK), max(r_decel, r1)
-
-
-def _ceil(x):
-    i = int(x)
-    return i + 1 if i < x else i
+    if r0 == r_nom and r1 == r_nom:
+        decel_s = n * _ONE_F / vn
+        accel_until = 0
+    else:
+        # Distances in lead steps times ONE, times 2 * acc (saves a division each).
+        vn2 = vn * vn
+        v0v0 = float(r0) * r0
+        v1v1 = float(r1) * r1
+        d_acc = vn2 - v0v0 if r_nom > r0 else 0.0
+        d_dec = vn2 - v1v1 if r_nom > r1 else 0.0
+        dist = (2.0 * acc) * (n * _ONE_F)
+        if d_acc + d_dec > dist:  # the ramps meet below r_nom
+            peak2 = (dist + v0v0 + v1v1) * 0.5
+            if peak2 < v0v0:
+                peak2 = v0v0
+            if peak2 < v1v1:
+                peak2 = v1v1
+            vn = sqrt(peak2)
+            d_acc = peak2 - v0v0
+            if d_acc > dist:
+                d_acc = dist
+            d_dec = dist - d_acc
+        accel_s = (vn - r0) / acc  # in ticks, as every time here
+        decel_s = accel_s + (dist - d_acc - d_dec) / ((2.0 * acc) * vn)
+        accel_until = int(accel_s)
+        if accel_until < accel_s:
+            accel_until += 1
+    decel_after = int(decel_s)
+    if decel_after < decel_s:
+        decel_after += 1
+    if decel_after < 1:
+        decel_after = 1
+    r_decel = int(vn - acc * (decel_after + 0.5 - decel_s) + 0.5)
+    if r_decel < r1:
+        r_decel = r1
+    if accel_until > _MAX_TICK:
+        accel_until = _MAX_TICK
+    if decel_after > _MAX_TICK:
+        decel_after = _MAX_TICK
+    if out is None:
+        return accel_until, decel_after, r_decel
+    out[at] = accel_until
+    out[at + 1] = decel_after
+    out[at + 2] = r_decel
 
 
 _MAX_TICK = 0x3FFFFFFF
@@ -174,8 +212,19 @@ class Planner:
         self.back_entry = [0.0] * q  # see _recalculate
         self.gain_v2 = [0.0] * q  # 2 * accel * mm: the v**2 a block gains or sheds
         self.exit = [0.0] * q  # exit speed baked into the slot's integer record
-        self.ramp = [None] * q  # per slot: (record's rates, its ramp_ticks schedule)
-        self.prev_unit = None
+        # Per slot, from _set_plan: mm/s -> rate, rate change per tick, slowest rate.
+        self._tick_one = self.tick_s * st.ONE
+        self.rate_k = [0.0] * q
+        self.rate_acc = [1] * q
+        self.rate_floor = [0] * q
+        # Per slot: the rates (r0, r_nom, r1) of its record and their ramp_ticks schedule.
+        self._rates = array("i", bytes(12 * q))
+        self._ramps = array("i", bytes(12 * q))
+        self.prev_unit = None  # one of _units, or None after a stop
+        self._units = ([0.0] * 4, [0.0] * 4)
+        self._delta = [0] * 4
+        self._abs_steps = [0] * 4
+        self._d_mm = [0.0] * 4
         self.prev_nominal = 0.0
         self.mix_id = 0
         self.tool_mix = (1,) + (0,) * (MAX_DRIVES - 1)  # the active tool's weights
@@ -448,8 +497,18 @@ class Planner:
         dx = target_steps[0] - pos[0]
         dy = target_steps[1] - pos[1]
         dz = target_steps[2] - pos[2]
-        steps = (dx if dx >= 0 else -dx, dy if dy >= 0 else -dy, dz if dz >= 0 else -dz,
-                 e_steps if e_steps >= 0 else -e_steps)
+        # Lists made once and refilled: on the chips a tuple of 3 or more takes a heap
+        # allocation of several blocks, which searches the heap from its first free block.
+        delta = self._delta
+        delta[0] = dx
+        delta[1] = dy
+        delta[2] = dz
+        delta[3] = e_steps
+        steps = self._abs_steps
+        steps[0] = dx if dx >= 0 else -dx
+        steps[1] = dy if dy >= 0 else -dy
+        steps[2] = dz if dz >= 0 else -dz
+        steps[3] = e_steps if e_steps >= 0 else -e_steps
         n = 0
         for k in steps:
             if k > n:
@@ -464,7 +523,11 @@ class Planner:
         y_mm = dy / spm[1]
         z_mm = dz / spm[2]
         de_mm = e_steps / spm[3] if e_steps and not e_mm else e_mm
-        d_mm = (x_mm, y_mm, z_mm, de_mm)
+        d_mm = self._d_mm
+        d_mm[0] = x_mm
+        d_mm[1] = y_mm
+        d_mm[2] = z_mm
+        d_mm[3] = de_mm
         xyz_mm = sqrt(x_mm * x_mm + y_mm * y_mm + z_mm * z_mm)
         along_xyz = dx or dy or dz
         dist = xyz_mm if along_xyz else (de_mm if de_mm >= 0 else -de_mm)
@@ -488,7 +551,12 @@ class Planner:
         if v < speed:
             speed = v
         len4 = sqrt(xyz_mm * xyz_mm + de_mm * de_mm)
-        unit = (x_mm / len4, y_mm / len4, z_mm / len4, de_mm / len4)
+        unit = self._units[0] if self.prev_unit is self._units[1] else self._units[1]
+        inv = 1.0 / len4
+        unit[0] = x_mm * inv
+        unit[1] = y_mm * inv
+        unit[2] = z_mm * inv
+        unit[3] = de_mm * inv
 
         slot = self._new_slot()
         # Junction speed from the deviation model; a stop if the queue ran empty.
@@ -514,7 +582,6 @@ class Planner:
         flags = 0
         dset = 0
         dclr = 0
-        delta = (dx, dy, dz, e_steps)
         for i in range(4):
             m[b + _B_STEPS + i] = steps[i]
             mask = dir_masks[i] if dir_masks else 0
@@ -547,7 +614,7 @@ class Planner:
             last = len(weights) - 1
             for i in range(MAX_DRIVES):
                 m[w + 1 + i] = weights[i] if i <= last else 0
-        self._set_plan(slot, dist, accel, speed, max_entry)
+        self._set_plan(slot, dist, accel, speed, max_entry, n)
         self._recalculate(slot)
         self._commit(slot)
         self.position_steps = [target_steps[0], target_steps[1], target_steps[2], pos[3] + e_steps]
@@ -563,7 +630,8 @@ class Planner:
             self.prev_nominal = speed
         return True
 
-    def _set_plan(self, slot, mm, accel, nominal, max_entry):
+    def _set_plan(self, slot, mm, accel, nominal, max_entry, n=0):
+        """A new block's planning data; n: its lead-axis steps (0 for a dwell)."""
         self.mm[slot] = mm
         self.accel[slot] = accel
         self.gain_v2[slot] = 2.0 * accel * mm
@@ -571,6 +639,17 @@ class Planner:
         self.max_entry[slot] = max_entry
         self.entry[slot] = 0.0
         self.exit[slot] = 0.0
+        self._rates[3 * slot + 1] = -1  # no schedule worked out yet
+        if n:
+            # mm/s -> the step loop's rate; mm/s**2 -> its rate change per tick.
+            k = self._tick_one * n / mm
+            acc = k * (accel * self.tick_s)
+            acc_i = int(acc + 0.5)
+            self.rate_k[slot] = k
+            self.rate_acc[slot] = acc_i if acc_i > 1 else 1
+            # The slowest rate a block may fall to: reached from rest within half a
+            # step, so a block that ends at a stop still finishes.
+            self.rate_floor[slot] = int(sqrt(acc * _ONE_F))
 
     # --- look-ahead ---
     def _recalculate(self, newest):
@@ -642,52 +721,62 @@ class Planner:
             k = nk
 
     def _write_trapezoid(self, slot, exit_speed):
+        """The slot's record for its entry speed and this exit speed. The factors that
+        depend on the block alone were worked out once, by _set_plan."""
         m = self.mem
-        b = st.BLOCK_BASE + slot * st.B_WORDS
-        if m[b + st.B_FLAGS] & st.F_DWELL:
+        b = _BLOCK_BASE + slot * _B_WORDS
+        if m[b + _B_FLAGS] & _F_DWELL:
             return
-        n = m[b + st.B_N]
-        mm = self.mm[slot]
-        a = self.accel[slot]
         v0 = self.entry[slot]
-        v1 = exit_speed
         vn = self.nominal[slot]
-        f = n / mm  # lead steps per mm of path
-        two_a = 2.0 * a
-        accel_steps = (vn * vn - v0 * v0) / two_a * f
-        decel_steps = (vn * vn - v1 * v1) / two_a * f
-        if accel_steps + decel_steps > n:
+        v02 = v0 * v0
+        v12 = exit_speed * exit_speed
+        vn2 = vn * vn
+        gain = self.gain_v2[slot]
+        if (vn2 - v02) + (vn2 - v12) > gain:
             # The nominal speed is never reached: accelerate to where the ramps meet.
-            accel_steps = ((v1 * v1 - v0 * v0) / two_a * f + n) * 0.5
-            accel_steps = min(max(accel_steps, 0.0), float(n))
-            vn = sqrt(v0 * v0 + two_a * accel_steps / f)
-        k = self.tick_s * st.ONE * f
-        acc = a * f * self.tick_s * self.tick_s * st.ONE
-        acc_i = max(1, int(acc + 0.5))
-        # The slowest rate a block may fall to: reached from rest within half a step,
-        # so a block that ends at a stop still finishes.
-        floor = int(sqrt(acc * st.ONE))
-        r_nom = max(int(vn * k), floor)
-        r0 = min(max(int(v0 * k), floor), r_nom)
-        r1 = min(max(int(v1 * k), floor), r_nom)
+            vn2 = (v02 + v12 + gain) * 0.5
+            if vn2 < v02:
+                vn2 = v02
+            elif vn2 > v02 + gain:
+                vn2 = v02 + gain
+            vn = sqrt(vn2)
+        k = self.rate_k[slot]
+        floor = self.rate_floor[slot]
+        r_nom = int(vn * k)
+        if r_nom < floor:
+            r_nom = floor
+        r0 = int(v0 * k)
+        if r0 < floor:
+            r0 = floor
+        if r0 > r_nom:
+            r0 = r_nom
+        r1 = int(exit_speed * k)
+        if r1 < floor:
+            r1 = floor
+        if r1 > r_nom:
+            r1 = r_nom
+        acc_i = self.rate_acc[slot]
         # The look-ahead rewrites every waiting block for each new one, mostly with
         # the same rates: the schedule is worked out again only when they change.
-        rates = (n, r0, r_nom, r1, acc_i)
-        ramp = self.ramp[slot]
-        if ramp is None or ramp[0] != rates:
-            ramp = self.ramp[slot] = (rates, ramp_ticks(n, r0, r_nom, r1, acc_i))
-        accel_until, decel_after, r_decel = ramp[1]
+        c = 3 * slot
+        rates = self._rates
+        ramp = self._ramps
+        if rates[c] != r0 or rates[c + 1] != r_nom or rates[c + 2] != r1:
+            ramp_ticks(m[b + _B_N], r0, r_nom, r1, acc_i, ramp, c)
+            rates[c] = r0
+            rates[c + 1] = r_nom
+            rates[c + 2] = r1
         state = self._irq_off()
-        try:
-            if slot == m[st.S_TAIL] and m[st.S_ACTIVE]:
-                return  # the step loop has it: too late to change
-            m[b + st.B_RATE_INIT] = r0
-            m[b + st.B_RATE_NOM] = r_nom
-            m[b + st.B_RATE_FINAL] = r1
-            m[b + st.B_ACCEL] = acc_i
-            m[b + st.B_ACCEL_UNTIL] = accel_until
-            m[b + st.B_DECEL_AFTER] = decel_after
-            m[b + st.B_RATE_DECEL] = r_decel
-            self.exit[slot] = v1
-        finally:
+        if slot == m[_S_TAIL] and m[_S_ACTIVE]:
             self._irq_on(state)
+            return  # the step loop has it: too late to change
+        m[b + _B_RATE_INIT] = r0
+        m[b + _B_RATE_NOM] = r_nom
+        m[b + _B_RATE_FINAL] = r1
+        m[b + _B_ACCEL] = acc_i
+        m[b + _B_ACCEL_UNTIL] = ramp[c]
+        m[b + _B_DECEL_AFTER] = ramp[c + 1]
+        m[b + _B_RATE_DECEL] = ramp[c + 2]
+        self._irq_on(state)
+        self.exit[slot] = exit_speed
