@@ -7,6 +7,8 @@ absolute time is reported, its reference is reported next to it.
 
     python bench/run.py [--quick] [--only NAME,...]
 
+--only chip runs just the rows measured on the emulated Pico (bench/chip_rows.py);
+they are skipped, with the reason, where node, rp2040js or the image are missing.
 --quick uses ~100 MB inputs for the host tools instead of 1 GB. Generated inputs live
 in out/bench/ (the 1 GB G-code is kept there and reused).
 """
@@ -25,6 +27,7 @@ import numpy as np
 from mixstep import deploy, paths, sim, steptiming
 from mixstep.simprinter import SimPrinter
 from mixfw.gcode import Parser
+import chip_rows
 
 ROOT = paths.ROOT
 WORK = ROOT / "out" / "bench"
@@ -65,6 +68,15 @@ TARGETS = {
     "detool_peak_mb": ("<", 50),
     "trace_check_mb_per_s": None,
     "trace_check_peak_mb": None,
+    # On the emulated Pico (bench/chip_rows.py): estimates, real silicon is slower.
+    "chip_planner_lines_per_s": (">=", 1000),
+    "chip_planner_lines_per_s_no_stepping": None,
+    "chip_cpu_left_while_stepping": (">=", 0.80),
+    "chip_max_step_rate": (">=", 100000),
+    "chip_max_step_rate_keeping_rate": None,
+    "chip_step_time_error_max_us": ("<=", 2),
+    "chip_underruns": ("<=", 0),
+    "chip_heap_free_min_bytes": None,
 }
 
 
@@ -444,6 +456,7 @@ MEASUREMENTS = {
     "sim_speed": lambda res, size: bench_sim_speed(res),
     "gcode_tools": bench_gcode_tools,
     "trace_check": bench_trace_check,
+    "chip": lambda res, size: chip_rows.bench_chip(res, WORK),
 }
 
 

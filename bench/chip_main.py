@@ -1,0 +1,107 @@
+# The chip bench's planner run on the emulated Pico: bench/chip_rows.py puts it on the
+# flash compiled as chip_main.mpy, with a main.py that imports it in place of the
+# firmware's main.py, which goes there as fwmain.mpy and is only imported.
+# It answers requests on the USB console, one line each, then `ok`:
+#   M115                   ok (the harness asks it once it has booted)
+#   plan FILE STEP         parse and plan FILE's lines (read into RAM first) through
+#                          the firmware's parser, command table and planner, with the
+#                          queue retired by hand as boards/sim/plan_only.py's retire_one
+#                          does; with STEP 1 the step path runs meanwhile (see
+#                          stepping_printer). Answers `bench:{json}`.
+# Written against the firmware's API: fwmain.build(files_root=None),
+# fwmain.start_timer(printer, tick_us) (returns what has deinit()), printer.parser.parse,
+# printer.run_line, printer.planner (.idle, .queue, .synchronize), printer.mem with the
+# stepper's S_HEAD/S_TAIL/S_ACTIVE/S_POS words (plan_only.retire_one).
+import sys
+import gc
+import io
+import json
+import time
+import fwmain
+from mixfw import stepper as st
+from plan_only import retire_one
+
+SKIPPED = (b"M109", b"M190", b"M116")
+
+# The step path's move while planning: X 100 mm/s, Y 75 mm/s and E 14.46 mm/s of
+# filament mixed over all six drives, i.e. 8,000 + 6,000 + 6,000 steps/s at the
+# pico_6drives steps/mm (80, 80, 415), for 8 s: longer than any planning run here.
+STEP_SETUP = (b"M302 P1", b"M211 S0", b"G91", b"M83",
+              b"M567 P6 E0.1:0.15:0.2:0.25:0.12:0.18", b"T6")
+STEP_MOVE = b"G1 X800 Y600 E115.66 F7500"
+
+
+def stepping_printer():
+    """A second printer, built as main.py builds the board's, whose only job is to keep
+    the step path busy with one long six-drive mixed move, as while printing. The
+    planner measured is another printer whose queue is retired by hand, so what it
+    plans never reaches the pins and never waits for them; both share the CPU."""
+    printer = fwmain.build(files_root=None)
+    for line in STEP_SETUP + (STEP_MOVE,):
+        printer.run_line(printer.parser.parse(line, len(line)))
+    return printer
+
+
+def stepper_steps(printer):
+    m = printer.mem
+    return m[st.S_POS + st.X] + m[st.S_POS + st.Y] + abs(m[st.S_POS + st.E])
+
+
+def plan(path, stepping):
+    gc.collect()
+    stepper = stepping_printer() if stepping else None
+    printer = fwmain.build(files_root=None)
+    planner = printer.planner
+    planner.idle = retire_one(printer.mem, planner.queue)
+    parse = printer.parser.parse
+    run_line = printer.run_line
+    run_line(parse(b"M302 P1", 7))
+    with open(path, "rb") as f:
+        data = [raw.rstrip(b"\r\n") for raw in f]
+    data = [raw for raw in data if raw[:4] not in SKIPPED]
+    moves = sum(1 for raw in data if raw[:3] in (b"G1 ", b"G0 "))
+    timer = None
+    steps0 = 0
+    if stepper:
+        timer = fwmain.start_timer(stepper, stepper.settings["tick_us"])
+        time.sleep_ms(300)  # past the move's acceleration, into its cruise
+        steps0 = stepper_steps(stepper)
+    gc.collect()
+    free = gc.mem_free()
+    errors = []
+    t0 = time.ticks_us()
+    for number, raw in enumerate(data, 1):
+        try:
+            run_line(parse(raw, len(raw)))
+        except Exception as e:  # the firmware would answer Error: and go on
+            if len(errors) < 5:
+                errors.append("line %d: %r" % (number, e))
+    planner.synchronize()
+    us = time.ticks_diff(time.ticks_us(), t0)
+    out = {"lines": len(data), "move_lines": moves, "seconds": us / 1e6,
+           "move_lines_per_s": moves * 1e6 / us, "errors": errors,
+           "mem_free_before": free, "mem_free_after": gc.mem_free()}
+    if stepper:
+        out["stepper_steps_per_s"] = (stepper_steps(stepper) - steps0) * 1e6 / us
+        out["stepper_still_moving"] = bool(stepper.planner.busy())
+        timer.deinit()
+    return out
+
+
+def serve():
+    while True:
+        words = sys.stdin.readline().split()
+        if not words:
+            continue
+        if words[0] == "plan":
+            try:
+                res = plan(words[1], words[2] == "1")
+            except Exception as e:  # said with its traceback and the heap left
+                trace = io.StringIO()
+                sys.print_exception(e, trace)
+                res = {"failed": trace.getvalue(), "mem_free": gc.mem_free()}
+            print("bench:" + json.dumps(res))
+        print("ok")
+
+
+serve()

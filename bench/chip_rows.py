@@ -1,0 +1,493 @@
+"""The chip rows of `make bench` (issue 13): the firmware on the emulated Pico.
+
+Every figure comes from the real MicroPython v1.28 rp2 firmware running mixstep on
+rp2040js (mixstep.emu.Chip and emu/harness.mjs, the image in mixstep.emu.DEFAULT_IMAGE),
+board pico_6drives. The emulator is optimistic (no flash wait states, free interrupt
+entry, see ../shared/rp2emu/README.md): each figure is an estimate, and real silicon
+is slower. Three emulator sessions, one at a time:
+
+  planner   bench/chip_main.py run by main.py (the firmware's main.py beside it as
+            fwmain, all compiled with mpy-cross as `make deploy` compiles mixfw):
+            plans an excerpt of the example with the queue retired by hand, alone
+            and while a second printer's step path runs a six-drive mixed move.
+  stepping  the firmware as deployed, over USB: one move at 20,000 steps/s for the CPU
+            share and the step times, then moves at rising step rates for the highest
+            rate whose pulses, DIR setup and step times are all in spec.
+  print     the firmware as deployed: testdata/circles_tube_emu_excerpt.gcode streamed
+            over USB, then the same file printed from the emulated flash (M23/M24), for
+            the underruns and the free heap.
+
+    python bench/run.py --only chip
+    python bench/chip_rows.py [planner,stepping,print]     (figures as JSON)
+"""
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from mixstep import deploy, emu, paths, steptiming
+
+BOARD = "pico_6drives"
+ROOT = paths.ROOT
+BENCH_DIR = Path(__file__).resolve().parent
+CIRCLES = ROOT / "testdata" / "circles_tube_emu_excerpt.gcode"
+# The example's lines planned on the chip: perimeters and infill, 289 of 301 are G1.
+PLAN_LINES = (3000, 3300)
+CAVEAT = ("An estimate from the emulated RP2040 (rp2040js, the real MicroPython v1.28 "
+          "rp2 firmware, 125 MHz), which charges no flash wait states and no interrupt "
+          "entry: real silicon is slower.")
+
+# The stepping moves: X, Y and E in the ratio 8 : 6 : 6 of steps, E mixed over all
+# six drives (weights below, tool 6). At 20,000 steps/s: X 100 mm/s, Y 75 mm/s and
+# 14.46 mm/s of filament at 80, 80 and 415 steps/mm.
+SHARE = (0.4, 0.3, 0.3)
+MIX = "M567 P6 E0.1:0.15:0.2:0.25:0.12:0.18"
+CPU_RATE = 20000  # total steps/s of the CPU-share move
+CPU_MOVE_S = 1.0
+CPU_WINDOW = (0.25, 0.85)  # seconds after the move's ok: its cruise
+# The step-rate search: total steps/s tried, doubling from the first, then halving the
+# gap between the highest passing and lowest failing rate this many times.
+SWEEP_START = 2500
+SWEEP_MAX = 320000
+SWEEP_BISECT = 3
+SWEEP_CRUISE_S = 0.08
+SWEEP_RAMP_S = 0.02  # each move's acceleration (M204 P) ramps to its cruise in this
+# A step's time is in spec within this of the ideal trapezoid (the target of
+# chip_step_time_error_max_us). The search also reports the highest rate the step
+# path keeps: every step made, pulses and DIR setup in spec, and the first-to-last
+# lead step time within this fraction of the ideal, whatever single steps' jitter.
+STEP_TIME_SPEC_US = 2.0
+RATE_TOLERANCE = 0.01
+# The print: the emulated time each way of printing gets (today's firmware plans far
+# slower than the file asks, so it is cut there; the count is then a lower bound).
+PRINT_LIMIT_S = 7.0
+DIAG_EVERY_S = 1.0  # M122 (underruns, free heap) this often during the print
+
+NOTES = {
+    "chip_planner_lines_per_s": (
+        "G1 lines per second parsed and planned by the firmware on the emulated Pico "
+        "(board %s): lines %d-%d of the example (289 G1 of 301, read into RAM first) "
+        "through printer.parser.parse and printer.run_line into the planner, the queue "
+        "retired by hand one block per wait as boards/sim/plan_only.py's retire_one "
+        "does (full look-ahead), WHILE the step path runs a six-drive mixed move of "
+        "about 20,000 steps/s (X, Y, E 8:6:6). The stepping is a second printer built "
+        "by the same main.build and started by main.start_timer with one long move, so "
+        "what is planned never waits for the pins (bench/chip_main.py). "
+        "chip_planner_lines_per_s_no_stepping: the same with no step path running; "
+        "chip_planner_stepper_steps_per_s: the steps the stepping printer made meanwhile. "
+        % ((BOARD,) + PLAN_LINES)),
+    "chip_cpu_left_while_stepping": (
+        "Share of the emulated CPU time in thread mode (the main loop; interrupts "
+        "excluded, from the harness's time per exception) during the cruise of one move "
+        "at %d steps/s (X 100 mm/s, Y 75 mm/s, E 14.46 mm/s mixed over six drives), "
+        "the firmware as deployed on %s, sent over USB; window %.2f-%.2f s after its ok. "
+        "chip_cpu_step_fraction: the step timer's interrupt; chip_cpu_left_steps_per_s: "
+        "rising STEP edges per second in the window. " % ((CPU_RATE, BOARD) + CPU_WINDOW)),
+    "chip_max_step_rate": (
+        "Highest total steps/s (X, Y, E 4:3:3, E mixed over six drives; rates doubled from "
+        "%d, then bisected %d times) at which one move of that cruise rate from rest to "
+        "rest makes every step, with every STEP high and low time at least step_pulse_us "
+        "and every DIR change at least dir_setup_us before its axis' next step (board "
+        "settings; X and Y change direction at every move, the drives always extrude), "
+        "and every X (lead-axis) step within %g us of the ideal trapezoid (the target "
+        "of chip_step_time_error_max_us, whose ideal this is; M204 acceleration ramping "
+        "to cruise in %g s, M201/M203 limits raised so the G-code is the plan). 0: no "
+        "rate passed. "
+        "chip_max_step_rate_keeping_rate: the same search with single steps' times left "
+        "out: every step made, pulses and DIR setup in spec, and the first to last X step "
+        "within %g %% of the ideal time (the rate the step path keeps up with); "
+        "chip_max_step_rate_trials: every rate tried. "
+        % (SWEEP_START, SWEEP_BISECT, STEP_TIME_SPEC_US, SWEEP_RAMP_S, RATE_TOLERANCE * 100)),
+    "chip_step_time_error_max_us": (
+        "Worst X (lead-axis) STEP rising edge in the emulator's GPIO capture against its "
+        "ideal time in the trapezoid the G-code asks for (mixstep.steptiming."
+        "ideal_times_us, the k-th step where the trapezoid reaches k steps): from rest to "
+        "rest at the board's acceleration (the lead axis' share of it), entered and left "
+        "at sqrt(a), the speed reached from rest within half a step, as planner.py plans "
+        "a start and a stop; the move of chip_cpu_left_while_stepping. The trapezoid "
+        "starts at the latest time that leaves no step early (the start of a move sent "
+        "over USB is not step timing), so the figure is the spread of (edge - ideal). "
+        "_p99_us: 99th percentile. "),
+    "chip_underruns": (
+        "Times the planner's queue ran dry between two moves (planner.underruns, M122) "
+        "printing testdata/circles_tube_emu_excerpt.gcode (PrusaSlicer, 0.2 mm segments "
+        "at 150 mm/s, 750 lines/s, about 4.7 s of motion), the firmware as deployed on "
+        "%s: streamed over USB one line per ok, then from the emulated flash (M23/M24); "
+        "the sum of both. Each is cut after %g emulated s (then the count is a lower "
+        "bound: _usb_lines and _flash_bytes say how far it got). M122 every %g "
+        "emulated s. " % (BOARD, PRINT_LIMIT_S, DIAG_EVERY_S)),
+    "chip_heap_free_min_bytes": (
+        "Lowest gc.mem_free() after a collection (M122's mem_free_collected) sampled "
+        "every %g emulated s during both prints of chip_underruns; _uncollected: M122's "
+        "mem_free before its collection, garbage included. " % DIAG_EVERY_S),
+}
+for _k in NOTES:
+    NOTES[_k] += CAVEAT
+
+
+def unavailable(image_dir=None):
+    """Why the emulator can't run here (node, rp2040js, the image), or None."""
+    try:
+        emu.check_setup()
+        emu.image_files(image_dir)
+    except emu.EmuError as e:
+        return str(e)
+    return None
+
+
+def _settings():
+    return paths.load_board(BOARD)["SETTINGS"]
+
+
+# --- planner ---------------------------------------------------------------------
+
+def _compiled(out, modules):
+    """{name.mpy: path} of each module compiled as `make deploy` compiles mixfw, and a
+    main.py that imports chip_main: compiling on the chip would take heap the two
+    printers of the planner run need."""
+    out.mkdir(parents=True, exist_ok=True)
+    cross = deploy._tool("mpy-cross")
+    files = {}
+    for name, src in modules.items():
+        dst = out / (name + ".mpy")
+        subprocess.run([cross, "-march=" + deploy.MARCH["rp2040"], "-s", name + ".py",
+                        "-o", str(dst), str(src)], check=True, capture_output=True)
+        files[dst.name] = dst
+    (out / "main.py").write_text("import chip_main\n")
+    files["main.py"] = out / "main.py"
+    return files
+
+
+def chip_planner(res, work):
+    excerpt = work / "chip_plan.gcode"
+    lines = paths.EXAMPLE_GCODE.read_text().splitlines()[PLAN_LINES[0] - 1:PLAN_LINES[1]]
+    excerpt.write_text("\n".join(lines) + "\n")
+    files = _compiled(work / "chip_flash", {
+        "chip_main": BENCH_DIR / "chip_main.py", "fwmain": paths.FIRMWARE / "main.py",
+        "plan_only": paths.BOARDS / "sim" / "plan_only.py"})
+    files["plan.gcode"] = excerpt
+    with emu.Chip(BOARD, files=files, max_emu_s=60, max_wall_s=900) as chip:
+        got = {}
+        for stepping in (0, 1):
+            answer = chip.command("plan plan.gcode %d" % stepping, max_s=30)
+            found = [t for t in answer if t.startswith("bench:")]
+            if not found:
+                raise RuntimeError("chip_main.py answered %s" % answer)
+            r = json.loads(found[0][len("bench:"):])
+            if r.get("failed") or r["errors"]:
+                raise RuntimeError("planning on the chip: %s" % (r.get("failed") or r["errors"]))
+            got[stepping] = r
+    r = got[1]
+    if not r["stepper_still_moving"]:
+        raise RuntimeError("the stepping printer's move ended before the planning did")
+    res["chip_planner_lines_per_s"] = r["move_lines_per_s"]
+    res["chip_planner_lines_per_s_no_stepping"] = got[0]["move_lines_per_s"]
+    res["chip_planner_stepper_steps_per_s"] = r["stepper_steps_per_s"]
+    res["chip_planner_move_lines"] = r["move_lines"]
+    res["chip_planner_mem_free_bytes"] = r["mem_free_before"]
+
+
+# --- stepping --------------------------------------------------------------------
+
+def _move(rate, seconds, sign=1, accel=None):
+    """A relative G1 of X, Y and E whose cruise makes `rate` total steps/s for
+    `seconds` (plus its ramps at `accel`, if given, else `seconds` includes them):
+    (line, X mm, X mm/s, path mm/s)."""
+    spm = _settings()["steps_per_mm"]
+    vx, vy, ve = (rate * s / k for s, k in zip(SHARE, (spm[0], spm[1], spm[3])))
+    v = (vx * vx + vy * vy) ** 0.5
+    if accel:
+        seconds += v / accel
+    dx, dy, de = vx * seconds, vy * seconds, ve * seconds
+    line = "G1 X%.4f Y%.4f E%.5f F%.3f" % (sign * dx, sign * dy, de, v * 60)
+    return line, dx, vx, v
+
+
+def _window(edges, t0_s, t1_s):
+    times, gpios, levels = edges
+    keep = (times > t0_s * 1e9) & (times <= t1_s * 1e9)
+    return times[keep], gpios[keep], levels[keep]
+
+
+def _rises(edges, gpio):
+    times, gpios, levels = edges
+    return np.sort(times[(gpios == gpio) & (levels == 1)]).astype(np.int64)
+
+
+def lead_errors_us(rises_ns, n, v_steps_s, a_steps_s2):
+    """Each lead-axis step's time minus its ideal time (us), or None if the count is
+    not n. The ideal: the trapezoid of a move from rest to rest at cruise v and
+    acceleration a, entered and left at sqrt(a), the speed reached from rest within
+    half a step (as the planner plans a start or stop: planner.py's rate floor), the
+    k-th step where the trapezoid reaches k steps (steptiming.ideal_times_us), and
+    placed at the latest start that leaves no step early."""
+    if len(rises_ns) != n:
+        return None
+    v_rest = min(a_steps_s2 ** 0.5, v_steps_s)
+    ideal = steptiming.ideal_times_us(np.arange(1, n + 1), 0.0, n, v_rest / 1e6,
+                                      v_steps_s / 1e6, v_rest / 1e6, a_steps_s2 / 1e12)
+    d = rises_ns / 1000.0 - ideal
+    return d - d.min()
+
+
+def duration_error(rises_ns, n, v_steps_s, a_steps_s2):
+    """The first-to-last lead step time over its ideal, minus 1 (see lead_errors_us)."""
+    v_rest = min(a_steps_s2 ** 0.5, v_steps_s)
+    ideal = steptiming.ideal_times_us(np.array([1, n]), 0.0, n, v_rest / 1e6,
+                                      v_steps_s / 1e6, v_rest / 1e6, a_steps_s2 / 1e12)
+    return (rises_ns[-1] - rises_ns[0]) / 1000.0 / (ideal[1] - ideal[0]) - 1
+
+
+def pulse_spec(edges, pins, names):
+    """Shortest STEP high and low time and DIR setup (us) over the named motors."""
+    times, gpios, levels = edges
+    high = low = setup = float("inf")
+    for name in names:
+        step, direction = pins[name + "_step"], pins[name + "_dir"]
+        sel = gpios == step
+        t, lv = times[sel].astype(np.int64), levels[sel]
+        if len(t) > 1:
+            dt = np.diff(t) / 1000.0
+            if np.any(lv[:-1] == 1):
+                high = min(high, dt[lv[:-1] == 1].min())
+            if np.any(lv[:-1] == 0):
+                low = min(low, dt[lv[:-1] == 0].min())
+        rise = t[lv == 1]
+        for td in times[gpios == direction]:
+            after = rise[rise > td]
+            if len(after):
+                setup = min(setup, (after[0] - td) / 1000.0)
+    return high, low, setup
+
+
+def chip_stepping(res, work):
+    settings = _settings()
+    pins = paths.load_board(BOARD)["PINS"]
+    motors = ["x", "y"] + ["e%d" % i for i in range(settings["drives"])]
+    spm = settings["steps_per_mm"]
+    tick_us = settings["tick_us"]
+    with emu.Chip(BOARD, max_emu_s=120, max_wall_s=1200) as chip:
+        for line in ("M302 P1", "M211 S0", "G91", "M83", MIX, "T6"):
+            _command(chip, line)
+        # CPU share and step times: one move at the board's own limits.
+        line, dx, vx, v = _move(CPU_RATE, CPU_MOVE_S)
+        _command(chip, line)
+        start = chip.now
+        chip.run(for_s=CPU_WINDOW[0])
+        a = chip.cpu()
+        chip.run(for_s=CPU_WINDOW[1] - CPU_WINDOW[0])
+        b = chip.cpu()
+        _command(chip, "M400", max_s=10)
+        end = chip.now
+        span = b["nanos"] - a["nanos"]
+        res["chip_cpu_left_while_stepping"] = (b["exc"][0] - a["exc"][0]) / span
+        res["chip_cpu_step_fraction"] = sum(b["exc"][n] - a["exc"][n]
+                                            for n in emu.STEP_EXCEPTIONS) / span
+        edges = chip.edges()
+        win = _window(edges, a["nanos"] / 1e9, b["nanos"] / 1e9)
+        steps = sum(len(_rises(win, pins[m + "_step"])) for m in motors)
+        res["chip_cpu_left_steps_per_s"] = steps / (span / 1e9)
+        move = _window(edges, start - 0.1, end)
+        accel = settings["acceleration_mm_s2"]
+        n = round(dx * spm[0])
+        err = lead_errors_us(_rises(move, pins["x_step"]), n, vx * spm[0],
+                             accel * vx / v * spm[0])
+        if err is None:
+            raise RuntimeError("the 20,000 steps/s move made %d X steps, not %d"
+                               % (len(_rises(move, pins["x_step"])), n))
+        res["chip_step_time_error_max_us"] = float(err.max())
+        res["chip_step_time_error_p99_us"] = float(np.percentile(err, 99))
+        # The highest step rate in spec.
+        for line in ("M203 X10000 Y10000 E10000", "M201 X1000000 Y1000000 E1000000"):
+            _command(chip, line)
+        trials = {}
+
+        def trial(rate):
+            if rate in trials:
+                return trials[rate]
+            sign = -1 if len(trials) % 2 else 1  # DIR changes every move
+            v = _move(rate, 1)[3]
+            accel = round(v / SWEEP_RAMP_S, 1)
+            _command(chip, "M204 P%g" % accel)
+            line, dx, vx, v = _move(rate, SWEEP_CRUISE_S, sign, accel)
+            t0 = chip.now
+            _command(chip, line)
+            _command(chip, "M400", max_s=20)
+            win = _window(chip.edges(), t0, chip.now)
+            n = round(dx * spm[0])
+            rises = _rises(win, pins["x_step"])
+            err = lead_errors_us(rises, n, vx * spm[0], accel * vx / v * spm[0])
+            high, low, setup = pulse_spec(win, pins, motors)
+            in_pulse = (high >= settings["step_pulse_us"] and low >= settings["step_pulse_us"]
+                        and setup >= settings["dir_setup_us"] and err is not None)
+            t = {"rate": rate, "x_steps": int(len(rises)), "x_steps_planned": n,
+                 "error_max_us": None if err is None else round(float(err.max()), 3),
+                 "min_high_us": _finite(high), "min_low_us": _finite(low),
+                 "min_dir_setup_us": _finite(setup),
+                 "duration_error": None if err is None else round(float(
+                     duration_error(rises, n, vx * spm[0], accel * vx / v * spm[0])), 5),
+                 "in_spec": bool(in_pulse and err.max() <= STEP_TIME_SPEC_US)}
+            t["keeps_rate"] = bool(in_pulse and abs(t["duration_error"]) <= RATE_TOLERANCE)
+            t.update({
+                 "emulated_s": round(chip.now - t0, 4)})
+            trials[rate] = t
+            return t
+
+        for key, ok in (("chip_max_step_rate", "in_spec"),
+                        ("chip_max_step_rate_keeping_rate", "keeps_rate")):
+            res[key] = _search(trial, ok)
+    res["chip_max_step_rate_trials"] = [trials[r] for r in sorted(trials)]
+    res["chip_step_tick_us"] = tick_us
+
+
+def _finite(us):
+    """None for a check with nothing to check (no DIR change in the move): JSON has
+    no infinity."""
+    return None if us == float("inf") else round(us, 3)
+
+
+def _search(trial, ok):
+    """Highest rate that passes: double from SWEEP_START, then bisect the gap."""
+    good, bad = 0, None
+    rate = SWEEP_START
+    while rate <= SWEEP_MAX:
+        if trial(rate)[ok]:
+            good = rate
+            rate *= 2
+        else:
+            bad = rate
+            break
+    if bad is None or good == 0:
+        return good
+    for _ in range(SWEEP_BISECT):
+        mid = round((good + bad) / 2 / 100) * 100
+        if trial(mid)[ok]:
+            good = mid
+        else:
+            bad = mid
+    return good
+
+
+def _command(chip, line, max_s=5):
+    answer = chip.command(line, max_s=max_s)
+    errors = [t for t in answer if t.startswith("Error:")]
+    if errors:
+        raise RuntimeError("%s: %s" % (line, errors))
+    return answer
+
+
+# --- the print -------------------------------------------------------------------
+
+def _diagnose(chip, samples):
+    for text in chip.command("M122", max_s=10):
+        if text.startswith("echo:underruns:"):
+            samples.append(emu._diag(text))
+            return samples[-1]
+    raise RuntimeError("M122 gave no diagnostics")
+
+
+def chip_print(res, work):
+    samples = []
+    with emu.Chip(BOARD, files={"circles.gcode": CIRCLES}, max_emu_s=120,
+                  max_wall_s=1800) as chip:
+        # Over USB, one line per ok, as a host streams it.
+        t0 = last = chip.now
+        sent = 0
+        with open(CIRCLES, encoding="latin-1") as f:
+            lines = [raw.rstrip("\r\n") for raw in f]
+        for text in lines:
+            if chip.now - t0 >= PRINT_LIMIT_S:
+                break
+            if chip.now - last >= DIAG_EVERY_S:
+                _diagnose(chip, samples)
+                last = chip.now
+            answer = chip.command(text, max_s=10)
+            if any(t.startswith("Error:") for t in answer):
+                raise RuntimeError("line %d: %s" % (sent + 1, answer))
+            sent += 1
+        usb_s = chip.now - t0
+        _command(chip, "M400", max_s=30)
+        usb = _diagnose(chip, samples)["underruns"]
+        # From the emulated flash: back home first, then M23/M24.
+        _command(chip, "G90")
+        _command(chip, "G1 X5 Y5 F9000", max_s=10)
+        _command(chip, "G28", max_s=30)
+        if not any("File selected" in t for t in chip.command("M23 circles.gcode")):
+            raise RuntimeError("M23 did not select circles.gcode")
+        _command(chip, "M24")
+        t0 = last = chip.now
+        done = False
+        while chip.now - t0 < PRINT_LIMIT_S and not done:
+            try:
+                chip.run(match="Done printing file", for_s=min(DIAG_EVERY_S,
+                                                               PRINT_LIMIT_S - (chip.now - t0)))
+            except emu.Stopped:
+                pass
+            done = any(t.startswith("Done printing file") for t in chip.lines_since(t0))
+            _diagnose(chip, samples)
+        flash_s = chip.now - t0
+        progress = [t for t in chip.command("M27") if t.startswith("SD printing byte")]
+        flash = samples[-1]["underruns"] - usb
+        if not done:
+            _command(chip, "M25")
+        errors = [t for t in chip.lines_since(0) if t.startswith("Error:")]
+        if errors:
+            raise RuntimeError("the print: %s" % errors[:3])
+    res["chip_underruns"] = usb + flash
+    res["chip_underruns_usb"] = usb
+    res["chip_underruns_flash"] = flash
+    res["chip_underruns_usb_lines"] = sent
+    res["chip_underruns_file_lines"] = len(lines)
+    res["chip_underruns_usb_emulated_s"] = round(usb_s, 3)
+    res["chip_underruns_usb_lines_per_s"] = round(sent / usb_s, 1)
+    res["chip_underruns_flash_done"] = done
+    res["chip_underruns_flash_emulated_s"] = round(flash_s, 3)
+    res["chip_underruns_flash_bytes"] = (progress[0][len("SD printing byte "):]
+                                         if progress else None)
+    res["chip_heap_free_min_bytes"] = min(s["mem_free_collected"] for s in samples)
+    res["chip_heap_free_min_uncollected_bytes"] = min(s["mem_free"] for s in samples)
+    res["chip_heap_samples"] = len(samples)
+
+
+# --- all of it -------------------------------------------------------------------
+
+PARTS = (("planner", chip_planner), ("stepping", chip_stepping), ("print", chip_print))
+
+
+def bench_chip(res, work):
+    """Every chip row into res, or chip_skipped with the reason when the emulator
+    can't run here. A part that fails raises after the others ran."""
+    reason = unavailable()
+    if reason:
+        res["chip_skipped"] = reason
+        print("bench: chip rows skipped: %s" % reason, file=sys.stderr)
+        return
+    failed = []
+    for name, part in PARTS:
+        t0 = time.perf_counter()
+        print("bench: chip %s ..." % name, file=sys.stderr, flush=True)
+        try:
+            part(res, work)
+        except Exception as e:
+            failed.append("%s: %s: %s" % (name, type(e).__name__, e))
+            print("bench: chip %s FAILED: %s" % (name, failed[-1]), file=sys.stderr)
+        res["bench_seconds_chip_" + name] = round(time.perf_counter() - t0, 1)
+    res["chip_board"] = BOARD
+    for key, text in NOTES.items():
+        res[key + "_method"] = text
+    if failed:
+        raise RuntimeError("; ".join(failed))
+
+
+if __name__ == "__main__":
+    out = {}
+    work = ROOT / "out" / "bench"
+    work.mkdir(parents=True, exist_ok=True)
+    parts = sys.argv[1].split(",") if len(sys.argv) > 1 else [n for n, _ in PARTS]
+    for name, part in PARTS:
+        if name in parts:
+            part(out, work)
+    print(json.dumps(out, indent=2))
