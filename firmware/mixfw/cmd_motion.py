@@ -33,6 +33,8 @@ class Motion:
         self.pos_nm = [0, 0, 0]
         self.offset_nm = [0, 0, 0]
         self._xyz_spm = [spm_fixed(s) for s in planner.steps_per_mm[:3]]
+        self._seen_nm = [None, None, None]  # see _steps
+        self._seen_steps = [0, 0, 0]
         self.e_nm = 0  # logical E
         self.e_offset_nm = 0  # filament = logical E + offset (G92 E, G10/G11)
         self.absolute = True
@@ -46,6 +48,7 @@ class Motion:
         self.soft_limits = settings.get("soft_limits", True)
         # Longest E move accepted, as Marlin's PREVENT_LENGTHY_EXTRUDE.
         self.max_extrude_mm = settings.get("max_extrude_mm", 200.0)
+        self._max_extrude_nm = nm_from_mm(self.max_extrude_mm)
         self.retracted_nm = 0  # retraction not yet undone (equal and replay policies)
         self.fw_retracted = False
         self._retraction_settings(settings)
@@ -68,11 +71,14 @@ class Motion:
         p.retract_acceleration_mm_s2 = settings["retract_acceleration_mm_s2"]
         p.junction_deviation_mm = settings["junction_deviation_mm"]
         self._xyz_spm = [spm_fixed(s) for s in p.steps_per_mm[:3]]
+        self._seen_nm = [None, None, None]  # see _steps
+        self._seen_steps = [0, 0, 0]
         p.set_position_steps(self.machine_steps())
         self._travel(settings["travel_mm"])
         self.homing_feed_mm_s = settings["homing_feed_mm_s"]
         self.soft_limits = settings.get("soft_limits", True)
         self.max_extrude_mm = settings.get("max_extrude_mm", 200.0)
+        self._max_extrude_nm = nm_from_mm(self.max_extrude_mm)
         self._retraction_settings(settings)
 
     def _travel(self, travel_mm):
@@ -110,10 +116,18 @@ class Motion:
     def _steps(self, pos_nm):
         spm = self._xyz_spm
         off = self.offset_nm
-        return [div_round((pos_nm[0] + off[0]) * spm[0], _NM_SPM_SCALE),
-                div_round((pos_nm[1] + off[1]) * spm[1], _NM_SPM_SCALE),
-                div_round((pos_nm[2] + off[2]) * spm[2], _NM_SPM_SCALE),
-                self.planner.position_steps[3]]
+        # The product is a big int on the chips, costlier than the rest of a move: an
+        # axis the move leaves where it was keeps the steps worked out last time.
+        seen_nm = self._seen_nm
+        seen_steps = self._seen_steps
+        steps = [0, 0, 0, self.planner.position_steps[3]]
+        for i in range(3):
+            nm = pos_nm[i] + off[i]
+            if nm != seen_nm[i]:
+                seen_steps[i] = div_round(nm * spm[i], _NM_SPM_SCALE)
+                seen_nm[i] = nm
+            steps[i] = seen_steps[i]
+        return steps
 
     def enable_for(self, axes_mask):
         want = axes_mask & 7
@@ -182,10 +196,9 @@ class Motion:
     def _queue(self, steps, xyz, e_nm, feed_mm_s):
         """Queue a move of X Y Z (axes in xyz) to steps, with e_nm of filament."""
         if e_nm:
-            e_mm = abs(e_nm) / NM_PER_MM
-            if e_mm > self.max_extrude_mm:
+            if not -self._max_extrude_nm <= e_nm <= self._max_extrude_nm:
                 raise GcodeError("extrusion of %.1f mm in one move is over max_extrude_mm %g"
-                                 % (e_mm, self.max_extrude_mm))
+                                 % (abs(e_nm) / NM_PER_MM, self.max_extrude_mm))
             for guard in self.extrusion_guards:
                 guard()
         self.enable_for(xyz | (8 if e_nm else 0))

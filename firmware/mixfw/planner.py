@@ -234,7 +234,7 @@ class Planner:
         self.drives = settings["drives"]
         self.drive_steps_per_mm = list(settings.get("drive_steps_per_mm") or
                                        [self.steps_per_mm[3]] * self.drives)
-        self._spm_fixed = [spm_fixed(v) for v in self.drive_steps_per_mm]
+        self._set_spm_fixed()
         # Each drive's exact filament is drive_nm[i] + drive_rem[i] / rem_total nm: the
         # part of a share below a nanometre is carried, not dropped. The tuple
         # (drive_nm, drive_rem, rem_total) is replaced, never changed in place: _plan_e
@@ -297,8 +297,15 @@ class Planner:
         it is, counted in the new unit."""
         self.synchronize()
         self.drive_steps_per_mm = list(drive_steps_per_mm)
-        self._spm_fixed = [spm_fixed(v) for v in self.drive_steps_per_mm]
+        self._set_spm_fixed()
         self._drive_pos_from_steps()
+
+    def _set_spm_fixed(self):
+        self._spm_fixed = [spm_fixed(v) for v in self.drive_steps_per_mm]
+        # The longest extrusion that goes in one block (see add_move), worked out here
+        # once: a big-int product per move costs the chips more than the rest of it.
+        limit = NM_PER_MM * SPM_SCALE * (MAX_PERIOD - 2 * MAX_DRIVES)
+        self._one_piece_nm = -(-limit // max(self._spm_fixed))
 
     def _nm_of_steps(self, i, steps):
         return div_round(steps * (NM_PER_MM * SPM_SCALE), self._spm_fixed[i])
@@ -465,11 +472,11 @@ class Planner:
         # The mixer gives every drive exactly its count in a block of at most
         # MAX_PERIOD E steps (each drive's count rounds by up to a step: hence the
         # margin), so a longer extrusion, such as a purge, goes in equal pieces.
-        pieces = (abs(e_nm) * max(self._spm_fixed)
-                  // (NM_PER_MM * SPM_SCALE * (MAX_PERIOD - 2 * MAX_DRIVES))) + 1
-        if pieces == 1:
+        if -self._one_piece_nm < e_nm < self._one_piece_nm:
             return self._add_block(target_steps, feed_mm_s, homing_axes, dir_masks, e_nm,
                                    mix, replay)
+        pieces = (abs(e_nm) * max(self._spm_fixed)
+                  // (NM_PER_MM * SPM_SCALE * (MAX_PERIOD - 2 * MAX_DRIVES))) + 1
         start = self.position_steps
         added = False
         for k in range(1, pieces + 1):
