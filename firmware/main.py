@@ -41,11 +41,15 @@ def load_config(path=CONFIG_PATH, warn=print):
     return config
 
 
+def _need_rp2(settings):
+    if settings.get("chip") not in ("rp2040", "rp2350"):
+        raise ValueError("step_backend %s needs an RP2040 or RP2350, not %r"
+                         % (settings.get("step_backend"), settings.get("chip")))
+
+
 def _start_pio(mem, settings, pin_map):
     """The step loop feeds a PIO state machine (rp2 only); returns what it calls."""
-    if settings.get("chip") not in ("rp2040", "rp2350"):
-        raise ValueError("step_backend pio needs an RP2040 or RP2350, not %r"
-                         % settings.get("chip"))
+    _need_rp2(settings)
     import rp2
     from mixfw import pio
     names = ["x", "y", "z"] + ["e%d" % i for i in range(settings["drives"])]
@@ -54,6 +58,18 @@ def _start_pio(mem, settings, pin_map):
     mem[st.S_PIO_SHIFT] = first
     mem[st.S_PIO_LATENCY] = pio.LATENCY_TICKS
     return sm.put  # bound once: the interrupt must not look it up
+
+
+def _pio_dma_feed(mem, settings, pin_map, pins):
+    """The step loop fills a ring of events that DMA feeds to a state machine (rp2
+    only); the feed starts with the printer (start_timer)."""
+    _need_rp2(settings)
+    import rp2
+    from mixfw import piodma
+    names = ["x", "y", "z"] + ["e%d" % i for i in range(settings["drives"])]
+    feed = piodma.Feed(rp2, machine.Pin, mem, pin_map, names, settings, pins.endstops)
+    feed.dir_invert_mask = pins.dir_invert_mask
+    return feed
 
 
 def build(config=None, pin_map=None, files_root=FILES_ROOT):
@@ -75,8 +91,12 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     for i, m in enumerate(pins.dir_masks):
         mem[st.DIR_MASK_BASE + i] = m
     out = pins.out
-    if settings.get("step_backend", "timer") == "pio":
+    feed = None
+    backend = settings.get("step_backend", "timer")
+    if backend == "pio":
         out = _start_pio(mem, settings, pin_map)
+    elif backend == "pio_dma":
+        feed = _pio_dma_feed(mem, settings, pin_map, pins)
     elif pins.registers:
         out, offsets = pins.registers
         for i, word in enumerate(offsets):
@@ -85,8 +105,11 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     planner = Planner(mem, settings, printer.idle, machine.disable_irq, machine.enable_irq)
     planner.dir_invert_mask = pins.dir_invert_mask
     motion = cmd_motion.Motion(planner, pins, settings, printer.reply)
-    # A halt stops motion before anything is reported.
+    # A halt stops motion before anything is reported; steps the DMA ring still held
+    # never reached the pins, so they are taken back before the queue is dropped.
     for stop in (printer.on_halt, printer.on_quick_stop):
+        if feed:
+            stop.append(feed.stop_and_take_back)
         stop.append(planner.abort)
         stop.append(motion.resync)
     cmd_motion.register(printer, motion)
@@ -123,6 +146,7 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     printer.motion = motion
     printer.thermal = thermal
     printer.irq = st.make_irq(mem, out, pins.endstops)
+    printer.feed = feed
     return printer
 
 
@@ -143,6 +167,9 @@ def start_timer(printer, tick_us):
     """The timer owns the step loop: hard on rp2; soft on ESP32, whose timers have no
     hard callbacks (see the README for the jitter that gives)."""
     chip = printer.settings.get("chip", "sim")
+    if printer.feed:
+        printer.feed.start()  # the DMA IRQ runs the step loop: no timer
+        return printer.feed
     check_timer_support(chip, sys.implementation.version)
     freq = 1000000 // tick_us
     if chip == "esp32":
