@@ -60,10 +60,12 @@ def test_every_drive_makes_the_timer_backends_steps(tmp_path, timer_steps):
 
 
 def test_a_late_refill_stalls_the_pins_but_makes_no_wrong_step(tmp_path, timer_steps):
-    """Every 3rd DMA IRQ held back 2.5 ms (longer than a batch): the other channel
-    ends first, so the refill has to start the armed channel itself."""
+    """Every DMA IRQ held back 3 ms (longer than a batch): the other channel ends
+    first and the FIFO runs dry, so the refill has to start the armed channel
+    itself. (One IRQ held back alone stalls nothing: the other channel's IRQ, on
+    time, hands over the ready segment.)"""
     p, edges, said = run(tmp_path, "late", PIO_DMA, LINES + ["M400", "M122"],
-                         before=["M7103 S2500 P3"])
+                         before=["M7103 S3000 P1"])
     assert p.finish()["steps"] == timer_steps
     assert _late_refills(said) > 10
 

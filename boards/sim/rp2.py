@@ -63,9 +63,10 @@ _FIFO_WORDS = 8
 
 
 def dma_register_bank(ram):
-    """The DMA's registers as RAM, and the one array its addresses point into."""
+    """The DMA's registers and PIO0's as RAM banks; ram: the one array the DMA's
+    addresses point into."""
     _engine.ram = ram
-    return _engine.bank
+    return _engine.bank, _engine.pio_bank
 
 
 class DMA:
@@ -122,6 +123,7 @@ class _Engine:
 
     def __init__(self):
         self.bank = array("I", bytes(4 * (0x450 // 4)))
+        self.pio_bank = array("I", bytes(4 * 16))  # FLEVEL (word 3) is kept
         self.ram = None
         self.dmas = [None] * _CHANNELS
         self.left = [0] * _CHANNELS  # transfers still to do per channel
@@ -220,6 +222,7 @@ class _Engine:
         keep = simmachine.now_us
         simmachine.now_us = self.t // self.per_us
         simmachine._now_w = simmachine.now_us & simmachine._W30
+        self.pio_bank[3] = len(self.fifo)  # state machine 0's TX level
         try:
             if simmachine.heap_lock_ticks:
                 micropython.heap_lock()

@@ -34,7 +34,9 @@ CYCLES_PER_US = const(8)
 BATCH_US = const(2000)  # 1 ms batches gave late refills on the emulated chip
 SEGMENTS = const(3)
 DMA_BASE = const(0x50000000)
+PIO0_BASE = const(0x50200000)
 PIO0_TXF0 = const(0x50200010)
+_FLEVEL = const(3)  # PIO register word: each state machine's FIFO levels, a byte each
 # Word offsets: in a channel's block of 16 registers, and of the shared registers.
 _READ_ADDR = const(0)
 _TRANS_COUNT = const(2)
@@ -61,13 +63,14 @@ _R_SEG_N = const(82)
 _R_SEG_SEQ = const(85)
 _R_SEG_WORDS = const(96)
 _R_W = const(92)
+_R_SM = const(107)
 _S_LEVELS = const(45)
 assert (_R_BATCHES, _R_BUSY_BIT, _R_CH, _R_CHAIN_SHIFT, _R_CH_SEG, _R_CTRL, _R_FIRED,
         _R_LATE, _R_READY, _R_RING_ADDR, _R_SEG_LV, _R_SEG_N, _R_SEG_SEQ, _R_SEG_WORDS,
-        _R_W, _S_LEVELS) == (
+        _R_W, _R_SM, _S_LEVELS) == (
     st.R_BATCHES, st.R_BUSY_BIT, st.R_CH, st.R_CHAIN_SHIFT, st.R_CH_SEG, st.R_CTRL,
     st.R_FIRED, st.R_LATE, st.R_READY, st.R_RING_ADDR, st.R_SEG_LV, st.R_SEG_N,
-    st.R_SEG_SEQ, st.R_SEG_WORDS, st.R_W, st.S_LEVELS)
+    st.R_SEG_SEQ, st.R_SEG_WORDS, st.R_W, st.R_SM, st.S_LEVELS)
 
 
 def seg_words(batch_ticks):
@@ -77,11 +80,14 @@ def seg_words(batch_ticks):
 
 
 @micropython.viper
-def refill(mem_buf, regs_in, ring, endstops, done: int):
+def refill(mem_buf, io, done: int):
     """Channel `done` (0 or 1) has read its segment: arm it with the ready one, chain
-    the running channel to it, and fill the freed segment with the next batch."""
+    the running channel to it, and fill the freed segment with the next batch. io:
+    (DMA registers, PIO registers, ring, endstops), one tuple because a viper call
+    with more arguments allocates."""
     mem = ptr32(mem_buf)
-    regs = ptr32(regs_in)
+    regs = ptr32(io[0])
+    pio = ptr32(io[1])
     ch = mem[_R_CH + done]
     r = ch * _CH_WORDS
     o = mem[_R_CH + 1 - done] * _CH_WORDS
@@ -98,14 +104,17 @@ def refill(mem_buf, regs_in, ring, endstops, done: int):
         # nothing triggered this one (it neither runs nor has read a word).
         if (regs[r + _CTRL_TRIG] & busy) == 0 and regs[r + _READ_ADDR] == start:
             regs[_MULTI_CHAN_TRIGGER] = 1 << ch
-            mem[_R_LATE] += 1
+            # Late only if the FIFO had run dry: idle batches are 2 words, so with
+            # words enough in the FIFO both channels may end before the IRQ runs.
+            if (pio[_FLEVEL] >> (mem[_R_SM] << 3)) & 15 == 0:
+                mem[_R_LATE] += 1
     freed = mem[_R_CH_SEG + done]
     mem[_R_CH_SEG + done] = seg
     mem[_R_FIRED] += 1
     base = freed * mem[_R_SEG_WORDS]
     mem[_R_W] = base
     mem[_R_SEG_LV + freed] = mem[_S_LEVELS]
-    w = int(tick(mem_buf, ring, endstops))
+    w = int(tick(mem_buf, io[2], io[3]))
     mem[_R_SEG_N + freed] = w - base
     mem[_R_SEG_SEQ + freed] = mem[_R_BATCHES]
     mem[_R_READY] = freed
@@ -145,11 +154,12 @@ class Feed:
         self.dmas = [rp2.DMA(), rp2.DMA()]
         bank = getattr(rp2, "dma_register_bank", None)
         if bank:  # the simulated chip: registers in RAM, ring addresses from 0
-            self.regs = bank(self.ring)
+            self.regs, self.pio_regs = bank(self.ring)
             mem[st.R_RING_ADDR] = 0
         else:
             import uctypes
             self.regs = DMA_BASE
+            self.pio_regs = PIO0_BASE
             mem[st.R_RING_ADDR] = uctypes.addressof(self.ring)
         d = self.dmas[0]
         self.ctrl = d.pack_ctrl(size=2, inc_read=True, inc_write=False, chain_to=0,
@@ -163,14 +173,15 @@ class Feed:
         mem[st.R_BUSY_BIT] = BUSY_BIT.get(shift, 24)
         for i, dma in enumerate(self.dmas):
             mem[st.R_CH + i] = dma.channel
-        regs, ring = self.regs, self.ring
+        mem[st.R_SM] = sm_id
+        io = (self.regs, self.pio_regs, self.ring, endstops)
 
         # Bound once: the interrupt does no lookups and allocates nothing.
         def irq0(_dma):
-            refill(mem, regs, ring, endstops, 0)
+            refill(mem, io, 0)
 
         def irq1(_dma):
-            refill(mem, regs, ring, endstops, 1)
+            refill(mem, io, 1)
 
         self.handlers = (irq0, irq1)
         self.sm = None

@@ -107,6 +107,7 @@ R_BUSY_BIT = const(101)
 R_CH = const(102)  # the two DMA channels (2 words)
 R_CH_SEG = const(104)  # segment each channel was last given (2 words)
 R_FIRED = const(106)  # channel completions handled
+R_SM = const(107)  # the state machine's number
 R_SEG_LV = const(108)  # pin levels before each segment's first event (3 words)
 BLOCK_BASE = const(112)
 
