@@ -44,7 +44,7 @@ _CTRL_TRIG = const(3)
 _AL1_CTRL = const(4)
 _CH_WORDS = const(16)
 _MULTI_CHAN_TRIGGER = const(0x430 // 4)
-_CHAN_ABORT = const(0x444 // 4)
+_INTS0 = const(0x40C // 4)
 BUSY_BIT = {11: 24, 13: 26}  # CHAIN_TO's place tells the chip: RP2040, RP2350
 
 # The step loop's words refill uses, as constants viper folds (checked below).
@@ -133,6 +133,8 @@ class Feed:
         tick_us = settings["tick_us"]
         batch_ticks = max(1, batch_us // tick_us)
         words = seg_words(batch_ticks)
+        import gc
+        gc.collect()  # one block of a few kB: the heap is fragmented after the imports
         self.ring = array("i", bytes(4 * SEGMENTS * words))
         mem[st.S_PIO] = 2
         mem[st.S_PIO_SHIFT] = self.first
@@ -240,13 +242,24 @@ class Feed:
         self.running = True
 
     def stop(self):
-        """Stop the state machine, then the channels. Returns the ring position
-        (segment, word) of the first word the pins never got."""
+        """Stop the state machine, then the channels: what was read from the ring and
+        what the FIFO still holds then say which words reached the pins. Returns the
+        stream order of the segments, and the segment and word the pins stopped at.
+        An abort can raise the channel's IRQ (RP2040-E13): the handlers go first, and
+        the flags are cleared after, so no refill runs on a stopped ring."""
         self.sm.active(0)
         for dma in self.dmas:
+            dma.irq(None)
             dma.active(0)
         self.running = False
-        return self._first_unsent()
+        where = self._first_unsent()
+        mask = (1 << self.dmas[0].channel) | (1 << self.dmas[1].channel)
+        if isinstance(self.regs, int):
+            import machine
+            machine.mem32[self.regs + 4 * _INTS0] = mask
+        else:
+            self.regs[_INTS0] = mask
+        return where
 
     def _first_unsent(self):
         mem = self.mem
