@@ -60,14 +60,15 @@ def _start_pio(mem, settings, pin_map):
     return sm.put  # bound once: the interrupt must not look it up
 
 
-def _pio_dma_feed(mem, settings, pin_map, pins):
+def _pio_dma_feed(mem, settings, pin_map, pins, ring):
     """The step loop fills a ring of events that DMA feeds to a state machine (rp2
     only); the feed starts with the printer (start_timer)."""
     _need_rp2(settings)
     import rp2
     from mixfw import piodma
     names = ["x", "y", "z"] + ["e%d" % i for i in range(settings["drives"])]
-    feed = piodma.Feed(rp2, machine.Pin, mem, pin_map, names, settings, pins.endstops)
+    feed = piodma.Feed(rp2, machine.Pin, mem, pin_map, names, settings, pins.endstops,
+                       ring=ring)
     feed.dir_invert_mask = pins.dir_invert_mask
     return feed
 
@@ -81,6 +82,10 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     capture = settings.get("trace_records", 0)
     mem = array("i", bytes(4 * st.mem_words(settings["queue_blocks"], capture)))
     st.init_capture(mem, settings["queue_blocks"], capture)
+    ring = None
+    if settings.get("step_backend") == "pio_dma":
+        from mixfw import piodma
+        ring = piodma.make_ring(settings)
     mem[st.S_PULSE_TICKS] = _ticks(settings["step_pulse_us"], tick_us)
     mem[st.S_DIR_TICKS] = _ticks(settings["dir_setup_us"], tick_us)
     mem[st.MIX_BASE + mixer.M_N] = settings["drives"]
@@ -96,7 +101,7 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     if backend == "pio":
         out = _start_pio(mem, settings, pin_map)
     elif backend == "pio_dma":
-        feed = _pio_dma_feed(mem, settings, pin_map, pins)
+        feed = _pio_dma_feed(mem, settings, pin_map, pins, ring)
     elif pins.registers:
         out, offsets = pins.registers
         for i, word in enumerate(offsets):

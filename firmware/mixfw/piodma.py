@@ -74,9 +74,21 @@ assert (_R_BATCHES, _R_BUSY_BIT, _R_CH, _R_CHAIN_SHIFT, _R_CH_SEG, _R_CTRL, _R_F
 
 
 def seg_words(batch_ticks):
-    # At most two events a tick (a step and its fall), one for a DIR change that
-    # replaces a step, and the batch's closing event.
-    return 4 * batch_ticks + 4
+    """Ring words a batch can need. A step tick writes two events (the step and its
+    fall) and is never followed by another (the pulse and its low time take a tick
+    at least); any other tick writes one at most (DIR). So 3 events in 2 ticks, 2
+    words each, and the batch's closing event."""
+    return 3 * batch_ticks + 6
+
+
+def batch_ticks(settings, batch_us=BATCH_US):
+    return max(1, batch_us // settings["tick_us"])
+
+
+def make_ring(settings, batch_us=BATCH_US):
+    """The ring, to be allocated early: a few kB in one block, which the heap may
+    not have in one piece once the firmware is built."""
+    return array("i", bytes(4 * SEGMENTS * seg_words(batch_ticks(settings, batch_us))))
 
 
 @micropython.viper
@@ -124,22 +136,20 @@ class Feed:
     """The ring, the state machine and the two channels of one printer's steps."""
 
     def __init__(self, rp2, Pin, mem, pin_map, names, settings, endstops,
-                 sm_id=0, batch_us=BATCH_US):
+                 sm_id=0, batch_us=BATCH_US, ring=None):
         self.rp2 = rp2
         self.mem = mem
         self.first, self.count = out_range(pin_map, names)
         self.out_base = Pin(self.first)
         self.sm_id = sm_id
         tick_us = settings["tick_us"]
-        batch_ticks = max(1, batch_us // tick_us)
-        words = seg_words(batch_ticks)
-        import gc
-        gc.collect()  # one block of a few kB: the heap is fragmented after the imports
-        self.ring = array("i", bytes(4 * SEGMENTS * words))
+        ticks = batch_ticks(settings, batch_us)
+        words = seg_words(ticks)
+        self.ring = ring if ring is not None else make_ring(settings, batch_us)
         mem[st.S_PIO] = 2
         mem[st.S_PIO_SHIFT] = self.first
         mem[st.R_TC] = tick_us * CYCLES_PER_US
-        mem[st.R_BATCH_TICKS] = batch_ticks
+        mem[st.R_BATCH_TICKS] = ticks
         mem[st.R_PULSE_CYC] = settings["step_pulse_us"] * CYCLES_PER_US
         mem[st.R_SEG_WORDS] = words
         # Steps land anywhere in their tick and a DIR change at its start, after the

@@ -241,19 +241,14 @@ def tick(mem_buf, out, endstops) -> int:
     mem = ptr32(mem_buf)
     # The ring's loop costs the timer path a compare of a register per tick: where the
     # timer path returns, the ring goes on with the batch's next tick.
+    # Locals only the ring reads are set only for it (each is a store per tick).
     ring = 0
-    tc = 0
-    t0 = 0  # start of this tick, PIO cycles from the batch's start
-    ticks_left = 0
-    phase = 0
-    step_rate = 0
-    w_first = 0
     if mem[S_PIO] == 2:
         ring = 1
         evr = ptr32(out)
         tc = mem[R_TC]
         ticks_left = mem[R_BATCH_TICKS]
-        t0 = 0 - tc
+        t0 = 0 - tc  # start of this tick, PIO cycles from the batch's start
         w_first = mem[R_W]
         if mem[R_PENDING] > 0:
             mem[R_PENDING] -= 1
