@@ -41,15 +41,11 @@ def load_config(path=CONFIG_PATH, warn=print):
     return config
 
 
-def _need_rp2(settings):
-    if settings.get("chip") not in ("rp2040", "rp2350"):
-        raise ValueError("step_backend %s needs an RP2040 or RP2350, not %r"
-                         % (settings.get("step_backend"), settings.get("chip")))
-
-
 def _start_pio(mem, settings, pin_map):
     """The step loop feeds a PIO state machine (rp2 only); returns what it calls."""
-    _need_rp2(settings)
+    if settings.get("chip") not in ("rp2040", "rp2350"):
+        raise ValueError("step_backend pio needs an RP2040 or RP2350, not %r"
+                         % settings.get("chip"))
     import rp2
     from mixfw import pio
     names = ["x", "y", "z"] + ["e%d" % i for i in range(settings["drives"])]
@@ -60,32 +56,20 @@ def _start_pio(mem, settings, pin_map):
     return sm.put  # bound once: the interrupt must not look it up
 
 
-def _pio_dma_feed(mem, settings, pin_map, pins, ring):
-    """The step loop fills a ring of events that DMA feeds to a state machine (rp2
-    only); the feed starts with the printer (start_timer)."""
-    _need_rp2(settings)
-    import rp2
-    from mixfw import piodma
-    names = ["x", "y", "z"] + ["e%d" % i for i in range(settings["drives"])]
-    feed = piodma.Feed(rp2, machine.Pin, mem, pin_map, names, settings, pins.endstops,
-                       ring=ring)
-    feed.dir_invert_mask = pins.dir_invert_mask
-    return feed
-
-
 def build(config=None, pin_map=None, files_root=FILES_ROOT):
     config = config or Config(board.SETTINGS, None)
     settings = config.settings
     pin_map = pin_map or board.PINS
     tick_us = settings["tick_us"]
-    # Step-loop memory: one array for state, mixer, pin masks and the block ring.
+    # Step-loop memory: one array for state, mixer, pin masks and the block ring; it
+    # and the DMA ring (step_backend pio_dma) are the largest blocks, so they come first.
     capture = settings.get("trace_records", 0)
     mem = array("i", bytes(4 * st.mem_words(settings["queue_blocks"], capture)))
     st.init_capture(mem, settings["queue_blocks"], capture)
-    ring = None
+    feed = None
     if settings.get("step_backend") == "pio_dma":
         from mixfw import piodma
-        ring = piodma.make_ring(settings)
+        feed = piodma.Feed(machine, mem, settings, pin_map)
     mem[st.S_PULSE_TICKS] = _ticks(settings["step_pulse_us"], tick_us)
     mem[st.S_DIR_TICKS] = _ticks(settings["dir_setup_us"], tick_us)
     mem[st.MIX_BASE + mixer.M_N] = settings["drives"]
@@ -96,12 +80,8 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     for i, m in enumerate(pins.dir_masks):
         mem[st.DIR_MASK_BASE + i] = m
     out = pins.out
-    feed = None
-    backend = settings.get("step_backend", "timer")
-    if backend == "pio":
+    if settings.get("step_backend", "timer") == "pio":
         out = _start_pio(mem, settings, pin_map)
-    elif backend == "pio_dma":
-        feed = _pio_dma_feed(mem, settings, pin_map, pins, ring)
     elif pins.registers:
         out, offsets = pins.registers
         for i, word in enumerate(offsets):
@@ -173,7 +153,7 @@ def start_timer(printer, tick_us):
     hard callbacks (see the README for the jitter that gives)."""
     chip = printer.settings.get("chip", "sim")
     if printer.feed:
-        printer.feed.start()  # the DMA IRQ runs the step loop: no timer
+        printer.feed.start(printer.pins)  # the DMA IRQ runs the step loop: no timer
         return printer.feed
     check_timer_support(chip, sys.implementation.version)
     freq = 1000000 // tick_us

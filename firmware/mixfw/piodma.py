@@ -133,37 +133,53 @@ def refill(mem_buf, io, done: int):
 
 
 class Feed:
-    """The ring, the state machine and the two channels of one printer's steps."""
+    """The ring, the state machine and the two channels of one printer's steps. Made
+    right after the step loop's memory (its ring is the next largest block), set up
+    by the first start(), once the pins and their masks are there."""
 
-    def __init__(self, rp2, Pin, mem, pin_map, names, settings, endstops,
-                 sm_id=0, batch_us=BATCH_US, ring=None):
+    def __init__(self, machine, mem, settings, pin_map, sm_id=0, batch_us=BATCH_US):
+        if settings.get("chip") not in ("rp2040", "rp2350"):
+            raise ValueError("step_backend pio_dma needs an RP2040 or RP2350, not %r"
+                             % settings.get("chip"))
+        import rp2
         self.rp2 = rp2
+        self.machine = machine
         self.mem = mem
-        self.first, self.count = out_range(pin_map, names)
-        self.out_base = Pin(self.first)
+        self.settings = settings
         self.sm_id = sm_id
+        self.batch_us = batch_us
+        self.names = ["x", "y", "z"] + ["e%d" % i for i in range(settings["drives"])]
+        self.first, self.count = out_range(pin_map, self.names)
+        self.ring = make_ring(settings, batch_us)
+        self.dmas = [rp2.DMA(), rp2.DMA()]
+        self.pins = None
+        self.sm = None
+        self.running = False
+
+    def _setup(self, pins):
+        """The step loop's words for the ring, and the IRQ handlers."""
+        mem, settings, rp2 = self.mem, self.settings, self.rp2
+        self.pins = pins
+        self.out_base = self.machine.Pin(self.first)
         tick_us = settings["tick_us"]
-        ticks = batch_ticks(settings, batch_us)
-        words = seg_words(ticks)
-        self.ring = ring if ring is not None else make_ring(settings, batch_us)
+        ticks = batch_ticks(settings, self.batch_us)
         mem[st.S_PIO] = 2
         mem[st.S_PIO_SHIFT] = self.first
         mem[st.R_TC] = tick_us * CYCLES_PER_US
         mem[st.R_BATCH_TICKS] = ticks
         mem[st.R_PULSE_CYC] = settings["step_pulse_us"] * CYCLES_PER_US
-        mem[st.R_SEG_WORDS] = words
+        mem[st.R_SEG_WORDS] = seg_words(ticks)
         # Steps land anywhere in their tick and a DIR change at its start, after the
         # fall of a pulse that may reach into it: the setup counts from there.
         mem[st.S_DIR_TICKS] = max(1, -(-(settings["dir_setup_us"] + settings["step_pulse_us"])
                                        // tick_us))
         self.motors = []  # (step mask, dir mask, position word, drive word or -1)
-        for i, name in enumerate(names):
+        for i in range(len(self.names)):
             axis = i if i < 3 else st.E
             drive = st.S_DRIVE_POS + i - 3 if i >= 3 else -1
             self.motors.append((mem[st.MASK_BASE + i], mem[st.DIR_MASK_BASE + i],
                                 st.S_POS + axis, drive))
-        self.dir_invert_mask = 0
-        self.dmas = [rp2.DMA(), rp2.DMA()]
+        self.dir_invert_mask = pins.dir_invert_mask
         bank = getattr(rp2, "dma_register_bank", None)
         if bank:  # the simulated chip: registers in RAM, ring addresses from 0
             self.regs, self.pio_regs = bank(self.ring)
@@ -174,6 +190,7 @@ class Feed:
             self.pio_regs = PIO0_BASE
             mem[st.R_RING_ADDR] = uctypes.addressof(self.ring)
         d = self.dmas[0]
+        sm_id = self.sm_id
         self.ctrl = d.pack_ctrl(size=2, inc_read=True, inc_write=False, chain_to=0,
                                 treq_sel=sm_id, irq_quiet=False)
         shift = 0
@@ -186,7 +203,7 @@ class Feed:
         for i, dma in enumerate(self.dmas):
             mem[st.R_CH + i] = dma.channel
         mem[st.R_SM] = sm_id
-        io = (self.regs, self.pio_regs, self.ring, endstops)
+        io = (self.regs, self.pio_regs, self.ring, pins.endstops)
 
         # Bound once: the interrupt does no lookups and allocates nothing.
         def irq0(_dma):
@@ -196,8 +213,6 @@ class Feed:
             refill(mem, io, 1)
 
         self.handlers = (irq0, irq1)
-        self.sm = None
-        self.running = False
 
     def _program(self):
         rp2 = self.rp2
@@ -222,11 +237,13 @@ class Feed:
         base = seg * mem[st.R_SEG_WORDS]
         mem[st.R_W] = base
         mem[st.R_SEG_LV + seg] = mem[st.S_LEVELS]
-        mem[st.R_SEG_N + seg] = tick(mem, self.ring, None) - base
+        mem[st.R_SEG_N + seg] = tick(mem, self.ring, self.pins.endstops) - base
         mem[st.R_SEG_SEQ + seg] = mem[st.R_BATCHES]
 
-    def start(self):
+    def start(self, pins=None):
         """Prime the ring with three batches and let the channels run."""
+        if self.pins is None:
+            self._setup(pins)
         mem = self.mem
         rp2 = self.rp2
         self.sm = rp2.StateMachine(self.sm_id, self._program(), freq=PIO_HZ,
@@ -265,8 +282,7 @@ class Feed:
         where = self._first_unsent()
         mask = (1 << self.dmas[0].channel) | (1 << self.dmas[1].channel)
         if isinstance(self.regs, int):
-            import machine
-            machine.mem32[self.regs + 4 * _INTS0] = mask
+            self.machine.mem32[self.regs + 4 * _INTS0] = mask
         else:
             self.regs[_INTS0] = mask
         return where
@@ -295,20 +311,19 @@ class Feed:
         return order, order[-1], mem[st.R_SEG_N + order[-1]]
 
     def _regs_view(self):
-        return _Mem32(self.regs) if isinstance(self.regs, int) else self.regs
+        return _Mem32(self.machine, self.regs) if isinstance(self.regs, int) else self.regs
 
     def stop_and_take_back(self):
         """M112 / quick stop: stop the pins where they are and take every step the pins
         never got out of the step loop's positions, so they hold where the axes are."""
         if not self.running:
             return
-        import machine
-        state = machine.disable_irq()
+        state = self.machine.disable_irq()
         try:
             order, seg, at = self.stop()
             self._take_back(order, seg, at)
         finally:
-            machine.enable_irq(state)
+            self.machine.enable_irq(state)
         self.start()
 
     def _take_back(self, order, seg, at):
@@ -364,10 +379,9 @@ class Feed:
 
 
 class _Mem32:
-    def __init__(self, base):
-        import machine
+    def __init__(self, machine, base):
         self.base = base
-        self.mem32 = machine.mem32
+        self.mem32 = machine.mem32  # main loop only: an address above 2**30 is a big int
 
     def __getitem__(self, i):
         return self.mem32[self.base + 4 * i]
