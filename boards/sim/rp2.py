@@ -2,8 +2,9 @@
 # program text is not interpreted; the behaviour of mixstep's two programs is:
 # - step_levels (mixfw/pio.py) outputs one word of pin levels per tick: each word comes
 #   out when the previous one has had its tick, or when it arrives if the FIFO ran empty;
-# - step_events (mixfw/piodma.py) takes (levels, delay) word pairs: the levels come out
-#   one cycle after their pull, the next pull is delay + 3 cycles after the delay's.
+# - step_events (mixfw/piodma.py) takes words of levels (low bits, one per pin) and a
+#   count above them: the levels come out one cycle after the pull, the next pull is
+#   count + 4 cycles after this one.
 # The DMA: channels whose registers are a RAM bank laid out as the RP2040's (the
 # firmware writes it with ptr32), reading words from one RAM array (address 0 is its
 # first byte), paced by the state machine's 8-word TX FIFO, with CHAIN_TO and an IRQ
@@ -135,7 +136,6 @@ class _Engine:
         self.per_us = 8
         self.t = 0  # cycles: the time of the last thing done
         self.ready = 0  # cycle of the state machine's next pull
-        self.want_levels = True
         self.pending = []  # (cycle, channel) of IRQs held back (set_irq_delay)
         self.irq_delay_cycles = 0
         self.irq_delay_every = 0
@@ -153,7 +153,6 @@ class _Engine:
         self.per_us = freq // 1000000
         self.fifo = []
         self.on = False
-        self.want_levels = True
         simmachine.add_device(self.run)
 
     def put(self, word):
@@ -262,14 +261,10 @@ class _Engine:
                     continue
             if not self.fifo or pull > until:
                 break
-            word = self.fifo.pop(0)
+            word = self.fifo.pop(0) & 0xFFFFFFFF
             self.t = pull
-            if self.want_levels:
-                self._output(word, pull + 1)
-                self.ready = pull + 2
-            else:
-                self.ready = pull + 3 + word
-            self.want_levels = not self.want_levels
+            self._output(word & ((1 << self.count) - 1), pull + 1)
+            self.ready = pull + 4 + (word >> self.count)
         if self.t < until and not self.fifo:
             self.t = until  # stalled on an empty FIFO until then
 

@@ -1,7 +1,8 @@
 # step_backend "pio_dma" for RP2040/RP2350: the step loop runs ahead in batches and
-# writes each edge as an event, (delay in PIO cycles, pin levels), into a ring in RAM.
-# Two DMA channels, chained to each other, move the ring into a state machine's FIFO
-# paced by its TX DREQ; the state machine waits out each delay and writes the levels.
+# writes the pin levels between edges, a word each (levels, and above them the PIO
+# cycles they hold), into a ring in RAM. Two DMA channels, chained to each other, move
+# the ring into a state machine's FIFO paced by its TX DREQ; the state machine writes
+# each word's levels to the pins and counts its cycles down.
 # The CPU takes one interrupt per batch (BATCH_US), not one per tick, and an edge lands
 # at its own time inside its tick, not on the tick.
 #
@@ -74,11 +75,11 @@ assert (_R_BATCHES, _R_BUSY_BIT, _R_CH, _R_CHAIN_SHIFT, _R_CH_SEG, _R_CTRL, _R_F
 
 
 def seg_words(batch_ticks):
-    """Ring words a batch can need. A step tick writes two events (the step and its
-    fall) and is never followed by another (the pulse and its low time take a tick
-    at least); any other tick writes one at most (DIR). So 3 events in 2 ticks, 2
-    words each, and the batch's closing event."""
-    return 3 * batch_ticks + 6
+    """Ring words a batch can need. A step tick has two edges (the step and its fall)
+    and is never followed by another (the pulse and its low time take a tick at
+    least); any other tick one at most (DIR). So 3 edges in 2 ticks, a word each, and
+    the word that holds the last levels to the batch's end."""
+    return (3 * batch_ticks) // 2 + 3
 
 
 def batch_ticks(settings, batch_us=BATCH_US):
@@ -150,6 +151,10 @@ class Feed:
         self.batch_us = batch_us
         self.names = ["x", "y", "z"] + ["e%d" % i for i in range(settings["drives"])]
         self.first, self.count = out_range(pin_map, self.names)
+        hold_cycles = (batch_ticks(settings, batch_us) + 1) * settings["tick_us"] * CYCLES_PER_US
+        if hold_cycles >> (32 - self.count):
+            raise ValueError("step_backend pio_dma: %d STEP/DIR pins leave %d bits for a "
+                             "batch of %d cycles" % (self.count, 32 - self.count, hold_cycles))
         self.ring = make_ring(settings, batch_us)
         self.dmas = [rp2.DMA(), rp2.DMA()]
         self.pins = None
@@ -169,6 +174,7 @@ class Feed:
         mem[st.R_BATCH_TICKS] = ticks
         mem[st.R_PULSE_CYC] = settings["step_pulse_us"] * CYCLES_PER_US
         mem[st.R_SEG_WORDS] = seg_words(ticks)
+        mem[st.R_LEVEL_BITS] = self.count
         # Steps land anywhere in their tick and a DIR change at its start, after the
         # fall of a pulse that may reach into it: the setup counts from there.
         mem[st.S_DIR_TICKS] = max(1, -(-(settings["dir_setup_us"] + settings["step_pulse_us"])
@@ -216,16 +222,19 @@ class Feed:
 
     def _program(self):
         rp2 = self.rp2
+        pins_n = self.count
+        hold_n = 32 - pins_n
 
+        # The assembler swaps the module's globals for its own names while it runs:
+        # the counts come in as closure variables.
         @rp2.asm_pio(out_init=(rp2.PIO.OUT_LOW,) * self.count,
                      out_shiftdir=rp2.PIO.SHIFT_RIGHT, fifo_join=rp2.PIO.JOIN_TX)
         def step_events():
             # noqa: F821 below: the PIO assembler's names.
             wrap_target()  # noqa: F821
             pull(block)  # noqa: F821
-            out(pins, 32)  # noqa: F821
-            pull(block)  # noqa: F821
-            out(x, 32)  # noqa: F821
+            out(pins, pins_n)  # noqa: F821
+            out(x, hold_n)  # noqa: F821
             label("wait")  # noqa: F821
             jmp(x_dec, "wait")  # noqa: F821
             wrap()  # noqa: F821
@@ -263,7 +272,6 @@ class Feed:
             # its IRQ has armed the first again.
             dma.config(read=mem[st.R_RING_ADDR] + 4 * i * words, write=txf,
                        count=mem[st.R_SEG_N + i], ctrl=self.ctrl | (b.channel << shift))
-        self.sm.put(mem[st.S_LEVELS] >> self.first)
         self.sm.active(1)
         a.active(1)
         self.running = True
@@ -331,10 +339,11 @@ class Feed:
         ring = self.ring
         words = mem[st.R_SEG_WORDS]
         shift = self.first
-        # Levels on the pins: the last levels word before the first unsent word.
+        # Levels on the pins: the last word sent's, or those the segment starts from.
+        level_mask = (1 << self.count) - 1
         prev = mem[st.R_SEG_LV + seg] >> shift
-        for k in range(1, at, 2):
-            prev = ring[seg * words + k]
+        if at > 0:
+            prev = ring[seg * words + at - 1] & level_mask
         sent = prev << shift
         started = False
         for s in order:
@@ -346,10 +355,8 @@ class Feed:
             else:
                 k = 0
             n = mem[st.R_SEG_N + s]
-            if k % 2 == 0:
-                k += 1
             while k < n:
-                lv = ring[s * words + k]
+                lv = ring[s * words + k] & level_mask
                 rising = (lv & ~prev) << shift
                 dirs = lv << shift
                 for step, dmask, pos, drive in self.motors:
@@ -359,7 +366,7 @@ class Feed:
                         if drive >= 0:
                             mem[drive] -= back
                 prev = lv
-                k += 2
+                k += 1
         steps = 0
         dir_mask = 0
         for step, dmask, _, _ in self.motors:

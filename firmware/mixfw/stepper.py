@@ -86,8 +86,10 @@ MIX_C = const(58)
 MASK_BASE = const(64)  # STEP pin masks: X Y Z then the drives (9 words)
 DIR_MASK_BASE = const(73)  # DIR pin masks in the same order (9 words)
 # Event ring (step_backend "pio_dma", S_PIO == 2; see piodma.py): one call of tick runs
-# a batch of ticks and writes their edges as (delay, levels) words into the ring passed
-# as out. Times are PIO cycles from the batch's start.
+# a batch of ticks and writes the pin levels between its edges into the ring passed as
+# out, a word each: the levels in the low bits, above R_LEVEL_BITS the PIO cycles they
+# hold (a word is written when the edge that ends it is known). Times are PIO cycles
+# from the batch's start.
 R_SEG_N = const(82)  # words in each of the 3 ring segments
 R_SEG_SEQ = const(85)  # batch number each segment holds (3 words)
 R_TC = const(88)  # PIO cycles per tick
@@ -109,6 +111,7 @@ R_CH_SEG = const(104)  # segment each channel was last given (2 words)
 R_FIRED = const(106)  # channel completions handled
 R_SM = const(107)  # the state machine's number
 R_SEG_LV = const(108)  # pin levels before each segment's first event (3 words)
+R_LEVEL_BITS = const(111)  # the state machine's pins
 BLOCK_BASE = const(112)
 
 # Block record words.
@@ -132,9 +135,9 @@ B_DWELL = const(14)  # ticks, for dwell blocks
 B_MIX = const(15)  # mix id then 6 weights: same shape as the mixer's M_ID..M_W
 B_RATE_DECEL = const(22)
 B_WORDS = const(24)
-# A PIO event takes this many cycles besides its delay (piodma.py's program): two
-# pulls, two outs and the last pass of the delay loop.
-EV_MIN_CYCLES = const(5)
+# A PIO event takes this many cycles besides its delay (piodma.py's program): a pull,
+# two outs and the last pass of the delay loop.
+EV_MIN_CYCLES = const(4)
 # A batch filled now has reached the pins once this many more have been filled: two
 # segments are ahead of it in the ring, and the 8-word FIFO behind it can hold four
 # batches of 2 words (idle ones).
@@ -492,13 +495,13 @@ def tick(mem_buf, out, endstops) -> int:
                 w = mem[R_W]
                 last = mem[R_LAST]
                 shift = mem[S_PIO_SHIFT]
+                bits = mem[R_LEVEL_BITS]
                 k = 0 if nxt != lv else 2  # else a pulse whose fall is written already
                 while k < 2:
                     if t < last + EV_MIN_CYCLES:
                         t = last + EV_MIN_CYCLES
-                    evr[w] = t - last - EV_MIN_CYCLES
-                    evr[w + 1] = nxt >> shift
-                    w += 2
+                    evr[w] = (lv >> shift) | ((t - last - EV_MIN_CYCLES) << bits)
+                    w += 1
                     last = t
                     lv = nxt
                     k += 1
@@ -540,20 +543,20 @@ def tick(mem_buf, out, endstops) -> int:
             regs[mem[S_REG_CLR]] = clr_mask
         return stepped
 
-    # The batch ends with its levels held to its last cycle, so the next batch counts
-    # from there.
+    # The levels since the last edge hold to the batch's last cycle, and the next
+    # batch counts from there.
     end = mem[R_BATCH_TICKS] * tc
     last = mem[R_LAST]
     t = end if end >= last + EV_MIN_CYCLES else last + EV_MIN_CYCLES
     w = mem[R_W]
-    evr[w] = t - last - EV_MIN_CYCLES
-    evr[w + 1] = mem[S_LEVELS] >> mem[S_PIO_SHIFT]
-    mem[R_W] = w + 2
+    hold = (t - last - EV_MIN_CYCLES) << mem[R_LEVEL_BITS]
+    evr[w] = (mem[S_LEVELS] >> mem[S_PIO_SHIFT]) | hold
+    mem[R_W] = w + 1
     mem[R_LAST] = t - end
     if w != w_first or mem[S_ACTIVE] or mem[S_TAIL] != mem[S_HEAD] or mem[S_PULSE_LEFT]:
         mem[R_PENDING] = PENDING_BATCHES
     mem[R_BATCHES] = (mem[R_BATCHES] + 1) & 0x3FFFFFFF
-    return w + 2
+    return w + 1
 
 
 def run_mix(weights, moves, out=None):
