@@ -361,7 +361,9 @@ class Feed:
                 dirs = lv << shift
                 for step, dmask, pos, drive in self.motors:
                     if rising & step:
-                        back = 1 if bool(dirs & dmask) != bool(self.dir_invert_mask & dmask) else -1
+                        # A DIR pin high is forward, unless the motor is wired inverted.
+                        forward = bool(dirs & dmask) != bool(self.dir_invert_mask & dmask)
+                        back = 1 if forward else -1
                         mem[pos] -= back
                         if drive >= 0:
                             mem[drive] -= back
