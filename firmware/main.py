@@ -132,6 +132,9 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     printer.thermal = thermal
     printer.irq = st.make_irq(mem, out, pins.endstops)
     printer.feed = feed
+    if feed:  # the stopped feed runs again once everything else has stopped
+        printer.on_halt.append(feed.resume)
+        printer.on_quick_stop.append(feed.resume)
     return printer
 
 

@@ -70,7 +70,9 @@ class Reports:
         free = gc.mem_free()
         gc.collect()
         mem = self.planner.mem
-        late = " late_refills:%d" % mem[st.R_LATE] if mem[st.S_PIO] == 2 else ""
+        late = ""
+        if mem[st.S_PIO] == 2:
+            late = " late_refills:%d dma_refills:%d" % (mem[st.R_LATE], mem[st.R_FIRED])
         self.printer.reply("echo:underruns:%d mem_free:%d mem_free_collected:%d%s" % (
             self.planner.underruns, free, gc.mem_free(), late))
 

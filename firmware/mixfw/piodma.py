@@ -34,6 +34,7 @@ PIO_HZ = const(8000000)
 CYCLES_PER_US = const(8)
 BATCH_US = const(2000)  # 1 ms batches gave late refills on the emulated chip
 SEGMENTS = const(3)
+FIFO_WORDS = const(8)  # the TX FIFO, joined
 DMA_BASE = const(0x50000000)
 PIO0_BASE = const(0x50200000)
 PIO0_TXF0 = const(0x50200010)
@@ -78,8 +79,9 @@ def seg_words(batch_ticks):
     """Ring words a batch can need. A step tick has two edges (the step and its fall)
     and is never followed by another (the pulse and its low time take a tick at
     least); any other tick one at most (DIR). So 3 edges in 2 ticks, a word each, and
-    the word that holds the last levels to the batch's end."""
-    return (3 * batch_ticks) // 2 + 3
+    the word that holds the last levels to the batch's end; an idle batch is padded
+    to stepper.BATCH_MIN_WORDS."""
+    return (3 * batch_ticks) // 2 + 3 + st.BATCH_MIN_WORDS
 
 
 def batch_ticks(settings, batch_us=BATCH_US):
@@ -219,6 +221,7 @@ class Feed:
             refill(mem, io, 1)
 
         self.handlers = (irq0, irq1)
+        self.program = self._program()  # assembled once: it takes ms on the chip
 
     def _program(self):
         rp2 = self.rp2
@@ -255,7 +258,7 @@ class Feed:
             self._setup(pins)
         mem = self.mem
         rp2 = self.rp2
-        self.sm = rp2.StateMachine(self.sm_id, self._program(), freq=PIO_HZ,
+        self.sm = rp2.StateMachine(self.sm_id, self.program, freq=PIO_HZ,
                                    out_base=self.out_base)
         mem[st.R_LAST] = 0
         for seg in range(SEGMENTS):
@@ -283,11 +286,18 @@ class Feed:
         An abort can raise the channel's IRQ (RP2040-E13): the handlers go first, and
         the flags are cleared after, so no refill runs on a stopped ring."""
         self.sm.active(0)
+        # The channels go on until the FIFO is full or their segments end; read their
+        # addresses once they have (a word in flight when a channel is aborted counts
+        # as read but never reaches the FIFO).
+        a, b = self.dmas
+        for _ in range(200):
+            if self.sm.tx_fifo() >= FIFO_WORDS or not (a.active() or b.active()):
+                break
+        where = self._first_unsent()
         for dma in self.dmas:
             dma.irq(None)
             dma.active(0)
         self.running = False
-        where = self._first_unsent()
         mask = (1 << self.dmas[0].channel) | (1 << self.dmas[1].channel)
         if isinstance(self.regs, int):
             self.machine.mem32[self.regs + 4 * _INTS0] = mask
@@ -323,7 +333,8 @@ class Feed:
 
     def stop_and_take_back(self):
         """M112 / quick stop: stop the pins where they are and take every step the pins
-        never got out of the step loop's positions, so they hold where the axes are."""
+        never got out of the step loop's positions, so they hold where the axes are.
+        The feed starts again (resume) once the queue has been dropped."""
         if not self.running:
             return
         state = self.machine.disable_irq()
@@ -332,7 +343,10 @@ class Feed:
             self._take_back(order, seg, at)
         finally:
             self.machine.enable_irq(state)
-        self.start()
+
+    def resume(self):
+        if not self.running:
+            self.start()
 
     def _take_back(self, order, seg, at):
         mem = self.mem

@@ -138,10 +138,14 @@ B_WORDS = const(24)
 # A PIO event takes this many cycles besides its delay (piodma.py's program): a pull,
 # two outs and the last pass of the delay loop.
 EV_MIN_CYCLES = const(4)
+# Every batch has at least this many words, one more than the state machine's FIFO
+# holds: a channel then never ends the moment it starts (several could end before
+# their IRQs ran), and the FIFO never holds a whole batch.
+BATCH_MIN_WORDS = const(9)
 # A batch filled now has reached the pins once this many more have been filled: two
-# segments are ahead of it in the ring, and the 8-word FIFO behind it can hold four
-# batches of 2 words (idle ones).
-PENDING_BATCHES = const(7)
+# segments are ahead of it in the ring, and the batch after it has pushed it out of
+# the FIFO.
+PENDING_BATCHES = const(4)
 
 # Flag bits.
 F_DWELL = const(1)
@@ -543,20 +547,32 @@ def tick(mem_buf, out, endstops) -> int:
             regs[mem[S_REG_CLR]] = clr_mask
         return stepped
 
-    # The levels since the last edge hold to the batch's last cycle, and the next
-    # batch counts from there.
+    # The levels since the last edge hold to the batch's last cycle, in as many
+    # pieces as make up BATCH_MIN_WORDS, and the next batch counts from there.
     end = mem[R_BATCH_TICKS] * tc
     last = mem[R_LAST]
-    t = end if end >= last + EV_MIN_CYCLES else last + EV_MIN_CYCLES
     w = mem[R_W]
-    hold = (t - last - EV_MIN_CYCLES) << mem[R_LEVEL_BITS]
-    evr[w] = (mem[S_LEVELS] >> mem[S_PIO_SHIFT]) | hold
-    mem[R_W] = w + 1
+    lv = mem[S_LEVELS] >> mem[S_PIO_SHIFT]
+    bits = mem[R_LEVEL_BITS]
+    edges = w - w_first
+    pieces = BATCH_MIN_WORDS - edges
+    if pieces < 1 or end - last < pieces * EV_MIN_CYCLES:
+        pieces = 1
+    while pieces > 1:
+        piece = (end - last) // pieces
+        evr[w] = lv | ((piece - EV_MIN_CYCLES) << bits)
+        w += 1
+        last += piece
+        pieces -= 1
+    t = end if end >= last + EV_MIN_CYCLES else last + EV_MIN_CYCLES
+    evr[w] = lv | ((t - last - EV_MIN_CYCLES) << bits)
+    w += 1
+    mem[R_W] = w
     mem[R_LAST] = t - end
-    if w != w_first or mem[S_ACTIVE] or mem[S_TAIL] != mem[S_HEAD] or mem[S_PULSE_LEFT]:
+    if edges or mem[S_ACTIVE] or mem[S_TAIL] != mem[S_HEAD] or mem[S_PULSE_LEFT]:
         mem[R_PENDING] = PENDING_BATCHES
     mem[R_BATCHES] = (mem[R_BATCHES] + 1) & 0x3FFFFFFF
-    return w + 1
+    return w
 
 
 def run_mix(weights, moves, out=None):
