@@ -46,6 +46,7 @@ _CTRL_TRIG = const(3)
 _AL1_CTRL = const(4)
 _CH_WORDS = const(16)
 _MULTI_CHAN_TRIGGER = const(0x430 // 4)
+_INTR = const(0x400 // 4)
 _INTS0 = const(0x40C // 4)
 BUSY_BIT = {11: 24, 13: 26}  # CHAIN_TO's place tells the chip: RP2040, RP2350
 
@@ -268,13 +269,22 @@ class Feed:
         words = mem[st.R_SEG_WORDS]
         txf = PIO0_TXF0 + 4 * self.sm_id
         shift = mem[st.R_CHAIN_SHIFT]
+        # The first word goes into the FIFO by hand: a state machine made again
+        # after a stop with a full FIFO raised no DREQ on the emulated chip until its
+        # first pull.
+        self.sm.put(self.ring[0])
         for i, dma in enumerate(self.dmas):
             mem[st.R_CH_SEG + i] = i
-            dma.irq(self.handlers[i], hard=True)
+            first = 1 if i == 0 else 0
             # The first chains to the second; the second to itself (no chain) until
             # its IRQ has armed the first again.
-            dma.config(read=mem[st.R_RING_ADDR] + 4 * i * words, write=txf,
-                       count=mem[st.R_SEG_N + i], ctrl=self.ctrl | (b.channel << shift))
+            dma.config(read=mem[st.R_RING_ADDR] + 4 * (i * words + first), write=txf,
+                       count=mem[st.R_SEG_N + i] - first,
+                       ctrl=self.ctrl | (b.channel << shift))
+        # A flag left from a stop would run a refill on channels not yet running.
+        self._clear_flags()
+        for i, dma in enumerate(self.dmas):
+            dma.irq(self.handlers[i], hard=True)
         self.sm.active(1)
         a.active(1)
         self.running = True
@@ -298,12 +308,18 @@ class Feed:
             dma.irq(None)
             dma.active(0)
         self.running = False
+        self._clear_flags()
+        return where
+
+    def _clear_flags(self):
+        """Both channels' raw interrupt flags (INTR; INTS0 is INTR masked)."""
         mask = (1 << self.dmas[0].channel) | (1 << self.dmas[1].channel)
         if isinstance(self.regs, int):
+            self.machine.mem32[self.regs + 4 * _INTR] = mask
             self.machine.mem32[self.regs + 4 * _INTS0] = mask
         else:
+            self.regs[_INTR] = mask
             self.regs[_INTS0] = mask
-        return where
 
     def _first_unsent(self):
         mem = self.mem
