@@ -17,13 +17,14 @@
 # IRQ triggers the armed channel itself. A late refill then stalls the pins (steps
 # late, never wrong); R_LATE counts them (M122).
 #
-# What can hold the DMA IRQ back is whatever masks interrupts in the main loop:
-# machine.disable_irq() sections (the planner's queue hand-over, a few us), flash
-# writes (the rp2 port runs flash erase/program with interrupts off: tens of ms for
-# an erase, longer than a batch), and the soft-IRQ/GC paths only as far as they
-# disable interrupts (gc.collect itself runs with interrupts on, so it does not delay
-# a hard IRQ). Saving the configuration or writing a file while printing can
-# therefore cost late refills.
+# What can hold the DMA IRQ back is whatever masks interrupts or holds the CPU in
+# another handler: machine.disable_irq() sections (the planner's queue hand-over, a
+# few us), other interrupt handlers of the same priority (USB, a few us), and flash
+# erase/program, which the rp2 port runs with interrupts off (a 4 kB erase takes tens
+# of ms, many batches): saving the configuration (M500) or writing a file while
+# printing costs late refills. gc.collect() runs with interrupts on (a hard handler
+# that allocated would fail during it; refill allocates nothing), so it delays
+# nothing: M122, which collects, ran during the emulated prints with no late refill.
 from array import array
 from mixfw.compat import micropython, const, ptr32
 from mixfw import stepper as st
