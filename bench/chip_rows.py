@@ -18,7 +18,14 @@ is slower. Three emulator sessions, one at a time:
             the underruns and the free heap.
 
     python bench/run.py --only chip
-    python bench/chip_rows.py [planner,stepping,print]     (figures as JSON)
+    python bench/chip_rows.py [planner,stepping,cpu,print] [--board B] [--set K=V ...]
+                                                        (figures as JSON)
+
+`cpu` is the stepping part without its step-rate search. --board and --set run the
+rows on another board or with settings laid over the board's (as `mixstep emu --set`),
+e.g. `--board pico --set step_backend=pio_dma` (pico_6drives' STEP/DIR pins are not
+one run of GPIOs, which the PIO backends need); the move is then mixed over the
+board's drives.
 """
 import json
 import subprocess
@@ -138,8 +145,24 @@ def unavailable(image_dir=None):
     return None
 
 
+# Settings laid over the board's for every chip session (--set).
+OVERRIDES = {}
+
+
+def configure(board, overrides):
+    """Run the rows on `board` with `overrides` laid over its settings."""
+    global BOARD, MIX
+    BOARD = board
+    OVERRIDES.clear()
+    OVERRIDES.update(overrides)
+    drives = _settings()["drives"]
+    if drives != 6:  # the same kind of uneven mix over the drives there are
+        MIX = "M567 P6 E" + ":".join("%.4f" % ((i + 2) / sum(range(2, drives + 2)))
+                                      for i in range(drives))
+
+
 def _settings():
-    return paths.load_board(BOARD)["SETTINGS"]
+    return dict(paths.load_board(BOARD)["SETTINGS"], **OVERRIDES)
 
 
 # --- planner ---------------------------------------------------------------------
@@ -169,7 +192,8 @@ def chip_planner(res, work):
         "chip_main": BENCH_DIR / "chip_main.py", "fwmain": paths.FIRMWARE / "main.py",
         "plan_only": paths.BOARDS / "sim" / "plan_only.py"})
     files["plan.gcode"] = excerpt
-    with emu.Chip(BOARD, files=files, max_emu_s=60, max_wall_s=900) as chip:
+    with emu.Chip(BOARD, settings=OVERRIDES, files=files, max_emu_s=60,
+                  max_wall_s=900) as chip:
         got = {}
         for stepping in (0, 1):
             answer = chip.command("plan plan.gcode %d" % stepping, max_s=30)
@@ -263,13 +287,17 @@ def pulse_spec(edges, pins, names):
     return high, low, setup
 
 
-def chip_stepping(res, work):
+def chip_cpu(res, work):
+    chip_stepping(res, work, sweep=False)
+
+
+def chip_stepping(res, work, sweep=True):
     settings = _settings()
     pins = paths.load_board(BOARD)["PINS"]
     motors = ["x", "y"] + ["e%d" % i for i in range(settings["drives"])]
     spm = settings["steps_per_mm"]
     tick_us = settings["tick_us"]
-    with emu.Chip(BOARD, max_emu_s=120, max_wall_s=1200) as chip:
+    with emu.Chip(BOARD, settings=OVERRIDES, max_emu_s=120, max_wall_s=1200) as chip:
         for line in ("M302 P1", "M211 S0", "G91", "M83", MIX, "T6"):
             _command(chip, line)
         # CPU share and step times: one move at the board's own limits.
@@ -300,6 +328,11 @@ def chip_stepping(res, work):
                                % (len(_rises(move, pins["x_step"])), n))
         res["chip_step_time_error_max_us"] = float(err.max())
         res["chip_step_time_error_p99_us"] = float(np.percentile(err, 99))
+        late = _diagnose(chip, []).get("late_refills")
+        if late is not None:
+            res["chip_late_refills"] = late
+        if not sweep:
+            return
         # The highest step rate in spec.
         for line in ("M203 X10000 Y10000 E10000", "M201 X1000000 Y1000000 E1000000"):
             _command(chip, line)
@@ -391,7 +424,7 @@ def _diagnose(chip, samples):
 
 def chip_print(res, work):
     samples = []
-    with emu.Chip(BOARD, files={"circles.gcode": CIRCLES}, max_emu_s=120,
+    with emu.Chip(BOARD, settings=OVERRIDES, files={"circles.gcode": CIRCLES}, max_emu_s=120,
                   max_wall_s=1800) as chip:
         # Over USB, one line per ok, as a host streams it.
         t0 = last = chip.now
@@ -476,6 +509,8 @@ def bench_chip(res, work):
             print("bench: chip %s FAILED: %s" % (name, failed[-1]), file=sys.stderr)
         res["bench_seconds_chip_" + name] = round(time.perf_counter() - t0, 1)
     res["chip_board"] = BOARD
+    if OVERRIDES:
+        res["chip_settings"] = dict(OVERRIDES)
     for key, text in NOTES.items():
         res[key + "_method"] = text
     if failed:
@@ -486,8 +521,18 @@ if __name__ == "__main__":
     out = {}
     work = ROOT / "out" / "bench"
     work.mkdir(parents=True, exist_ok=True)
-    parts = sys.argv[1].split(",") if len(sys.argv) > 1 else [n for n, _ in PARTS]
-    for name, part in PARTS:
+    import argparse
+    ap = argparse.ArgumentParser()
+    ap.add_argument("parts", nargs="?", default=",".join(n for n, _ in PARTS))
+    ap.add_argument("--board", default=BOARD)
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    args = ap.parse_args()
+    configure(args.board, dict(emu._setting(t) for t in args.set))
+    parts = args.parts.split(",")
+    for name, part in PARTS + (("cpu", chip_cpu),):
         if name in parts:
             part(out, work)
+    if OVERRIDES or BOARD != "pico_6drives":
+        out["chip_board"] = BOARD
+        out["chip_settings"] = dict(OVERRIDES)
     print(json.dumps(out, indent=2))

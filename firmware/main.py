@@ -61,10 +61,15 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     settings = config.settings
     pin_map = pin_map or board.PINS
     tick_us = settings["tick_us"]
-    # Step-loop memory: one array for state, mixer, pin masks and the block ring.
+    # Step-loop memory: one array for state, mixer, pin masks and the block ring; it
+    # and the DMA ring (step_backend pio_dma) are the largest blocks, so they come first.
     capture = settings.get("trace_records", 0)
     mem = array("i", bytes(4 * st.mem_words(settings["queue_blocks"], capture)))
     st.init_capture(mem, settings["queue_blocks"], capture)
+    feed = None
+    if settings.get("step_backend") == "pio_dma":
+        from mixfw import piodma
+        feed = piodma.Feed(machine, mem, settings, pin_map)
     mem[st.S_PULSE_TICKS] = _ticks(settings["step_pulse_us"], tick_us)
     mem[st.S_DIR_TICKS] = _ticks(settings["dir_setup_us"], tick_us)
     mem[st.MIX_BASE + mixer.M_N] = settings["drives"]
@@ -85,8 +90,11 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     planner = Planner(mem, settings, printer.idle, machine.disable_irq, machine.enable_irq)
     planner.dir_invert_mask = pins.dir_invert_mask
     motion = cmd_motion.Motion(planner, pins, settings, printer.reply)
-    # A halt stops motion before anything is reported.
+    # A halt stops motion before anything is reported; steps the DMA ring still held
+    # never reached the pins, so they are taken back before the queue is dropped.
     for stop in (printer.on_halt, printer.on_quick_stop):
+        if feed:
+            stop.append(feed.stop_and_take_back)
         stop.append(planner.abort)
         stop.append(motion.resync)
     cmd_motion.register(printer, motion)
@@ -123,6 +131,10 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     printer.motion = motion
     printer.thermal = thermal
     printer.irq = st.make_irq(mem, out, pins.endstops)
+    printer.feed = feed
+    if feed:  # the stopped feed runs again once everything else has stopped
+        printer.on_halt.append(feed.resume)
+        printer.on_quick_stop.append(feed.resume)
     return printer
 
 
@@ -143,6 +155,9 @@ def start_timer(printer, tick_us):
     """The timer owns the step loop: hard on rp2; soft on ESP32, whose timers have no
     hard callbacks (see the README for the jitter that gives)."""
     chip = printer.settings.get("chip", "sim")
+    if printer.feed:
+        printer.feed.start(printer.pins)  # the DMA IRQ runs the step loop: no timer
+        return printer.feed
     check_timer_support(chip, sys.implementation.version)
     freq = 1000000 // tick_us
     if chip == "esp32":

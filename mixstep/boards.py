@@ -56,7 +56,8 @@ CHIPS = {
         "input_only": frozenset(),
     },
 }
-STEP_BACKENDS = {"timer": tuple(CHIPS), "pio": ("rp2040", "rp2350")}
+STEP_BACKENDS = {"timer": tuple(CHIPS), "pio": ("rp2040", "rp2350"),
+                 "pio_dma": ("rp2040", "rp2350")}
 PIN_WRITERS = ("registers", "pin")
 TMC_ADDRESSES = range(4)  # TMC2209: MS1/MS2 straps give 0..3
 
@@ -103,7 +104,8 @@ def check(board, name):
     drives = _check_settings(settings, chip, bad)
     tmc = board.get("TMC_UART")
     _check_required(pins, drives, bad)
-    if settings.get("step_backend") == "pio" and chip in STEP_BACKENDS["pio"] and drives:
+    if settings.get("step_backend") in ("pio", "pio_dma") and chip in STEP_BACKENDS["pio"] \
+            and drives:
         _check_pio_run(pins, drives, bad)
     # Every GPIO the board uses, with the key that names it; the TMC UART counts too.
     used = [(k, g) for k, g in pins.items()]

@@ -69,6 +69,16 @@ _wall_start_us = walltime.ticks_us()
 _virtual_start_us = 0
 
 
+# Devices that run on the chip's clock beside the CPU (rp2.py's DMA-fed state machine):
+# fn(end_us) does what the device does up to end_us, inside the idle quantum.
+_devices = []
+
+
+def add_device(fn):
+    if fn not in _devices:
+        _devices.append(fn)
+
+
 def add_world_hook(fn):
     """fn(now_us) runs after every idle quantum, outside the step loop."""
     _world_hooks.append(fn)
@@ -389,6 +399,8 @@ def idle():
             sys.stderr.write("simmachine: uncaught exception in timer callback, timer "
                              "disabled: %r\n" % (e,))
             break
+    for dev in _devices:
+        dev(end)
     _pio_output(end)
     _set_now(end)
     for hook in _world_hooks:

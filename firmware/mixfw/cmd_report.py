@@ -64,12 +64,17 @@ class Reports:
 
     # M122: diagnostics, as RepRapFirmware's: the planner's underruns (the step loop
     # ran dry between two moves with no wait between them) and the free heap, as it is
-    # and after a full collection (what the firmware really holds). Example: M122
+    # and after a full collection (what the firmware really holds); with step_backend
+    # pio_dma also the DMA refills that came late (the pins stalled). Example: M122
     def m122(self, line):
         free = gc.mem_free()
         gc.collect()
-        self.printer.reply("echo:underruns:%d mem_free:%d mem_free_collected:%d" % (
-            self.planner.underruns, free, gc.mem_free()))
+        mem = self.planner.mem
+        late = ""
+        if mem[st.S_PIO] == 2:
+            late = " late_refills:%d dma_refills:%d" % (mem[st.R_LATE], mem[st.R_FIRED])
+        self.printer.reply("echo:underruns:%d mem_free:%d mem_free_collected:%d%s" % (
+            self.planner.underruns, free, gc.mem_free(), late))
 
     # M117 <text>: the status message, kept for a display or a report; M117 alone
     # clears it. Example: M117 Printing...

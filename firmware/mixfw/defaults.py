@@ -7,7 +7,10 @@
 # guess would power every motor at boot); `mixstep boards check` insists on them.
 SETTINGS = {
     "chip": "sim",  # "rp2040", "rp2350" or "esp32" on a real board
-    "step_backend": "timer",  # "timer": machine.Timer runs the step loop; rp2 also "pio"
+    # "timer": machine.Timer runs the step loop; rp2 also "pio" (the timer feeds a PIO
+    # state machine a word per tick) and "pio_dma" (the step loop fills 2 ms batches of
+    # timed edges that DMA feeds to a state machine: one interrupt per batch).
+    "step_backend": "timer",
     "pin_writer": "pin",  # "pin": Pin.value() (portable); "registers": set/clear registers
     "invert_dir": (),  # axes/drives whose motor turns the other way, e.g. ("x", "e0")
     "step_pulse_us": 2,  # minimum STEP high time (DRV8825 needs 1.9)

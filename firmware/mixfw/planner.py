@@ -17,7 +17,7 @@ from mixfw.stepper import schedule_counts
 _S_HEAD = const(0)
 _S_TAIL = const(1)
 _S_ACTIVE = const(2)
-_BLOCK_BASE = const(88)
+_BLOCK_BASE = const(112)
 _B_WORDS = const(24)
 _B_N = const(0)
 _B_STEPS = const(1)
@@ -258,7 +258,8 @@ class Planner:
     # --- queue state, shared with the step loop ---
     def busy(self):
         m = self.mem
-        return m[_S_HEAD] != m[_S_TAIL] or m[_S_ACTIVE]
+        # R_PENDING: the DMA ring (step_backend pio_dma) still holds steps for the pins.
+        return m[_S_HEAD] != m[_S_TAIL] or m[_S_ACTIVE] or m[st.R_PENDING]
 
     def synchronize(self):
         """Wait until every queued block has run (M400)."""

@@ -85,7 +85,34 @@ MIX_Q = const(57)
 MIX_C = const(58)
 MASK_BASE = const(64)  # STEP pin masks: X Y Z then the drives (9 words)
 DIR_MASK_BASE = const(73)  # DIR pin masks in the same order (9 words)
-BLOCK_BASE = const(88)
+# Event ring (step_backend "pio_dma", S_PIO == 2; see piodma.py): one call of tick runs
+# a batch of ticks and writes the pin levels between its edges into the ring passed as
+# out, a word each: the levels in the low bits, above R_LEVEL_BITS the PIO cycles they
+# hold (a word is written when the edge that ends it is known). Times are PIO cycles
+# from the batch's start.
+R_SEG_N = const(82)  # words in each of the 3 ring segments
+R_SEG_SEQ = const(85)  # batch number each segment holds (3 words)
+R_TC = const(88)  # PIO cycles per tick
+R_BATCH_TICKS = const(89)
+R_PULSE_CYC = const(90)  # STEP high time
+R_LAST = const(91)  # time of the last event written, from the batch's start (>= 0)
+R_W = const(92)  # next ring word to write
+R_PENDING = const(93)  # batches still to run before the pins have output every step
+R_LATE = const(94)  # refills that came after the running segment had ended
+R_BATCHES = const(95)  # batches filled, wraps at 2**30
+R_SEG_WORDS = const(96)  # ring words per segment
+R_READY = const(97)  # the segment filled and not yet handed to a channel
+R_RING_ADDR = const(98)  # byte address of ring word 0 as the DMA sees it
+R_CTRL = const(99)  # channel control word with CHAIN_TO 0
+R_CHAIN_SHIFT = const(100)  # where CHAIN_TO sits in a control word
+R_BUSY_BIT = const(101)
+R_CH = const(102)  # the two DMA channels (2 words)
+R_CH_SEG = const(104)  # segment each channel was last given (2 words)
+R_FIRED = const(106)  # channel completions handled
+R_SM = const(107)  # the state machine's number
+R_SEG_LV = const(108)  # pin levels before each segment's first event (3 words)
+R_LEVEL_BITS = const(111)  # the state machine's pins
+BLOCK_BASE = const(112)
 
 # Block record words.
 B_N = const(0)  # lead-axis steps (step events)
@@ -108,6 +135,17 @@ B_DWELL = const(14)  # ticks, for dwell blocks
 B_MIX = const(15)  # mix id then 6 weights: same shape as the mixer's M_ID..M_W
 B_RATE_DECEL = const(22)
 B_WORDS = const(24)
+# A PIO event takes this many cycles besides its delay (piodma.py's program): a pull,
+# two outs and the last pass of the delay loop.
+EV_MIN_CYCLES = const(4)
+# Every batch has at least this many words, one more than the state machine's FIFO
+# holds: a channel then never ends the moment it starts (several could end before
+# their IRQs ran), and the FIFO never holds a whole batch.
+BATCH_MIN_WORDS = const(9)
+# A batch filled now has reached the pins once this many more have been filled: two
+# segments are ahead of it in the ring, and the batch after it has pushed it out of
+# the FIFO.
+PENDING_BATCHES = const(4)
 
 # Flag bits.
 F_DWELL = const(1)
@@ -208,228 +246,333 @@ def tick(mem_buf, out, endstops) -> int:
     a pointer it passes on as an int, and an address above 2**30 (any RAM of a 32-bit
     unix port, some chips' too) would be a big int allocated in the interrupt."""
     mem = ptr32(mem_buf)
-    mem[S_TICKS] = (mem[S_TICKS] + 1) & 0x3FFFFFFF
-    if mem[S_PIO]:
-        # The levels the last tick left, for the state machine; the burst goes on
-        # while there is work.
-        left = mem[S_PIO_LEFT]
+    # The ring's loop costs the timer path a compare of a register per tick: where the
+    # timer path returns, the ring goes on with the batch's next tick.
+    # Locals only the ring reads are set only for it (each is a store per tick).
+    ring = 0
+    if mem[S_PIO] == 2:
+        ring = 1
+        evr = ptr32(out)
+        tc = mem[R_TC]
+        ticks_left = mem[R_BATCH_TICKS]
+        t0 = 0 - tc  # start of this tick, PIO cycles from the batch's start
+        w_first = mem[R_W]
+        if mem[R_PENDING] > 0:
+            mem[R_PENDING] -= 1
+    while True:
+        if ring:
+            if ticks_left <= 0:
+                break
+            ticks_left -= 1
+            t0 += tc
+        mem[S_TICKS] = (mem[S_TICKS] + 1) & 0x3FFFFFFF
+        if mem[S_PIO] == 1:
+            # The levels the last tick left, for the state machine; the burst goes on
+            # while there is work.
+            left = mem[S_PIO_LEFT]
+            if left > 0:
+                _pio_put(mem_buf, out, 1)
+                if mem[S_ACTIVE] or mem[S_TAIL] != mem[S_HEAD] or mem[S_PULSE_LEFT]:
+                    left = mem[S_PIO_LATENCY] + 2
+                mem[S_PIO_LEFT] = left - 1
+        set_mask = 0
+        clr_mask = 0
+        stepped = 0
+        left = mem[S_PULSE_LEFT]
         if left > 0:
-            _pio_put(mem_buf, out, 1)
-            if mem[S_ACTIVE] or mem[S_TAIL] != mem[S_HEAD] or mem[S_PULSE_LEFT]:
-                left = mem[S_PIO_LATENCY] + 2
-            mem[S_PIO_LEFT] = left - 1
-    set_mask = 0
-    clr_mask = 0
-    stepped = 0
-    left = mem[S_PULSE_LEFT]
-    if left > 0:
-        left -= 1
-        mem[S_PULSE_LEFT] = left
-        if left == 0:
-            clr_mask = mem[S_PULSE_MASK]
-    b = BLOCK_BASE + mem[S_TAIL] * B_WORDS
-    run = 1
-    if mem[S_ACTIVE] == 0:
-        if mem[S_TAIL] == mem[S_HEAD]:
-            if clr_mask == 0:
-                return 0  # idle
-            run = 0
-        else:
-            changed = int(_start(mem_buf, b))
-            if changed:
-                dirs = mem[S_DIR]
-                set_mask = dirs & changed
-                clr_mask |= changed & (0 - 1 - dirs)
+            left -= 1
+            mem[S_PULSE_LEFT] = left
+            if left == 0:
+                clr_mask = mem[S_PULSE_MASK]
+        b = BLOCK_BASE + mem[S_TAIL] * B_WORDS
+        run = 1
+        if mem[S_ACTIVE] == 0:
+            if mem[S_TAIL] == mem[S_HEAD]:
+                if clr_mask == 0:
+                    if ring == 0:
+                        return 0  # idle
+                    if left == 0:  # nothing to do until the batch's end
+                        mem[S_TICKS] = (mem[S_TICKS] + ticks_left) & 0x3FFFFFFF
+                        ticks_left = 0
+                    continue
                 run = 0
-    flags = mem[b + B_FLAGS]
-    if run:
-        wait = mem[S_WAIT]
-        if wait > 0:
-            mem[S_WAIT] = wait - 1
-            if wait == 1 and (flags & F_DWELL):
+            else:
+                changed = int(_start(mem_buf, b))
+                if changed:
+                    dirs = mem[S_DIR]
+                    set_mask = dirs & changed
+                    clr_mask |= changed & (0 - 1 - dirs)
+                    run = 0
+        flags = mem[b + B_FLAGS]
+        if run:
+            wait = mem[S_WAIT]
+            if wait > 0:
+                mem[S_WAIT] = wait - 1
+                if wait == 1 and (flags & F_DWELL):
+                    _finish(mem_buf)
+                run = 0
+            elif flags & F_DWELL:  # a zero-length dwell
                 _finish(mem_buf)
-            run = 0
-        elif flags & F_DWELL:  # a zero-length dwell
-            _finish(mem_buf)
-            run = 0
-    if run:
-        # Velocity ramp, per tick so speed is linear in time.
-        ramp = mem[S_RAMP_TICKS] + 1
-        mem[S_RAMP_TICKS] = ramp
-        rate = mem[S_RATE]
-        phase = mem[S_PHASE] + rate
-        if ramp < mem[b + B_ACCEL_UNTIL]:
-            rate += mem[b + B_ACCEL]
-            if rate > mem[b + B_RATE_NOM]:
+                run = 0
+        if run:
+            # Velocity ramp, per tick so speed is linear in time.
+            ramp = mem[S_RAMP_TICKS] + 1
+            mem[S_RAMP_TICKS] = ramp
+            rate = mem[S_RATE]
+            step_rate = rate
+            phase = mem[S_PHASE] + rate
+            if ramp < mem[b + B_ACCEL_UNTIL]:
+                rate += mem[b + B_ACCEL]
+                if rate > mem[b + B_RATE_NOM]:
+                    rate = mem[b + B_RATE_NOM]
+            elif ramp >= mem[b + B_DECEL_AFTER]:
+                if ramp == mem[b + B_DECEL_AFTER]:
+                    rate = mem[b + B_RATE_DECEL]
+                else:
+                    rate -= mem[b + B_ACCEL]
+                    if rate < mem[b + B_RATE_FINAL]:
+                        rate = mem[b + B_RATE_FINAL]
+            else:
                 rate = mem[b + B_RATE_NOM]
-        elif ramp >= mem[b + B_DECEL_AFTER]:
-            if ramp == mem[b + B_DECEL_AFTER]:
-                rate = mem[b + B_RATE_DECEL]
+            mem[S_RATE] = rate
+            # A step waits while a STEP pin is still high or has just fallen (its low time).
+            if phase < ONE or left != 0 or clr_mask != 0:
+                mem[S_PHASE] = phase
+                if clr_mask == 0:
+                    if ring == 0:
+                        return 0  # the most common tick while moving: no step due, no pin to write
+                    # Cruise: straight on to the tick before the next step, or the
+                    # batch's end; the ticks between only add the same rate.
+                    if left == 0 and rate > 0 and rate == mem[b + B_RATE_NOM] and \
+                            ramp + 1 >= mem[b + B_ACCEL_UNTIL]:
+                        skip = (ONE - 1 - phase) // rate
+                        if skip > mem[b + B_DECEL_AFTER] - 1 - ramp:
+                            skip = mem[b + B_DECEL_AFTER] - 1 - ramp
+                        if skip > ticks_left:
+                            skip = ticks_left
+                        if skip > 0:
+                            mem[S_PHASE] = phase + skip * rate
+                            mem[S_RAMP_TICKS] = ramp + skip
+                            mem[S_TICKS] = (mem[S_TICKS] + skip) & 0x3FFFFFFF
+                            ticks_left -= skip
+                            t0 += skip * tc
+                    continue
+                run = 0
             else:
-                rate -= mem[b + B_ACCEL]
-                if rate < mem[b + B_RATE_FINAL]:
-                    rate = mem[b + B_RATE_FINAL]
-        else:
-            rate = mem[b + B_RATE_NOM]
-        mem[S_RATE] = rate
-        # A step waits while a STEP pin is still high or has just fallen (its low time).
-        if phase < ONE or left != 0 or clr_mask != 0:
-            mem[S_PHASE] = phase
-            if clr_mask == 0:
-                return 0  # the most common tick while moving: no step due, no pin to write
-            run = 0
-        else:
-            mem[S_PHASE] = phase - ONE
-    stopped = 0
-    if run and (flags & F_HOMING):
-        homing = (flags >> F_HOME_SHIFT) & 7
-        stopped = mem[S_HOME_STOP] | (int(endstops()) & homing)
-        mem[S_HOME_STOP] = stopped
-        if stopped == homing:
-            _finish(mem_buf)
-            run = 0
-    if run:
-        stepped = 1
-        n = mem[b + B_N]
-        # Bresenham for X, Y, Z, written out: constant offsets cost nothing.
-        err = mem[S_ERR + X] + mem[b + B_STEPS + X]
-        if err > n:
-            err -= n
-            if (stopped & 1) == 0:
-                set_mask = mem[MASK_BASE + X]
-                if flags & (F_NEG << X):
-                    mem[S_POS + X] -= 1
-                else:
-                    mem[S_POS + X] += 1
-        mem[S_ERR + X] = err
-        err = mem[S_ERR + Y] + mem[b + B_STEPS + Y]
-        if err > n:
-            err -= n
-            if (stopped & 2) == 0:
-                set_mask |= mem[MASK_BASE + Y]
-                if flags & (F_NEG << Y):
-                    mem[S_POS + Y] -= 1
-                else:
-                    mem[S_POS + Y] += 1
-        mem[S_ERR + Y] = err
-        err = mem[S_ERR + Z] + mem[b + B_STEPS + Z]
-        if err > n:
-            err -= n
-            if (stopped & 4) == 0:
-                set_mask |= mem[MASK_BASE + Z]
-                if flags & (F_NEG << Z):
-                    mem[S_POS + Z] -= 1
-                else:
-                    mem[S_POS + Z] += 1
-        mem[S_ERR + Z] = err
-        err = mem[S_ERR + E] + mem[b + B_STEPS + E]
-        if err > n:
-            err -= n
-            # The mixer (see mixer.py): forward, the drive whose next step is due
-            # first, ties to the lowest index; backward, the drive whose last step
-            # was due latest, ties to the highest, so a step back undoes a step forward.
-            drives = mem[MIX_N]
-            q = mem[MIX_Q]
-            best = -1
-            best_num = 0
-            best_w = 1
-            i = 0
-            if flags & (F_NEG << E):
-                if q <= 0:  # a new period, walked backwards from its end
+                mem[S_PHASE] = phase - ONE
+        stopped = 0
+        if run and (flags & F_HOMING):
+            homing = (flags >> F_HOME_SHIFT) & 7
+            stopped = mem[S_HOME_STOP] | (int(endstops()) & homing)
+            mem[S_HOME_STOP] = stopped
+            if stopped == homing:
+                _finish(mem_buf)
+                run = 0
+        if run:
+            stepped = 1
+            n = mem[b + B_N]
+            # Bresenham for X, Y, Z, written out: constant offsets cost nothing.
+            err = mem[S_ERR + X] + mem[b + B_STEPS + X]
+            if err > n:
+                err -= n
+                if (stopped & 1) == 0:
+                    set_mask = mem[MASK_BASE + X]
+                    if flags & (F_NEG << X):
+                        mem[S_POS + X] -= 1
+                    else:
+                        mem[S_POS + X] += 1
+            mem[S_ERR + X] = err
+            err = mem[S_ERR + Y] + mem[b + B_STEPS + Y]
+            if err > n:
+                err -= n
+                if (stopped & 2) == 0:
+                    set_mask |= mem[MASK_BASE + Y]
+                    if flags & (F_NEG << Y):
+                        mem[S_POS + Y] -= 1
+                    else:
+                        mem[S_POS + Y] += 1
+            mem[S_ERR + Y] = err
+            err = mem[S_ERR + Z] + mem[b + B_STEPS + Z]
+            if err > n:
+                err -= n
+                if (stopped & 4) == 0:
+                    set_mask |= mem[MASK_BASE + Z]
+                    if flags & (F_NEG << Z):
+                        mem[S_POS + Z] -= 1
+                    else:
+                        mem[S_POS + Z] += 1
+            mem[S_ERR + Z] = err
+            err = mem[S_ERR + E] + mem[b + B_STEPS + E]
+            if err > n:
+                err -= n
+                # The mixer (see mixer.py): forward, the drive whose next step is due
+                # first, ties to the lowest index; backward, the drive whose last step
+                # was due latest, ties to the highest, so a step back undoes a step forward.
+                drives = mem[MIX_N]
+                q = mem[MIX_Q]
+                best = -1
+                best_num = 0
+                best_w = 1
+                i = 0
+                if flags & (F_NEG << E):
+                    if q <= 0:  # a new period, walked backwards from its end
+                        while i < drives:
+                            mem[MIX_C + i] = mem[MIX_W + i]
+                            i += 1
+                        q = mem[MIX_SUM]
+                        i = 0
                     while i < drives:
-                        mem[MIX_C + i] = mem[MIX_W + i]
+                        w = mem[MIX_W + i]
+                        if w > 0:
+                            num = 2 * mem[MIX_C + i] - 1
+                            if best < 0 or num * best_w >= best_num * w:
+                                best = i
+                                best_num = num
+                                best_w = w
                         i += 1
-                    q = mem[MIX_SUM]
-                    i = 0
-                while i < drives:
-                    w = mem[MIX_W + i]
-                    if w > 0:
-                        num = 2 * mem[MIX_C + i] - 1
-                        if best < 0 or num * best_w >= best_num * w:
-                            best = i
-                            best_num = num
-                            best_w = w
-                    i += 1
-                if best >= 0:
-                    mem[MIX_C + best] -= 1
-                    mem[MIX_Q] = q - 1
-                    set_mask |= mem[MASK_BASE + 3 + best]
-                    mem[S_DRIVE_POS + best] -= 1
-                mem[S_POS + E] -= 1
+                    if best >= 0:
+                        mem[MIX_C + best] -= 1
+                        mem[MIX_Q] = q - 1
+                        set_mask |= mem[MASK_BASE + 3 + best]
+                        mem[S_DRIVE_POS + best] -= 1
+                    mem[S_POS + E] -= 1
+                else:
+                    if q >= mem[MIX_SUM]:  # a new period
+                        while i < drives:
+                            mem[MIX_C + i] = 0
+                            i += 1
+                        q = 0
+                        i = 0
+                    while i < drives:
+                        w = mem[MIX_W + i]
+                        if w > 0:
+                            num = 2 * mem[MIX_C + i] + 1
+                            if best < 0 or num * best_w < best_num * w:
+                                best = i
+                                best_num = num
+                                best_w = w
+                        i += 1
+                    if best >= 0:
+                        mem[MIX_C + best] += 1
+                        mem[MIX_Q] = q + 1
+                        set_mask |= mem[MASK_BASE + 3 + best]
+                        mem[S_DRIVE_POS + best] += 1
+                    mem[S_POS + E] += 1
+            mem[S_ERR + E] = err
+            if set_mask:
+                mem[S_PULSE_MASK] = set_mask
+                mem[S_PULSE_LEFT] = mem[S_PULSE_TICKS]
+            event = mem[S_EVENT] + 1
+            mem[S_EVENT] = event
+            if event >= n:
+                _finish(mem_buf)
+        if (set_mask | clr_mask) == 0:
+            if ring == 0:
+                return stepped
+            continue
+        # The writes: set_mask pins high, clr_mask pins low.
+        if mem[S_CAP_ON]:
+            head = mem[S_CAP_HEAD]
+            nxt = head + 1
+            if nxt >= mem[S_CAP_SIZE]:
+                nxt = 0
+            if nxt == mem[S_CAP_TAIL]:
+                mem[S_CAP_LOST] += 1
             else:
-                if q >= mem[MIX_SUM]:  # a new period
-                    while i < drives:
-                        mem[MIX_C + i] = 0
-                        i += 1
-                    q = 0
-                    i = 0
-                while i < drives:
-                    w = mem[MIX_W + i]
-                    if w > 0:
-                        num = 2 * mem[MIX_C + i] + 1
-                        if best < 0 or num * best_w < best_num * w:
-                            best = i
-                            best_num = num
-                            best_w = w
-                    i += 1
-                if best >= 0:
-                    mem[MIX_C + best] += 1
-                    mem[MIX_Q] = q + 1
-                    set_mask |= mem[MASK_BASE + 3 + best]
-                    mem[S_DRIVE_POS + best] += 1
-                mem[S_POS + E] += 1
-        mem[S_ERR + E] = err
+                r = mem[S_CAP_BASE] + head * CAP_WORDS
+                mem[r] = (mem[S_TICKS] - mem[S_CAP_T0]) & 0x3FFFFFFF
+                mem[r + 1] = set_mask
+                mem[r + 2] = clr_mask
+                mem[S_CAP_HEAD] = nxt
+        if mem[S_PIO]:
+            if ring:
+                # A step at the time the phase crossed ONE inside the tick (the rate
+                # is the tick's mean speed), its fall a pulse later; DIR at the tick's
+                # start. Events are never closer than the program's own cycles.
+                lv = mem[S_LEVELS]
+                t = t0
+                if run:
+                    over = phase - ONE  # phase left over at the tick's end
+                    if over < step_rate:
+                        t = t0 + tc - (((over // ((step_rate >> 10) + 1)) * tc) >> 10)
+                nxt = (lv | set_mask) & (0 - 1 - clr_mask)
+                w = mem[R_W]
+                last = mem[R_LAST]
+                shift = mem[S_PIO_SHIFT]
+                bits = mem[R_LEVEL_BITS]
+                k = 0 if nxt != lv else 2  # else a pulse whose fall is written already
+                while k < 2:
+                    if t < last + EV_MIN_CYCLES:
+                        t = last + EV_MIN_CYCLES
+                    evr[w] = (lv >> shift) | ((t - last - EV_MIN_CYCLES) << bits)
+                    w += 1
+                    last = t
+                    lv = nxt
+                    k += 1
+                    if run:
+                        t += mem[R_PULSE_CYC]
+                        nxt = lv & (0 - 1 - set_mask)
+                        run = 0
+                    else:
+                        k = 2
+                mem[R_W] = w
+                mem[R_LAST] = last
+                mem[S_LEVELS] = lv
+                continue
+            if mem[S_PIO_LEFT] == 0:
+                # A burst starts: old levels until the latency is queued, so this
+                # tick's levels come out exactly LATENCY ticks from now.
+                fill = mem[S_PIO_LATENCY] - int(_pio_ahead(mem_buf))
+                if fill > 0:
+                    _pio_put(mem_buf, out, fill)
+            mem[S_LEVELS] = (mem[S_LEVELS] | set_mask) & (0 - 1 - clr_mask)
+            mem[S_PIO_LEFT] = mem[S_PIO_LATENCY] + 2
+            return stepped
+        at = mem[S_REG_SET]
+        if at == 0:
+            out(set_mask, clr_mask)
+            return stepped
+        regs = ptr32(out)
+        hi = mem[S_REG_HI_SET]
+        if hi:
+            if set_mask >> HI_SHIFT:
+                regs[hi] = set_mask >> HI_SHIFT
+            if clr_mask >> HI_SHIFT:
+                regs[mem[S_REG_HI_CLR]] = clr_mask >> HI_SHIFT
+            set_mask = set_mask & LO_MASK
+            clr_mask = clr_mask & LO_MASK
         if set_mask:
-            mem[S_PULSE_MASK] = set_mask
-            mem[S_PULSE_LEFT] = mem[S_PULSE_TICKS]
-        event = mem[S_EVENT] + 1
-        mem[S_EVENT] = event
-        if event >= n:
-            _finish(mem_buf)
-    if (set_mask | clr_mask) == 0:
+            regs[at] = set_mask
+        if clr_mask:
+            regs[mem[S_REG_CLR]] = clr_mask
         return stepped
-    # The writes: set_mask pins high, clr_mask pins low.
-    if mem[S_CAP_ON]:
-        head = mem[S_CAP_HEAD]
-        nxt = head + 1
-        if nxt >= mem[S_CAP_SIZE]:
-            nxt = 0
-        if nxt == mem[S_CAP_TAIL]:
-            mem[S_CAP_LOST] += 1
-        else:
-            r = mem[S_CAP_BASE] + head * CAP_WORDS
-            mem[r] = (mem[S_TICKS] - mem[S_CAP_T0]) & 0x3FFFFFFF
-            mem[r + 1] = set_mask
-            mem[r + 2] = clr_mask
-            mem[S_CAP_HEAD] = nxt
-    if mem[S_PIO]:
-        if mem[S_PIO_LEFT] == 0:
-            # A burst starts: old levels until the latency is queued, so this
-            # tick's levels come out exactly LATENCY ticks from now.
-            fill = mem[S_PIO_LATENCY] - int(_pio_ahead(mem_buf))
-            if fill > 0:
-                _pio_put(mem_buf, out, fill)
-        mem[S_LEVELS] = (mem[S_LEVELS] | set_mask) & (0 - 1 - clr_mask)
-        mem[S_PIO_LEFT] = mem[S_PIO_LATENCY] + 2
-        return stepped
-    at = mem[S_REG_SET]
-    if at == 0:
-        out(set_mask, clr_mask)
-        return stepped
-    regs = ptr32(out)
-    hi = mem[S_REG_HI_SET]
-    if hi:
-        if set_mask >> HI_SHIFT:
-            regs[hi] = set_mask >> HI_SHIFT
-        if clr_mask >> HI_SHIFT:
-            regs[mem[S_REG_HI_CLR]] = clr_mask >> HI_SHIFT
-        set_mask = set_mask & LO_MASK
-        clr_mask = clr_mask & LO_MASK
-    if set_mask:
-        regs[at] = set_mask
-    if clr_mask:
-        regs[mem[S_REG_CLR]] = clr_mask
-    return stepped
+
+    # The levels since the last edge hold to the batch's last cycle, in as many
+    # pieces as make up BATCH_MIN_WORDS, and the next batch counts from there.
+    end = mem[R_BATCH_TICKS] * tc
+    last = mem[R_LAST]
+    w = mem[R_W]
+    lv = mem[S_LEVELS] >> mem[S_PIO_SHIFT]
+    bits = mem[R_LEVEL_BITS]
+    edges = w - w_first
+    pieces = BATCH_MIN_WORDS - edges
+    if pieces < 1 or end - last < pieces * EV_MIN_CYCLES:
+        pieces = 1
+    while pieces > 1:
+        piece = (end - last) // pieces
+        evr[w] = lv | ((piece - EV_MIN_CYCLES) << bits)
+        w += 1
+        last += piece
+        pieces -= 1
+    t = end if end >= last + EV_MIN_CYCLES else last + EV_MIN_CYCLES
+    evr[w] = lv | ((t - last - EV_MIN_CYCLES) << bits)
+    w += 1
+    mem[R_W] = w
+    mem[R_LAST] = t - end
+    if edges or mem[S_ACTIVE] or mem[S_TAIL] != mem[S_HEAD] or mem[S_PULSE_LEFT]:
+        mem[R_PENDING] = PENDING_BATCHES
+    mem[R_BATCHES] = (mem[R_BATCHES] + 1) & 0x3FFFFFFF
+    return w
 
 
 def run_mix(weights, moves, out=None):

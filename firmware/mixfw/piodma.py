@@ -1,0 +1,427 @@
+# step_backend "pio_dma" for RP2040/RP2350: the step loop runs ahead in batches and
+# writes the pin levels between edges, a word each (levels, and above them the PIO
+# cycles they hold), into a ring in RAM. Two DMA channels, chained to each other, move
+# the ring into a state machine's FIFO paced by its TX DREQ; the state machine writes
+# each word's levels to the pins and counts its cycles down.
+# The CPU takes one interrupt per batch (BATCH_US), not one per tick, and an edge lands
+# at its own time inside its tick, not on the tick.
+#
+# The ring has 3 segments: one the running channel reads, one armed on the other
+# channel, one filled and ready. When a channel ends, its IRQ (hard) arms it with the
+# ready segment, points the running channel's CHAIN_TO at it, and fills the segment it
+# had just read with the next batch.
+#
+# A late refill (the running channel ended before the IRQ re-armed the other) must
+# never replay stale words: a channel is armed without a trigger and chained to only
+# once it is armed; if the running one has already ended, the chain has passed and the
+# IRQ triggers the armed channel itself. A late refill then stalls the pins (steps
+# late, never wrong); R_LATE counts them (M122).
+#
+# What can hold the DMA IRQ back is whatever masks interrupts or holds the CPU in
+# another handler: machine.disable_irq() sections (the planner's queue hand-over, a
+# few us), other interrupt handlers of the same priority (USB, a few us), and flash
+# erase/program, which the rp2 port runs with interrupts off (a 4 kB erase takes tens
+# of ms, many batches): saving the configuration (M500) or writing a file while
+# printing costs late refills. gc.collect() runs with interrupts on (a hard handler
+# that allocated would fail during it; refill allocates nothing), so it delays
+# nothing: M122, which collects, ran during the emulated prints with no late refill.
+from array import array
+from mixfw.compat import micropython, const, ptr32
+from mixfw import stepper as st
+from mixfw.stepper import tick
+from mixfw.pio import out_range
+
+PIO_HZ = const(8000000)
+CYCLES_PER_US = const(8)
+BATCH_US = const(2000)  # 1 ms batches gave late refills on the emulated chip
+SEGMENTS = const(3)
+FIFO_WORDS = const(8)  # the TX FIFO, joined
+DMA_BASE = const(0x50000000)
+PIO0_BASE = const(0x50200000)
+PIO0_TXF0 = const(0x50200010)
+_FLEVEL = const(3)  # PIO register word: each state machine's FIFO levels, a byte each
+# Word offsets: in a channel's block of 16 registers, and of the shared registers.
+_READ_ADDR = const(0)
+_TRANS_COUNT = const(2)
+_CTRL_TRIG = const(3)
+_AL1_CTRL = const(4)
+_CH_WORDS = const(16)
+_MULTI_CHAN_TRIGGER = const(0x430 // 4)
+_INTR = const(0x400 // 4)
+_INTS0 = const(0x40C // 4)
+BUSY_BIT = {11: 24, 13: 26}  # CHAIN_TO's place tells the chip: RP2040, RP2350
+
+# The step loop's words refill uses, as constants viper folds (checked below).
+_R_BATCHES = const(95)
+_R_BUSY_BIT = const(101)
+_R_CH = const(102)
+_R_CHAIN_SHIFT = const(100)
+_R_CH_SEG = const(104)
+_R_CTRL = const(99)
+_R_FIRED = const(106)
+_R_LATE = const(94)
+_R_READY = const(97)
+_R_RING_ADDR = const(98)
+_R_SEG_LV = const(108)
+_R_SEG_N = const(82)
+_R_SEG_SEQ = const(85)
+_R_SEG_WORDS = const(96)
+_R_W = const(92)
+_R_SM = const(107)
+_S_LEVELS = const(45)
+assert (_R_BATCHES, _R_BUSY_BIT, _R_CH, _R_CHAIN_SHIFT, _R_CH_SEG, _R_CTRL, _R_FIRED,
+        _R_LATE, _R_READY, _R_RING_ADDR, _R_SEG_LV, _R_SEG_N, _R_SEG_SEQ, _R_SEG_WORDS,
+        _R_W, _R_SM, _S_LEVELS) == (
+    st.R_BATCHES, st.R_BUSY_BIT, st.R_CH, st.R_CHAIN_SHIFT, st.R_CH_SEG, st.R_CTRL,
+    st.R_FIRED, st.R_LATE, st.R_READY, st.R_RING_ADDR, st.R_SEG_LV, st.R_SEG_N,
+    st.R_SEG_SEQ, st.R_SEG_WORDS, st.R_W, st.R_SM, st.S_LEVELS)
+
+
+def seg_words(batch_ticks):
+    """Ring words a batch can need. A step tick has two edges (the step and its fall)
+    and is never followed by another (the pulse and its low time take a tick at
+    least); any other tick one at most (DIR). So 3 edges in 2 ticks, a word each, and
+    the word that holds the last levels to the batch's end; an idle batch is padded
+    to stepper.BATCH_MIN_WORDS."""
+    return (3 * batch_ticks) // 2 + 3 + st.BATCH_MIN_WORDS
+
+
+def batch_ticks(settings, batch_us=BATCH_US):
+    return max(1, batch_us // settings["tick_us"])
+
+
+def make_ring(settings, batch_us=BATCH_US):
+    """The ring, to be allocated early: a few kB in one block, which the heap may
+    not have in one piece once the firmware is built."""
+    return array("i", bytes(4 * SEGMENTS * seg_words(batch_ticks(settings, batch_us))))
+
+
+@micropython.viper
+def refill(mem_buf, io, done: int):
+    """Channel `done` (0 or 1) has read its segment: arm it with the ready one, chain
+    the running channel to it, and fill the freed segment with the next batch. io:
+    (DMA registers, PIO registers, ring, endstops), one tuple because a viper call
+    with more arguments allocates."""
+    mem = ptr32(mem_buf)
+    regs = ptr32(io[0])
+    pio = ptr32(io[1])
+    ch = mem[_R_CH + done]
+    r = ch * _CH_WORDS
+    o = mem[_R_CH + 1 - done] * _CH_WORDS
+    seg = mem[_R_READY]
+    start = mem[_R_RING_ADDR] + seg * mem[_R_SEG_WORDS] * 4
+    regs[r + _READ_ADDR] = start
+    regs[r + _TRANS_COUNT] = mem[_R_SEG_N + seg]
+    own = mem[_R_CTRL] | (ch << mem[_R_CHAIN_SHIFT])  # chained to itself: no chain
+    regs[r + _AL1_CTRL] = own
+    regs[o + _AL1_CTRL] = own
+    busy = 1 << mem[_R_BUSY_BIT]
+    if (regs[o + _CTRL_TRIG] & busy) == 0:
+        # The running channel may have ended before its CHAIN_TO pointed here: then
+        # nothing triggered this one (it neither runs nor has read a word).
+        if (regs[r + _CTRL_TRIG] & busy) == 0 and regs[r + _READ_ADDR] == start:
+            regs[_MULTI_CHAN_TRIGGER] = 1 << ch
+            # Late only if the FIFO had run dry: idle batches are 2 words, so with
+            # words enough in the FIFO both channels may end before the IRQ runs.
+            if (pio[_FLEVEL] >> (mem[_R_SM] << 3)) & 15 == 0:
+                mem[_R_LATE] += 1
+    freed = mem[_R_CH_SEG + done]
+    mem[_R_CH_SEG + done] = seg
+    mem[_R_FIRED] += 1
+    base = freed * mem[_R_SEG_WORDS]
+    mem[_R_W] = base
+    mem[_R_SEG_LV + freed] = mem[_S_LEVELS]
+    w = int(tick(mem_buf, io[2], io[3]))
+    mem[_R_SEG_N + freed] = w - base
+    mem[_R_SEG_SEQ + freed] = mem[_R_BATCHES]
+    mem[_R_READY] = freed
+
+
+class Feed:
+    """The ring, the state machine and the two channels of one printer's steps. Made
+    right after the step loop's memory (its ring is the next largest block), set up
+    by the first start(), once the pins and their masks are there."""
+
+    def __init__(self, machine, mem, settings, pin_map, sm_id=0, batch_us=BATCH_US):
+        if settings.get("chip") not in ("rp2040", "rp2350"):
+            raise ValueError("step_backend pio_dma needs an RP2040 or RP2350, not %r"
+                             % settings.get("chip"))
+        import rp2
+        self.rp2 = rp2
+        self.machine = machine
+        self.mem = mem
+        self.settings = settings
+        self.sm_id = sm_id
+        self.batch_us = batch_us
+        self.names = ["x", "y", "z"] + ["e%d" % i for i in range(settings["drives"])]
+        self.first, self.count = out_range(pin_map, self.names)
+        hold_cycles = (batch_ticks(settings, batch_us) + 1) * settings["tick_us"] * CYCLES_PER_US
+        if hold_cycles >> (32 - self.count):
+            raise ValueError("step_backend pio_dma: %d STEP/DIR pins leave %d bits for a "
+                             "batch of %d cycles" % (self.count, 32 - self.count, hold_cycles))
+        self.ring = make_ring(settings, batch_us)
+        self.dmas = [rp2.DMA(), rp2.DMA()]
+        self.pins = None
+        self.sm = None
+        self.running = False
+
+    def _setup(self, pins):
+        """The step loop's words for the ring, and the IRQ handlers."""
+        mem, settings, rp2 = self.mem, self.settings, self.rp2
+        self.pins = pins
+        self.out_base = self.machine.Pin(self.first)
+        tick_us = settings["tick_us"]
+        ticks = batch_ticks(settings, self.batch_us)
+        mem[st.S_PIO] = 2
+        mem[st.S_PIO_SHIFT] = self.first
+        mem[st.R_TC] = tick_us * CYCLES_PER_US
+        mem[st.R_BATCH_TICKS] = ticks
+        mem[st.R_PULSE_CYC] = settings["step_pulse_us"] * CYCLES_PER_US
+        mem[st.R_SEG_WORDS] = seg_words(ticks)
+        mem[st.R_LEVEL_BITS] = self.count
+        # Steps land anywhere in their tick and a DIR change at its start, after the
+        # fall of a pulse that may reach into it: the setup counts from there.
+        mem[st.S_DIR_TICKS] = max(1, -(-(settings["dir_setup_us"] + settings["step_pulse_us"])
+                                       // tick_us))
+        self.motors = []  # (step mask, dir mask, position word, drive word or -1)
+        for i in range(len(self.names)):
+            axis = i if i < 3 else st.E
+            drive = st.S_DRIVE_POS + i - 3 if i >= 3 else -1
+            self.motors.append((mem[st.MASK_BASE + i], mem[st.DIR_MASK_BASE + i],
+                                st.S_POS + axis, drive))
+        self.dir_invert_mask = pins.dir_invert_mask
+        bank = getattr(rp2, "dma_register_bank", None)
+        if bank:  # the simulated chip: registers in RAM, ring addresses from 0
+            self.regs, self.pio_regs = bank(self.ring)
+            mem[st.R_RING_ADDR] = 0
+        else:
+            import uctypes
+            self.regs = DMA_BASE
+            self.pio_regs = PIO0_BASE
+            mem[st.R_RING_ADDR] = uctypes.addressof(self.ring)
+        d = self.dmas[0]
+        sm_id = self.sm_id
+        self.ctrl = d.pack_ctrl(size=2, inc_read=True, inc_write=False, chain_to=0,
+                                treq_sel=sm_id, irq_quiet=False)
+        shift = 0
+        while not (d.pack_ctrl(size=2, inc_read=True, inc_write=False, chain_to=1,
+                               treq_sel=sm_id, irq_quiet=False) ^ self.ctrl) >> shift & 1:
+            shift += 1
+        mem[st.R_CTRL] = self.ctrl
+        mem[st.R_CHAIN_SHIFT] = shift
+        mem[st.R_BUSY_BIT] = BUSY_BIT.get(shift, 24)
+        for i, dma in enumerate(self.dmas):
+            mem[st.R_CH + i] = dma.channel
+        mem[st.R_SM] = sm_id
+        io = (self.regs, self.pio_regs, self.ring, pins.endstops)
+
+        # Bound once: the interrupt does no lookups and allocates nothing.
+        def irq0(_dma):
+            refill(mem, io, 0)
+
+        def irq1(_dma):
+            refill(mem, io, 1)
+
+        self.handlers = (irq0, irq1)
+        self.program = self._program()  # assembled once: it takes ms on the chip
+
+    def _program(self):
+        rp2 = self.rp2
+        pins_n = self.count
+        hold_n = 32 - pins_n
+
+        # The assembler swaps the module's globals for its own names while it runs:
+        # the counts come in as closure variables.
+        @rp2.asm_pio(out_init=(rp2.PIO.OUT_LOW,) * self.count,
+                     out_shiftdir=rp2.PIO.SHIFT_RIGHT, fifo_join=rp2.PIO.JOIN_TX)
+        def step_events():
+            # noqa: F821 below: the PIO assembler's names.
+            wrap_target()  # noqa: F821
+            pull(block)  # noqa: F821
+            out(pins, pins_n)  # noqa: F821
+            out(x, hold_n)  # noqa: F821
+            label("wait")  # noqa: F821
+            jmp(x_dec, "wait")  # noqa: F821
+            wrap()  # noqa: F821
+
+        return step_events
+
+    def _fill(self, seg):
+        mem = self.mem
+        base = seg * mem[st.R_SEG_WORDS]
+        mem[st.R_W] = base
+        mem[st.R_SEG_LV + seg] = mem[st.S_LEVELS]
+        mem[st.R_SEG_N + seg] = tick(mem, self.ring, self.pins.endstops) - base
+        mem[st.R_SEG_SEQ + seg] = mem[st.R_BATCHES]
+
+    def start(self, pins=None):
+        """Prime the ring with three batches and let the channels run."""
+        if self.pins is None:
+            self._setup(pins)
+        mem = self.mem
+        rp2 = self.rp2
+        self.sm = rp2.StateMachine(self.sm_id, self.program, freq=PIO_HZ,
+                                   out_base=self.out_base)
+        mem[st.R_LAST] = 0
+        for seg in range(SEGMENTS):
+            self._fill(seg)
+        mem[st.R_READY] = 2
+        a, b = self.dmas
+        words = mem[st.R_SEG_WORDS]
+        txf = PIO0_TXF0 + 4 * self.sm_id
+        shift = mem[st.R_CHAIN_SHIFT]
+        # The first word goes into the FIFO by hand: a state machine made again
+        # after a stop with a full FIFO raised no DREQ on the emulated chip until its
+        # first pull.
+        self.sm.put(self.ring[0])
+        for i, dma in enumerate(self.dmas):
+            mem[st.R_CH_SEG + i] = i
+            first = 1 if i == 0 else 0
+            # The first chains to the second; the second to itself (no chain) until
+            # its IRQ has armed the first again.
+            dma.config(read=mem[st.R_RING_ADDR] + 4 * (i * words + first), write=txf,
+                       count=mem[st.R_SEG_N + i] - first,
+                       ctrl=self.ctrl | (b.channel << shift))
+        # A flag left from a stop would run a refill on channels not yet running.
+        self._clear_flags()
+        for i, dma in enumerate(self.dmas):
+            dma.irq(self.handlers[i], hard=True)
+        self.sm.active(1)
+        a.active(1)
+        self.running = True
+
+    def stop(self):
+        """Stop the state machine, then the channels: what was read from the ring and
+        what the FIFO still holds then say which words reached the pins. Returns the
+        stream order of the segments, and the segment and word the pins stopped at.
+        An abort can raise the channel's IRQ (RP2040-E13): the handlers go first, and
+        the flags are cleared after, so no refill runs on a stopped ring."""
+        self.sm.active(0)
+        # The channels go on until the FIFO is full or their segments end; read their
+        # addresses once they have (a word in flight when a channel is aborted counts
+        # as read but never reaches the FIFO).
+        a, b = self.dmas
+        for _ in range(200):
+            if self.sm.tx_fifo() >= FIFO_WORDS or not (a.active() or b.active()):
+                break
+        where = self._first_unsent()
+        for dma in self.dmas:
+            dma.irq(None)
+            dma.active(0)
+        self.running = False
+        self._clear_flags()
+        return where
+
+    def _clear_flags(self):
+        """Both channels' raw interrupt flags (INTR; INTS0 is INTR masked)."""
+        mask = (1 << self.dmas[0].channel) | (1 << self.dmas[1].channel)
+        if isinstance(self.regs, int):
+            self.machine.mem32[self.regs + 4 * _INTR] = mask
+            self.machine.mem32[self.regs + 4 * _INTS0] = mask
+        else:
+            self.regs[_INTR] = mask
+            self.regs[_INTS0] = mask
+
+    def _first_unsent(self):
+        mem = self.mem
+        words = mem[st.R_SEG_WORDS]
+        base = mem[st.R_RING_ADDR]
+        regs = self._regs_view()
+        order = sorted(range(SEGMENTS), key=lambda s: mem[st.R_SEG_SEQ + s])
+        # Words read from the ring: up to where the later started channel got.
+        read = 0
+        for i in range(2):
+            seg = mem[st.R_CH_SEG + i]
+            ch = mem[st.R_CH + i]
+            done = (regs[ch * _CH_WORDS + _READ_ADDR] - base) // 4 - seg * words
+            if 0 < done <= mem[st.R_SEG_N + seg]:
+                at = sum(mem[st.R_SEG_N + s] for s in order[:order.index(seg)]) + done
+                read = max(read, at)
+        unsent = read - self.sm.tx_fifo()
+        for s in order:
+            n = mem[st.R_SEG_N + s]
+            if unsent < n:
+                return order, s, max(0, unsent)
+            unsent -= n
+        return order, order[-1], mem[st.R_SEG_N + order[-1]]
+
+    def _regs_view(self):
+        return _Mem32(self.machine, self.regs) if isinstance(self.regs, int) else self.regs
+
+    def stop_and_take_back(self):
+        """M112 / quick stop: stop the pins where they are and take every step the pins
+        never got out of the step loop's positions, so they hold where the axes are.
+        The feed starts again (resume) once the queue has been dropped."""
+        if not self.running:
+            return
+        state = self.machine.disable_irq()
+        try:
+            order, seg, at = self.stop()
+            self._take_back(order, seg, at)
+        finally:
+            self.machine.enable_irq(state)
+
+    def resume(self):
+        if not self.running:
+            self.start()
+
+    def _take_back(self, order, seg, at):
+        mem = self.mem
+        ring = self.ring
+        words = mem[st.R_SEG_WORDS]
+        shift = self.first
+        # Levels on the pins: the last word sent's, or those the segment starts from.
+        level_mask = (1 << self.count) - 1
+        prev = mem[st.R_SEG_LV + seg] >> shift
+        if at > 0:
+            prev = ring[seg * words + at - 1] & level_mask
+        sent = prev << shift
+        started = False
+        for s in order:
+            if s == seg:
+                started = True
+                k = at
+            elif not started:
+                continue
+            else:
+                k = 0
+            n = mem[st.R_SEG_N + s]
+            while k < n:
+                lv = ring[s * words + k] & level_mask
+                rising = (lv & ~prev) << shift
+                dirs = lv << shift
+                for step, dmask, pos, drive in self.motors:
+                    if rising & step:
+                        # A DIR pin high is forward, unless the motor is wired inverted.
+                        forward = bool(dirs & dmask) != bool(self.dir_invert_mask & dmask)
+                        back = 1 if forward else -1
+                        mem[pos] -= back
+                        if drive >= 0:
+                            mem[drive] -= back
+                prev = lv
+                k += 1
+        steps = 0
+        dir_mask = 0
+        for step, dmask, _, _ in self.motors:
+            steps |= step
+            dir_mask |= dmask
+        mem[st.S_LEVELS] = sent & ~steps
+        mem[st.S_DIR] = sent & dir_mask
+        mem[st.S_PULSE_LEFT] = 0
+        mem[st.S_WAIT] = 0
+        mem[st.R_PENDING] = 0
+        # The mixer's schedule went on past the steps taken back: start it afresh.
+        mem[st.MIX_BASE] = -1
+
+    def deinit(self):
+        if self.running:
+            self.stop()
+
+
+class _Mem32:
+    def __init__(self, machine, base):
+        self.base = base
+        self.mem32 = machine.mem32  # main loop only: an address above 2**30 is a big int
+
+    def __getitem__(self, i):
+        return self.mem32[self.base + 4 * i]
