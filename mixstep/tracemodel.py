@@ -564,7 +564,7 @@ class Transitions:
         self.pair_l0_nm = pair_l0_nm
         self.l0_nm = max([l0_nm] + list(pair_l0_nm.values()))
         self.tool = -1
-        self.pending = []  # [start, target, e_nm, line, mix, replay]
+        self.pending = []  # [start, target, e_nm, line, mix, replay, mix is its own]
         self.tool_mix = planner.tool_mix
 
     @staticmethod
@@ -572,15 +572,17 @@ class Transitions:
         return move[2] if move[2] > 0 and move[0] != move[1] else 0
 
     def add_move(self, start, target, e_nm, line, mix=None, replay=False):
+        # A move with a mix of its own (retract_policy 1) keeps it: a transition moves
+        # colour changes of printing extrusion, and the policy says how drives retract.
         self.pending.append([list(start), list(target), e_nm, line, mix or self.tool_mix,
-                             replay])
+                             replay, mix is not None])
         waiting = sum(self._printing(m) for m in self.pending)
         while self.pending and waiting - self._printing(self.pending[0]) >= self.l0_nm:
             waiting -= self._printing(self.pending[0])
             self._release()
 
     def _release(self):
-        start, target, e_nm, line, mix, replay = self.pending.pop(0)
+        start, target, e_nm, line, mix, replay, _ = self.pending.pop(0)
         self.planner.set_mix(mix)
         self.planner.add_move(start, target, e_nm, line, replay=replay)
 
@@ -604,14 +606,15 @@ class Transitions:
             need -= e
             k -= 1
         for move in self.pending[k:]:
-            move[4] = self.tool_mix
+            if not move[6]:
+                move[4] = self.tool_mix
 
     def _split(self, index, tail_nm):
-        start, target, e, line, mix, replay = self.pending[index]
+        start, target, e, line, mix, replay, own = self.pending[index]
         mid = [start[i] + _div_round((target[i] - start[i]) * (e - tail_nm), e)
                for i in range(3)]
-        self.pending[index] = [start, mid, e - tail_nm, line, mix, replay]
-        self.pending.insert(index + 1, [mid, list(target), tail_nm, line, mix, replay])
+        self.pending[index] = [start, mid, e - tail_nm, line, mix, replay, own]
+        self.pending.insert(index + 1, [mid, list(target), tail_nm, line, mix, replay, own])
 
 
 class Machine:
