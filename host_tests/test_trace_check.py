@@ -421,6 +421,43 @@ def test_a_dropped_step_pulse_fails(printed, tmp_path):
     assert _run_cli(bad, "--gcode", PRINT) == 1
 
 
+def test_one_dir_flipped_fails(snippet, tmp_path, capsys):
+    """One e1 DIR change written with the level e1 already had: every edge time is
+    kept, but the e1 steps up to its next DIR change now go the wrong way."""
+    gcode, vcd_path, _, _ = snippet
+    text = vcd_path.read_bytes()
+    d1, e1 = _ident(text, "e1_dir"), _ident(text, "e1_step")
+    changes = list(re.finditer(rb"\n([01])" + re.escape(d1) + rb"\n", text))
+    assert len(changes) > 4
+    for a, b in zip(changes[len(changes) // 2:], changes[len(changes) // 2 + 1:]):
+        if text.find(b"\n1" + e1 + b"\n", a.end() - 1, b.start() + 1) >= 0:
+            break  # e1 steps between this change and the next
+    flipped = b"0" if a.group(1) == b"1" else b"1"
+    bad = tmp_path / "flipped.vcd"
+    bad.write_bytes(text[:a.start() + 1] + flipped + text[a.start() + 2:])
+    report = tracecheck.check(bad, gcode)
+    assert "steps_e1" in _failed(report) and "moves" in _failed(report)
+    assert _run_cli(bad, "--gcode", gcode) == 1
+    assert "FAIL steps_e1" in capsys.readouterr().out
+
+
+def test_a_step_moved_to_another_drive_fails(snippet, tmp_path):
+    """One e1 pulse written on e0's STEP instead, at the same times: the number of
+    drive steps is unchanged, but e1 is a step short and e0 has one too many."""
+    gcode, vcd_path, _, _ = snippet
+    text = vcd_path.read_bytes()
+    e0, e1 = _ident(text, "e0_step"), _ident(text, "e1_step")
+    rise = text.index(b"\n1" + e1 + b"\n", len(text) // 2)
+    fall = text.index(b"\n0" + e1 + b"\n", rise + 1)
+    n = len(e1) + 3
+    bad = tmp_path / "moved.vcd"
+    bad.write_bytes(text[:rise] + b"\n1" + e0 + b"\n" + text[rise + n:fall]
+                    + b"\n0" + e0 + b"\n" + text[fall + n:])
+    report = tracecheck.check(bad, gcode)
+    assert {"steps_e0", "steps_e1", "moves"} <= set(_failed(report))
+    assert _run_cli(bad, "--gcode", gcode) == 1
+
+
 def test_a_too_short_pulse_fails(printed, tmp_path):
     """One e1 pulse ends 1 us after it starts instead of a tick later."""
     text = printed.read_bytes()
