@@ -7,37 +7,54 @@ and x/z values are ignored, and a signal's first value is its starting level, no
 edge. Signals are named as on the board (`x_step x_dir ... e5_step e5_dir`); `--map
 x_step=D0,x_dir=D1` names a logic analyser's channels.
 
+What the G-code asks is worked out by `mixstep.tracemodel`, which shares no code
+with the firmware (see its docstring for the arithmetic): its own G-code reading,
+tool mixes, palettes, gradients, firmware transitions, G10/G11, the three retraction
+policies, M92 and per-drive steps/mm, E absolute or relative, G92. Settings the
+board applies before the G-code (steps/mm, drives, retract_policy, transition
+lengths, ...) come from `--board` and `--set KEY=VALUE`, as for `mixstep serve`.
+
 Checks
-    steps_<axis>   net steps of X, Y, Z (their final position from the G-code, rounded
-                   half away from zero; the trace must start where the firmware counts
-                   0, i.e. at home, as the simulation does) and of every drive
-                   (round(drive_mm * steps_per_mm_E), drive_mm summing each E move's
-                   share by the active tool's weights). Exact: the firmware plans every
-                   drive from its absolute position the same way. An axis or drive
-                   that the G-code moves must have its STEP and DIR in the trace, or
-                   the check fails and names the missing signal; one it never moves
-                   may be left out of a capture (the check is then skipped).
-    moves          the drive steps follow the G-code's E moves in order: each move
-                   takes every drive monotonically to its planned step, no drive
-                   steps outside its move. Fails at the first step that does not fit.
-    mix            within each stretch of constant mix, every window of `window`
-                   drive steps gives each drive its weight share of the window's net
-                   steps within `mix_tolerance` steps. The firmware's mixer is a
-                   divisor schedule, so counts stay within about a step of ideal.
+    steps_<axis>   net steps of X, Y, Z (the steps of every move, from where the trace
+                   starts, which must be where the firmware counts 0, i.e. home, as in
+                   the simulation) and of every drive. Exact: the firmware plans every
+                   drive's step from its exact filament, so there is one right count.
+                   An axis or drive that the G-code moves must have its STEP and DIR
+                   in the trace, or the check fails and names the missing signal; one
+                   it never moves may be left out of a capture (the check is then
+                   skipped).
+    moves          the drive steps follow the model's blocks in order: in each block
+                   every drive goes monotonically to its planned step, exactly (the
+                   firmware gives each block the exact count of every drive), and no
+                   drive steps outside its block. Fails at the first step that does
+                   not fit.
+    mix            the order of the steps within a block is the mixer's and is not
+                   predicted step by step (the README specifies the schedule, not the
+                   weights a block hands it; only replays of part of a block need the
+                   order, and there the model assumes the block's counts over their
+                   common divisor): within each stretch of one mix, every window of
+                   `window` drive
+                   steps gives each drive its share of the window's net steps within
+                   `mix_tolerance` steps. The divisor schedule keeps every drive
+                   within about a step of its share at any point, so 2 is a margin.
     pulse_high_us, step_low_us
                    the shortest STEP high and low times, at least `step_pulse_us`.
     dir_setup_us   the shortest time from a DIR change to the next rising STEP on that
                    axis, at least `dir_setup_us`.
     rate_<axis>    the fastest run of RATE_RUN steps, at most max_feed_mm_s *
-                   steps_per_mm, with `rate_margin` and two step-loop ticks of slack
-                   (steps fall on ticks).
+                   steps_per_mm (the board's, not M92's), with `rate_margin` and two
+                   step-loop ticks of slack (steps fall on ticks).
 
 Not modelled (reported as `unmodelled` when the G-code uses them; counts may then
-differ): gradients (M166, M169), palettes and mixtures of mixtures (M168, M567 U),
-firmware-side transitions (transition_l1_mm/l2_mm), retract_policy 1 and 2, firmware
-retraction G10/G11, M92 and per-drive steps/mm options, soft limits, and moves the
-firmware would refuse. DIR high means forward unless the board lists the axis in
-`invert_dir`. At a logic analyser's sample rate, times are only as exact as a sample.
+differ): options changed while printing (M926, M930, M501, M502), printing from the
+printer's flash (M23/M24/M32), M112/M410/M999 (the queue is dropped at a moment the
+G-code does not say), the simulation's fault injections (M7100-M7102), and the
+cold-extrusion guard (the hot end's temperature is not modelled: a print that
+extrudes cold, without M302 P1, is refused by the firmware but expected here).
+Lines the firmware refuses (see tracemodel) are not run, and `refused_lines` counts
+them. The board's settings are read from boards/<name>/board.py as data. DIR high
+means forward unless the board lists the axis in `invert_dir`. At a logic analyser's
+sample rate, times are only as exact as a sample.
 
 The trace is streamed in chunks parsed with numpy, so memory stays bounded whatever
 its size; the expected moves are held in memory (they grow with the G-code only).
