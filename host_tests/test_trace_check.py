@@ -391,6 +391,36 @@ def test_the_firmware_retracts_equally_before_a_transitioned_change(tmp_path):
     assert _failed(tracecheck.check(vcd_path, gcode, settings=_EQUAL_SETTINGS)) == []
 
 
+def _small_moves_with_m204():
+    lines = ["M83", "M302 P1", "M567 P0 E1:1:1", "T0", "G1 X1 F1200"]
+    for i in range(40):
+        lines += ["G1 X%d E0.0123" % (2 + i), "M204 S1000"]
+    return "\n".join(lines + ["M400"]) + "\n"
+
+
+def test_settings_applied_mid_print_lose_no_filament(tmp_path):
+    """First principles: 40 moves of E0.0123 shared 1:1:1 feed each drive exactly
+    40 x 0.0041 = 0.164 mm, 68.06 steps at 415 steps/mm: 68. An M204 (or M201, M203,
+    M205, M92 X) between the moves changes nothing about the drives."""
+    gcode = tmp_path / "m204.gcode"
+    gcode.write_text(_small_moves_with_m204())
+    model = tracemodel.expected(gcode, tracecheck.board_settings("sim"))
+    assert [model["steps"]["e%d" % d] for d in range(3)] == [68, 68, 68]
+
+
+@pytest.mark.xfail(strict=True, reason="firmware: every settings change (M204, M201, M203, "
+                   "M205, M92, M930) sets each drive's exact filament to its whole steps "
+                   "(Motion.apply -> Planner.set_drive_steps), so the part of a step carried "
+                   "is lost each time: 80 steps per drive here instead of 68")
+def test_the_firmware_loses_no_filament_when_settings_change_mid_print(tmp_path):
+    gcode = tmp_path / "m204.gcode"
+    gcode.write_text(_small_moves_with_m204())
+    vcd_path = tmp_path / "m204.vcd"
+    report = sim.run(gcode, trace_path=vcd_path)
+    assert report["errors"] == []
+    assert _failed(tracecheck.check(vcd_path, gcode)) == []
+
+
 # --- corrupted traces -----------------------------------------------------------------
 
 def test_steps_played_faster_than_the_axes_can_go_fail_the_rate_check(snippet, tmp_path):
