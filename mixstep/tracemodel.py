@@ -34,6 +34,16 @@ section, "How the mixer picks a drive" and the options' meaning), in exact arith
 - Gradients (M166, M169) set the mix of each extruding move from its middle: mid-Z
   of the move, or the printing filament since M169 plus half the move's.
 
+Where the firmware departs from its specification, this model keeps to the
+specification, and the tests say which is right and why (host_tests/test_trace_check.py):
+a settings change mid-print (M204, M201, M203, M205, M92) keeps every drive's exact
+filament here (the firmware rounds it to whole steps each time), and a retract_policy 1
+retraction keeps its equal mix when a transition reaches back over it (the firmware
+gives it the new tool's mix). Two approximations of the firmware's are not copied
+either: it rounds a drive's position to the nanometre after a replayed retraction and
+when a mix's total changes; this model stays exact. They differ by under a nanometre,
+so only a position within that of exactly half a step could round the other way.
+
 The input side mirrors what the firmware refuses (and so does not run): bad
 checksums and line numbers, lines over line_buffer_bytes, bytes that are not
 printable ASCII, malformed words, unknown tools, moves beyond the soft limits or
