@@ -673,6 +673,9 @@ def format_report(report):
     for cmd, line in sorted(report["unmodelled"].items()):
         lines.append("  note: %s (first at line %d) is not modelled; counts may differ"
                      % (cmd, line))
+    if report.get("refused_lines"):
+        lines.append("  note: %d lines the firmware refuses (bad words, checksums, limits) "
+                     "are not run" % report["refused_lines"])
     if report["missing_signals"]:
         lines.append("FAILED: the G-code moves what the trace does not show: %s missing"
                      % ", ".join(report["missing_signals"]))
