@@ -96,9 +96,15 @@ class Refused(ValueError):
 
 def round_half_away(x):
     """The rounding rule to whole units: the nearest, half away from zero."""
-    x = Fraction(x)
-    n = (abs(x.numerator) * 2 + x.denominator) // (2 * x.denominator)
-    return n if x >= 0 else -n
+    if not isinstance(x, Fraction):
+        x = Fraction(x)
+    return div_round(x.numerator, x.denominator)
+
+
+def div_round(a, b):
+    """a / b for integers (b > 0), rounded half away from zero."""
+    q = (2 * (a if a >= 0 else -a) + b) // (2 * b)
+    return q if a >= 0 else -q
 
 
 def nm(mm):
@@ -469,9 +475,12 @@ class Planner:
 
     def _plan(self, e_nm, weights):
         total = sum(weights)
-        e_mm = Fraction(e_nm, NM_PER_MM)
-        drive_mm = [self.drive_mm[i] + e_mm * weights[i] / total for i in range(self.drives)]
-        targets = [round_half_away(drive_mm[i] * self.spm[i]) for i in range(self.drives)]
+        drive_mm = list(self.drive_mm)
+        targets = list(self.steps)
+        for i in range(self.drives):
+            if weights[i] and e_nm:  # a drive with no share stays, and so does its step
+                drive_mm[i] += Fraction(e_nm * weights[i], NM_PER_MM * total)
+                targets[i] = round_half_away(drive_mm[i] * self.spm[i])
         return drive_mm, targets
 
     def _add_block(self, start, target, e_nm, line, mix, replay):
@@ -559,8 +568,7 @@ def _pieces(e_nm, spm):
     return abs(e_nm) * max(spm) // (NM_PER_MM * MAX_BLOCK_E_STEPS) + 1
 
 
-def _div_round(a, b):
-    return round_half_away(Fraction(a, b))
+_div_round = div_round
 
 
 class Transitions:
@@ -738,8 +746,9 @@ class Machine:
 
     # --- motion -------------------------------------------------------------------
     def _steps(self, pos_nm):
-        return [round_half_away(Fraction(pos_nm[i] + self.offset_nm[i], NM_PER_MM)
-                                * self.spm[i]) for i in range(3)]
+        # nm times steps/mm in millionths: an exact integer over 10**12.
+        return [div_round((pos_nm[i] + self.offset_nm[i]) * self.spm[i].numerator,
+                          NM_PER_MM * self.spm[i].denominator) for i in range(3)]
 
     def _queue(self, target_steps, xyz, e_nm):
         if e_nm and not -self.max_extrude_nm <= e_nm <= self.max_extrude_nm:
