@@ -14,7 +14,7 @@ from sigrok import need_sigrok
 
 SAMPLES = paths.ROOT / "testdata"
 PRINT = SAMPLES / "part_3tool_prusaslicer_rel.gcode"
-# Every committed slicer file; the 100,000-line planner benchmark by its first 3000
+# Every committed slicer file; the 100,000-line planner benchmark by its first 1000
 # lines (the rest is the same part again, and would take minutes to simulate).
 BENCH_FILE = SAMPLES / "slic3r_part_x4_100k.gcode"
 SLICER_FILES = sorted(p.name for p in SAMPLES.glob("*.gcode") if p != BENCH_FILE) + [
@@ -34,7 +34,7 @@ def traces(tmp_path_factory):
             if name == "slic3r_part_x4_100k_head.gcode":
                 gcode = out / name
                 with open(BENCH_FILE) as f:
-                    gcode.write_text("".join(next(f) for _ in range(3000)))
+                    gcode.write_text("".join(next(f) for _ in range(1000)))
             vcd = out / (name + ".vcd")
             report = sim.run(gcode, trace_path=vcd)
             assert report["errors"] == [], report["errors"][:5]
