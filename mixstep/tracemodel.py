@@ -65,8 +65,8 @@ _MAX_DIGITS = 9
 # Commands whose arguments are text, not words (the firmware reads them whole).
 RAW_COMMANDS = {"M23", "M28", "M30", "M32", "M117", "M118", "M567", "M168", "M169",
                 "M925", "M926"}
-# Commands the firmware knows; a bad word after one of them is an error, after any
-# other the line is answered as an unknown command. Either way it is not run.
+# Commands that wait for the queued moves (so moves held for a transition go to the
+# planner first, and a later mix change cannot reach back over them).
 SYNC_COMMANDS = {"M400", "G28", "M92", "M201", "M203", "M204", "M205", "M930", "M167",
                  "M18", "M84"}
 # Known but not modelled: what they do to the steps cannot be told from the G-code
@@ -199,9 +199,9 @@ def _number(text, i):
     return v, (decimals, neg), i
 
 
-def parse_words(text, known=None):
-    """A line's text (no ';' comment) -> Line, or Refused. known: commands the firmware
-    runs (others are answered as unknown: also not run)."""
+def parse_words(text):
+    """A line's text (no ';' comment) -> Line, or Refused (a command the firmware does
+    not know is not run either, so the model need not tell the two apart)."""
     words = {}
     decimals = {}
     command = ""
@@ -467,7 +467,7 @@ class Planner:
         pieces = _pieces(e_nm, self.spm)
         prev = start_xyz
         for k in range(1, pieces + 1):
-            point = [start_xyz[i] + _div_round((target_xyz[i] - start_xyz[i]) * k, pieces)
+            point = [start_xyz[i] + div_round((target_xyz[i] - start_xyz[i]) * k, pieces)
                      for i in range(3)]
             piece = e_nm * k // pieces - e_nm * (k - 1) // pieces
             self._add_block(prev, point, piece, line, mix, replay)
@@ -568,9 +568,6 @@ def _pieces(e_nm, spm):
     return abs(e_nm) * max(spm) // (NM_PER_MM * MAX_BLOCK_E_STEPS) + 1
 
 
-_div_round = div_round
-
-
 class Transitions:
     """Moves wait here until L0 of printing extrusion follows them; a mix change
     reaches back over the last L0 (the tool pair's own, if it has one), splitting the
@@ -629,7 +626,7 @@ class Transitions:
 
     def _split(self, index, tail_nm):
         start, target, e, line, mix, replay, own = self.pending[index]
-        mid = [start[i] + _div_round((target[i] - start[i]) * (e - tail_nm), e)
+        mid = [start[i] + div_round((target[i] - start[i]) * (e - tail_nm), e)
                for i in range(3)]
         self.pending[index] = [start, mid, e - tail_nm, line, mix, replay, own]
         self.pending.insert(index + 1, [mid, list(target), tail_nm, line, mix, replay, own])
