@@ -308,6 +308,46 @@ def test_a_print_with_every_mixing_feature_passes(tmp_path, run, capsys):
     assert tracecheck.check(vcd_path, gcode)["ok"] is False
 
 
+def _numbered(n, text):
+    line = "N%d %s" % (n, text)
+    cs = 0
+    for c in line.encode():
+        cs ^= c
+    return "%s*%d" % (line, cs)
+
+
+def test_the_check_reads_gcode_as_the_firmware_does(tmp_path):
+    """Line numbers and checksums, comments, long lines and odd words: the lines the
+    firmware refuses (it answers Error:) are the lines the model does not run, and
+    the trace of what did run passes."""
+    lines = [
+        "M83", "M302 P1", "G1 X5 E0.5 F1200 ; a comment with * and N99 in it",
+        _numbered(1, "G1 X10 E0.5"), _numbered(2, "G1 X15 E0.5"),
+        _numbered(2, "G1 X15 E0.5"),  # a repeat: answered ok, not run again
+        _numbered(4, "G1 X99 E5"),  # a number skipped: refused
+        "N3 G1 X20 E0.5*7",  # a wrong checksum: refused
+        _numbered(3, "G1 X20 E0.5"), "N4 G1 X25 E0.5",  # a number without a checksum
+        _numbered(4, "M110 N10"), _numbered(11, "G1 X25 E0.5"),
+        "G1 X30 (a comment) E0.5", "G1 X35 E0.5 (unclosed", "g1 x35\te0.5",
+        "G1 X40 E0.5" + " " * 90,  # over the 96-byte line buffer: refused
+        "G1 X40 E0.5 ;" + "x" * 200,  # a long comment is not stored: fine
+        "G1 X45 E1.2.3", "G1 X45 E-", "G1 X45 X46", "X45 E1", "G1.5 X45", "G1 E",
+        "G1 X1234567890", "G1 X45.1234567891 E0.5",  # 9 significant digits are read
+        "G1 F0 X50 E1", "M163 S1.0 P1", "M400",
+    ]
+    gcode = tmp_path / "protocol.gcode"
+    gcode.write_text("\n".join(lines) + "\n")
+    vcd_path = tmp_path / "protocol.vcd"
+    report = sim.run(gcode, trace_path=vcd_path)
+    model = tracemodel.expected(gcode, tracecheck.board_settings("sim"))
+    refused = sorted(set(int(e.split(":")[0].split()[1]) for e in report["errors"]))
+    assert refused == [n for n, _ in model["refused"]]
+    assert len(refused) == 14
+    result = tracecheck.check(vcd_path, gcode)
+    assert _failed(result) == [] and result["refused_lines"] == 14
+    assert _by_name(result)["steps_x"]["measured"] == report["steps"]["x"] > 0
+
+
 _HALF_STEP = "M83\nM302 P1\nG1 E0.7 F600\nG1 E-0.4\nM400\n"
 
 
