@@ -461,6 +461,35 @@ def test_the_firmware_loses_no_filament_when_settings_change_mid_print(tmp_path)
     assert _failed(tracecheck.check(vcd_path, gcode)) == []
 
 
+_TIED_MIX = "M83\nM302 P1\nM567 P0 E1:0.3:0.3:0:3.7:0.3\nT0\nG1 E100 F3600\nM400\n"
+
+
+def test_a_tie_in_the_mix_goes_to_the_lower_drive():
+    """1:0.3:0.3:0:3.7:0.3 in 0.01 % steps: exactly 1785 5/7, 535 5/7 (three times),
+    0 and 6607 1/7, 9997 in whole steps. The 3 left go by largest remainder; e0, e1,
+    e2 and e5 tie exactly at 5/7, and the rule gives ties to the lower drive: e0, e1,
+    e2. (In doubles the four remainders differ in their last bits, and e5 can win.)"""
+    from fractions import Fraction
+    exact = [Fraction(1), Fraction(3, 10), Fraction(3, 10), 0, Fraction(37, 10), Fraction(3, 10)]
+    assert tracemodel.mix_weights(exact, 6) == (1786, 536, 536, 0, 6607, 535)
+    # The model reads the G-code's decimals exactly, so the M567 line gives that mix.
+    line = tracemodel.parse_words("M567 P0 E1:0.3:0.3:0:3.7:0.3")
+    weights = tracemodel._decimal_list(line.text.split()[1][1:])
+    assert tracemodel.mix_weights(weights, 6) == (1786, 536, 536, 0, 6607, 535)
+
+
+@pytest.mark.xfail(strict=True, reason="firmware: mixer.normalize takes the remainders in "
+                   "floats, so an exact tie is broken by rounding noise (e5 gets the step "
+                   "the rule gives e0): 100 mm then differ by 4 steps on e0 and e5")
+def test_the_firmware_gives_a_tie_in_the_mix_to_the_lower_drive(tmp_path):
+    gcode = tmp_path / "tie.gcode"
+    gcode.write_text(_TIED_MIX)
+    vcd_path = tmp_path / "tie.vcd"
+    report = sim.run(gcode, trace_path=vcd_path)
+    assert report["errors"] == []
+    assert _failed(tracecheck.check(vcd_path, gcode)) == []
+
+
 # --- corrupted traces -----------------------------------------------------------------
 
 def test_steps_played_faster_than_the_axes_can_go_fail_the_rate_check(snippet, tmp_path):
