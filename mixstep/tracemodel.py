@@ -39,7 +39,9 @@ specification, and the tests say which is right and why (host_tests/test_trace_c
 a settings change mid-print (M204, M201, M203, M205, M92) keeps every drive's exact
 filament here (the firmware rounds it to whole steps each time), and a retract_policy 1
 retraction keeps its equal mix when a transition reaches back over it (the firmware
-gives it the new tool's mix). Two approximations of the firmware's are not copied
+gives it the new tool's mix), and an exact tie in a mix's remainders goes to the lower
+drive as the rule says (the firmware's floats break such ties by rounding noise, e.g.
+1:0.3:0.3:0:3.7:0.3). Two approximations of the firmware's are not copied
 either: it rounds a drive's position to the nanometre after a replayed retraction and
 when a mix's total changes; this model stays exact. They differ by under a nanometre,
 so only a position within that of exactly half a step could round the other way.
