@@ -33,10 +33,11 @@ Checks
                    weights a block hands it; only replays of part of a block need the
                    order, and there the model assumes the block's counts over their
                    common divisor): within each stretch of one mix, every window of
-                   `window` drive
-                   steps gives each drive its share of the window's net steps within
-                   `mix_tolerance` steps. The divisor schedule keeps every drive
-                   within about a step of its share at any point, so 2 is a margin.
+                   `window` drive steps gives each drive its share of the window's net
+                   steps within `mix_tolerance` steps. The divisor schedule keeps every
+                   drive within about a step of its share at any point, so 2 is a
+                   margin. A replayed retraction (retract_policy 2) has no one mix and
+                   no windows: its exact counts are checked by `moves`.
     pulse_high_us, step_low_us
                    the shortest STEP high and low times, at least `step_pulse_us`.
     dir_setup_us   the shortest time from a DIR change to the next rising STEP on that
@@ -491,9 +492,10 @@ class _MoveWalk:
             line, weights, target = self.moves[self.m]
             self.target = list(target)
             self.left = sum(abs(target[d] - self.pos[d]) for d in range(self.drives))
-            total = sum(weights)
-            shares = [w / total for w in weights]
-            if shares != self._shares:
+            # A replayed retraction (retract_policy 2) runs the steps of earlier blocks
+            # backwards, so no one mix holds within it: it has no weights, and no windows.
+            shares = None if weights is None else [w / sum(weights) for w in weights]
+            if shares != self._shares or shares is None:
                 self._shares = shares
                 self._counts = [0] * self.drives
                 self._n = 0
@@ -514,10 +516,11 @@ class _MoveWalk:
             pos[d] += s
             self.left -= 1
             self.steps += 1
-            counts[d] += s
-            self._n += 1
-            if self._n == self.window:
-                self._check_window(t)
+            if self._shares is not None:
+                counts[d] += s
+                self._n += 1
+                if self._n == self.window:
+                    self._check_window(t)
             if self.left == 0:
                 self._next_move()
                 target = self.target
