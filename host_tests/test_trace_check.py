@@ -534,7 +534,8 @@ def test_a_tie_in_the_mix_goes_to_the_lower_drive():
     """1:0.3:0.3:0:3.7:0.3 in 0.01 % steps: exactly 1785 5/7, 535 5/7 (three times),
     0 and 6607 1/7, 9997 in whole steps. The 3 left go by largest remainder; e0, e1,
     e2 and e5 tie exactly at 5/7, and the rule gives ties to the lower drive: e0, e1,
-    e2. (In doubles the four remainders differ in their last bits, and e5 can win.)"""
+    e2. (MicroPython's sort is not stable, and in doubles the four remainders differ in
+    their last bits: the firmware gives it to e5.)"""
     from fractions import Fraction
     exact = [Fraction(1), Fraction(3, 10), Fraction(3, 10), 0, Fraction(37, 10), Fraction(3, 10)]
     assert tracemodel.mix_weights(exact, 6) == (1786, 536, 536, 0, 6607, 535)
@@ -544,9 +545,10 @@ def test_a_tie_in_the_mix_goes_to_the_lower_drive():
     assert tracemodel.mix_weights(weights, 6) == (1786, 536, 536, 0, 6607, 535)
 
 
-@pytest.mark.xfail(strict=True, reason="firmware: mixer.normalize takes the remainders in "
-                   "floats, so an exact tie is broken by rounding noise (e5 gets the step "
-                   "the rule gives e0): 100 mm then differ by 4 steps on e0 and e5")
+@pytest.mark.xfail(strict=True, reason="firmware: mixer.normalize gives ties to the lower "
+                   "drive by a stable sort, but MicroPython's sort is not stable (and the "
+                   "remainders are floats): e5 gets the step the rule gives e0, and 100 mm "
+                   "then differ by 4 steps on e0 and e5")
 def test_the_firmware_gives_a_tie_in_the_mix_to_the_lower_drive(tmp_path):
     gcode = tmp_path / "tie.gcode"
     gcode.write_text(_TIED_MIX)

@@ -40,8 +40,9 @@ a settings change mid-print (M204, M201, M203, M205, M92) keeps every drive's ex
 filament here (the firmware rounds it to whole steps each time), and a retract_policy 1
 retraction keeps its equal mix when a transition reaches back over it (the firmware
 gives it the new tool's mix), and an exact tie in a mix's remainders goes to the lower
-drive as the rule says (the firmware's floats break such ties by rounding noise, e.g.
-1:0.3:0.3:0:3.7:0.3). Two approximations of the firmware's are not copied
+drive as the rule says (the firmware sorts the remainders with MicroPython's sort,
+which is not stable, and in floats: 5:2:1:0.5:0.25:2 gives e5 the 0.01 % the rule
+gives e1). Two approximations of the firmware's are not copied
 either: it rounds a drive's position to the nanometre after a replayed retraction and
 when a mix's total changes; this model stays exact. They differ by under a nanometre,
 so only a position within that of exactly half a step could round the other way.
@@ -500,6 +501,9 @@ class Planner:
             if e_steps > 0 and self.keep_extrusion and not replay:
                 self._remember(counts)
             self.steps = targets
+            if weights is not None:
+                # The mix in steps: a drive geared finer takes more steps for its share.
+                weights = tuple(float(w * m) for w, m in zip(weights, self.spm))
             self.out(line, weights, tuple(targets), start, target)
         else:
             self.out(line, None, None, start, target)
@@ -1000,7 +1004,8 @@ _HANDLERS = {"G10": Machine.g10, "G11": Machine.g11, "G28": Machine.g28,
 def expected(gcode_path, settings):
     """Run a G-code file through the model. Returns {"steps": {axis: net steps the
     trace must show}, "moves": [(line, weights, drive targets)] for every block that
-    steps a drive (weights None for a replayed retraction), "moved": {axes and drives
+    steps a drive (weights: its mix in steps, each drive's weight times its steps/mm;
+    None for a replayed retraction), "moved": {axes and drives
     some block steps}, "unmodelled":
     {command: first line}, "refused": [(line, reason)]}."""
     m = Machine(settings)
