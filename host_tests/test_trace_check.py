@@ -558,6 +558,44 @@ def test_the_firmware_gives_a_tie_in_the_mix_to_the_lower_drive(tmp_path):
     assert _failed(tracecheck.check(vcd_path, gcode)) == []
 
 
+# A move with one X step and 3 mm of filament: T1's transition (L0 = 1.25 mm) splits
+# it, and the split puts the X step in the first part, so the last 1.25 mm is no
+# longer printing extrusion (it moves no axis).
+_SPLIT_WITHOUT_XY = ("M83\nM302 P1\nG1 X10 F3000\nT0\nG1 X10.0125 E3 F1200\nT1\n"
+                     "G1 X20 E1\nG1 X30 E1\nT2\nG1 X40 E3\nM400\n")
+_L0_1_25 = {"transition_l1_mm": 0.5, "transition_l2_mm": 1.5}
+
+
+def test_moves_wait_for_l0_of_printing_after_a_split():
+    """First principles (README): a move waits until L0 of printing extrusion follows
+    it, and a change applies over the L0 before it. T2 comes 2 mm of printing after
+    T1's split, so it reaches back over all of X30's 1 mm and the last 0.25 mm of X20:
+    e2 prints 1.25 mm before T2's own move, 519 steps."""
+    import tempfile
+    from pathlib import Path
+    with tempfile.TemporaryDirectory() as tmp:
+        gcode = Path(tmp) / "split.gcode"
+        gcode.write_text(_SPLIT_WITHOUT_XY)
+        model = tracemodel.expected(gcode, tracecheck.board_settings("sim", _L0_1_25))
+    before_t2 = [m for m in model["moves"] if m[0] < 10][-1][2]
+    assert before_t2[2] == 519  # 1.25 mm at 415 steps/mm, rounded
+    # T0 1.75 mm; T1 1.25 + 0.75 mm; T2 0.25 + 1 + 3 mm.
+    assert [model["steps"]["e%d" % d] for d in range(3)] == [726, 830, 1764]
+
+
+@pytest.mark.xfail(strict=True, reason="firmware: Transitions keeps a running total of the "
+                   "printing extrusion waiting, and a split whose last part moves no axis "
+                   "does not take that part out of it: moves are released before L0 of "
+                   "printing follows them, and T2's transition cannot reach back at all")
+def test_the_firmware_waits_for_l0_of_printing_after_a_split(tmp_path):
+    gcode = tmp_path / "split.gcode"
+    gcode.write_text(_SPLIT_WITHOUT_XY)
+    vcd_path = tmp_path / "split.vcd"
+    report = sim.run(gcode, trace_path=vcd_path, settings=_L0_1_25)
+    assert report["errors"] == []
+    assert _failed(tracecheck.check(vcd_path, gcode, settings=_L0_1_25)) == []
+
+
 # --- corrupted traces -----------------------------------------------------------------
 
 def test_steps_played_faster_than_the_axes_can_go_fail_the_rate_check(snippet, tmp_path):

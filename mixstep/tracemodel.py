@@ -42,7 +42,10 @@ retraction keeps its equal mix when a transition reaches back over it (the firmw
 gives it the new tool's mix), and an exact tie in a mix's remainders goes to the lower
 drive as the rule says (the firmware sorts the remainders with MicroPython's sort,
 which is not stable, and in floats: 5:2:1:0.5:0.25:2 gives e5 the 0.01 % the rule
-gives e1). Two approximations of the firmware's are not copied
+gives e1), and moves wait for L0 of printing extrusion after them counted anew
+(the firmware keeps a running total that a split whose last part moves no axis leaves
+too high, so it releases moves early and later transitions fall short). Two
+approximations of the firmware's are not copied
 either: it rounds a drive's position to the nanometre after a replayed retraction and
 when a mix's total changes; this model stays exact. They differ by under a nanometre,
 so only a position within that of exactly half a step could round the other way.
