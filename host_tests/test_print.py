@@ -8,6 +8,7 @@ import pytest
 
 from mixstep import paths, sim, trace
 from gcode_model import expected_steps
+from sigrok import need_sigrok
 
 SAMPLES = paths.ROOT / "testdata"
 
@@ -107,6 +108,7 @@ def test_no_axis_steps_faster_than_its_max_feed_rate(printed, board):
 def test_sigrok_decodes_the_trace(printed, board):
     """sigrok's stepper_motor decoder labels each step interval with the position
     at its start, so its last label is one step short of the final position."""
+    need_sigrok()
     report, out = printed
     proc = subprocess.run(["sigrok-cli", "-I", "vcd", "-i", str(out / "trace.vcd"),
                            "-P", "stepper_motor:step=e1_step:dir=e1_dir", "-A", "stepper_motor"],

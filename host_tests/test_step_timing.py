@@ -100,3 +100,17 @@ def test_any_planned_trapezoid_is_stepped_within_a_tick_of_its_ideal_times(mp, r
     # even at the slowest rate.
     assert late.min() >= -0.02
     assert late.max() <= 1.02
+
+
+@settings(max_examples=200, deadline=None)
+@given(trapezoids())
+def test_the_trapezoid_formulas_agree_with_the_motions_physics(record):
+    """ideal_times_us (the trapezoid's corners in closed form) against
+    physics_times_us (the fastest motion v^2 = v0^2 + 2as allows, within the cruise
+    speed and the braking to the exit speed, with its pieces found by bisection): the
+    same times, to far below a tick, for any block the planner may record."""
+    n, r0, r_nom, r1, acc, phase = record
+    args = (np.arange(1, n + 1), phase / ONE, n, r0 / ONE, r_nom / ONE, r1 / ONE, acc / ONE)
+    closed = steptiming.ideal_times_us(*args)
+    physics = steptiming.physics_times_us(*args)
+    assert np.abs(closed - physics).max() <= 1e-6 * max(1.0, physics.max())

@@ -122,3 +122,10 @@ def test_firmware_transitions_put_every_boundary_where_advance_does(tmp_path, bo
     checked = {c["name"]: c for c in tracecheck.check(vcd, advanced)["checks"]}
     for name in ("moves", "steps_e0", "steps_e1", "steps_e2", "steps_x", "steps_y"):
         assert checked[name]["ok"] is True, checked[name]["detail"]
+    # And against the plain file itself, trace check modelling the transitions from the
+    # same settings (its own model, not the firmware's code): every step exact.
+    same = {"transition_l1_mm": 1.0, "transition_l2_mm": 2.5}
+    plain = tracecheck.check(vcd, gcode, settings=same)
+    assert [c["name"] for c in plain["checks"] if c["ok"] is False] == []
+    assert [c["name"] for c in tracecheck.check(vcd, gcode)["checks"]
+            if c["ok"] is False and c["name"].startswith("steps_e")]

@@ -14,16 +14,17 @@ HEAP_CODE = paths.BOARDS / "sim" / "heap_code.py"
 
 
 def run(gcode_path, trace_path=None, report_path=None, heap_lock=False, edges_path=None,
-        board="sim", config_path=None, files_dir=None):
+        board="sim", config_path=None, files_dir=None, settings=None):
     """edges_path keeps the raw edge records (see trace.read_edges) for analysis; board:
     whose pin map and settings, on a simulated chip of its kind; config_path and
-    files_dir: the simulated flash (M500, M20-M32), none by default."""
+    files_dir: the simulated flash (M500, M20-M32), none by default; settings: board
+    settings to override, as `mixstep serve --set` ({"retract_policy": 2})."""
     gcode_path = Path(gcode_path)
     tmp = tempfile.TemporaryDirectory(prefix="mixstep-sim-")
     edges = Path(edges_path) if edges_path else Path(tmp.name) / "run.edges"
     wall0 = time.perf_counter()
     printer = SimPrinter(edges_path=edges, heap_lock=heap_lock, board=board,
-                         config_path=config_path, files_dir=files_dir)
+                         config_path=config_path, files_dir=files_dir, settings=settings)
     errors = []
     lines = 0
     with open(gcode_path, "r", encoding="ascii", errors="replace") as f:

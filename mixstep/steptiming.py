@@ -18,7 +18,10 @@ Method
        s(t) = phase + distance(t), so the k-th lead step's ideal time t(k) solves
        s(t) = k: under constant acceleration t = (sqrt(v0^2 + 2 a d) - v0) / a for a
        distance d into the ramp, d / vn while cruising, and the mirror of the first
-       form while decelerating.
+       form while decelerating. physics_times_us works the same times out from the
+       motion itself (the fastest v(s) that v^2 = v0^2 + 2 a s, the cruise speed and
+       the braking to v1 allow, its pieces found by bisection); the tests hold the
+       closed form to it.
     3. The edges are split into blocks by the block origins. In each block, the k-th
        rising STEP edge of the lead axis (for E: of any mixing drive) is the k-th
        lead step; its error is its edge time minus origin + t(k). Every other axis is
@@ -72,6 +75,58 @@ def ideal_times_us(k, phase, n, v0, vn, v1, a):
     d = s[dec] - d_acc - d_cruise
     t[dec] = t_cruise_end + (vn - np.sqrt(np.clip(vn * vn - 2 * a * d, 0.0, None))) / a
     return t
+
+
+def physics_times_us(k, phase, n, v0, vn, v1, a):
+    """The same times as ideal_times_us, worked out from the motion's physics instead
+    of the trapezoid's corner formulas: the reference the tests hold it to.
+
+    A block starts at speed v0, may not exceed vn, and must be able to stop down to v1
+    by its end, at acceleration a either way. By v^2 = v0^2 + 2 a s, the fastest it
+    can be at distance s is v(s) = min(vn, sqrt(v0^2 + 2 a s), sqrt(v1^2 + 2 a (n - s))),
+    and that is how it moves. The three curves' crossings split the block into pieces
+    (found by bisection on v(s), not solved for); on a piece where v follows one of
+    the square roots the time taken is the change of speed over a (v = v0 + a t), and
+    where it cruises it is the distance over vn."""
+    def up(s):
+        return np.sqrt(v0 * v0 + 2 * a * s)
+
+    def down(s):
+        return np.sqrt(max(v1 * v1 + 2 * a * (n - s), 0.0))
+
+    def crossing(f, g, lo, hi):
+        """Where f - g changes sign on [lo, hi] (f - g <= 0 at lo), by bisection."""
+        for _ in range(200):
+            mid = (lo + hi) / 2
+            if f(mid) - g(mid) <= 0:
+                lo = mid
+            else:
+                hi = mid
+        return lo
+
+    cruise = lambda s: vn
+    # Where accelerating stops: at vn, or earlier where braking must begin.
+    end_up = crossing(up, lambda s: min(vn, down(s)), 0.0, float(n)) if up(0) < min(vn, down(0)) else 0.0
+    # Where braking starts: where the cruise meets the braking curve; at the peak if
+    # there is no cruise; nowhere (the end) if the exit speed is the cruise speed.
+    if down(n) >= vn:
+        start_down = float(n)
+    elif down(end_up) > vn:
+        start_down = crossing(lambda s: -down(s), lambda s: -vn, end_up, float(n))
+    else:
+        start_down = end_up
+
+    def t_of(s):
+        if s <= end_up:
+            return (up(s) - v0) / a
+        t = (up(end_up) - v0) / a
+        if s <= start_down:
+            return t + (s - end_up) / vn
+        t += (start_down - end_up) / vn
+        return t + (down(start_down) - down(s)) / a
+
+    s = np.clip(np.asarray(k, dtype=float) - phase, 0.0, None)
+    return np.array([t_of(x) for x in s])
 
 
 def read_blocks(path):

@@ -7,37 +7,55 @@ and x/z values are ignored, and a signal's first value is its starting level, no
 edge. Signals are named as on the board (`x_step x_dir ... e5_step e5_dir`); `--map
 x_step=D0,x_dir=D1` names a logic analyser's channels.
 
+What the G-code asks is worked out by `mixstep.tracemodel`, which shares no code
+with the firmware (see its docstring for the arithmetic): its own G-code reading,
+tool mixes, palettes, gradients, firmware transitions, G10/G11, the three retraction
+policies, M92 and per-drive steps/mm, E absolute or relative, G92. Settings the
+board applies before the G-code (steps/mm, drives, retract_policy, transition
+lengths, ...) come from `--board` and `--set KEY=VALUE`, as for `mixstep serve`.
+
 Checks
-    steps_<axis>   net steps of X, Y, Z (their final position from the G-code, rounded
-                   half away from zero; the trace must start where the firmware counts
-                   0, i.e. at home, as the simulation does) and of every drive
-                   (round(drive_mm * steps_per_mm_E), drive_mm summing each E move's
-                   share by the active tool's weights). Exact: the firmware plans every
-                   drive from its absolute position the same way. An axis or drive
-                   that the G-code moves must have its STEP and DIR in the trace, or
-                   the check fails and names the missing signal; one it never moves
-                   may be left out of a capture (the check is then skipped).
-    moves          the drive steps follow the G-code's E moves in order: each move
-                   takes every drive monotonically to its planned step, no drive
-                   steps outside its move. Fails at the first step that does not fit.
-    mix            within each stretch of constant mix, every window of `window`
-                   drive steps gives each drive its weight share of the window's net
-                   steps within `mix_tolerance` steps. The firmware's mixer is a
-                   divisor schedule, so counts stay within about a step of ideal.
+    steps_<axis>   net steps of X, Y, Z (the steps of every move, from where the trace
+                   starts, which must be where the firmware counts 0, i.e. home, as in
+                   the simulation) and of every drive. Exact: the firmware plans every
+                   drive's step from its exact filament, so there is one right count.
+                   An axis or drive that the G-code moves must have its STEP and DIR
+                   in the trace, or the check fails and names the missing signal; one
+                   it never moves may be left out of a capture (the check is then
+                   skipped).
+    moves          the drive steps follow the model's blocks in order: in each block
+                   every drive goes monotonically to its planned step, exactly (the
+                   firmware gives each block the exact count of every drive), and no
+                   drive steps outside its block. Fails at the first step that does
+                   not fit.
+    mix            the order of the steps within a block is the mixer's and is not
+                   predicted step by step (the README specifies the schedule, not the
+                   weights a block hands it; only replays of part of a block need the
+                   order, and there the model assumes the block's counts over their
+                   common divisor): within each stretch of one mix, every window of
+                   `window` drive steps gives each drive its share of the window's net
+                   steps within `mix_tolerance` steps. The divisor schedule keeps every
+                   drive within about a step of its share at any point, so 2 is a
+                   margin. A replayed retraction (retract_policy 2) has no one mix and
+                   no windows: its exact counts are checked by `moves`.
     pulse_high_us, step_low_us
                    the shortest STEP high and low times, at least `step_pulse_us`.
     dir_setup_us   the shortest time from a DIR change to the next rising STEP on that
                    axis, at least `dir_setup_us`.
     rate_<axis>    the fastest run of RATE_RUN steps, at most max_feed_mm_s *
-                   steps_per_mm, with `rate_margin` and two step-loop ticks of slack
-                   (steps fall on ticks).
+                   steps_per_mm (the board's, not M92's), with `rate_margin` and two
+                   step-loop ticks of slack (steps fall on ticks).
 
 Not modelled (reported as `unmodelled` when the G-code uses them; counts may then
-differ): gradients (M166, M169), palettes and mixtures of mixtures (M168, M567 U),
-firmware-side transitions (transition_l1_mm/l2_mm), retract_policy 1 and 2, firmware
-retraction G10/G11, M92 and per-drive steps/mm options, soft limits, and moves the
-firmware would refuse. DIR high means forward unless the board lists the axis in
-`invert_dir`. At a logic analyser's sample rate, times are only as exact as a sample.
+differ): options changed while printing (M926, M930, M501, M502), printing from the
+printer's flash (M23/M24/M32), M112/M410/M999 (the queue is dropped at a moment the
+G-code does not say), the simulation's fault injections (M7100-M7102), and the
+cold-extrusion guard (the hot end's temperature is not modelled: a print that
+extrudes cold, without M302 P1, is refused by the firmware but expected here).
+Lines the firmware refuses (see tracemodel) are not run, and `refused_lines` counts
+them. The board's settings are read from boards/<name>/board.py as data. DIR high
+means forward unless the board lists the axis in `invert_dir`. At a logic analyser's
+sample rate, times are only as exact as a sample.
 
 The trace is streamed in chunks parsed with numpy, so memory stays bounded whatever
 its size; the expected moves are held in memory (they grow with the G-code only).
@@ -51,30 +69,12 @@ import time
 
 import numpy as np
 
-from mixstep import paths
-
-# mixfw's pure modules import on CPython: one implementation of parsing, mixing and
-# step rounding, shared with the firmware.
-from mixfw import cmd_config, cmd_files, cmd_mixing
-from fractions import Fraction
-
-from mixfw.gcode import GcodeError, Parser, letter_index
-from mixfw.mixer import MixError, default_tool_mixes, normalize
-from mixfw.planner import steps_from_mm, spm_fixed, SPM_SCALE, NM_PER_MM
+from mixstep import paths, tracemodel
 
 AXES = ("x", "y", "z")
 RATE_RUN = 20  # steps over which the step rate is measured
 CHUNK_BYTES = 1 << 20  # larger chunks are no faster, and numpy's temporaries grow with them
-_MARLIN_LETTERS = "ABCDHI"
 _UNITS_S = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "ps": 1e-12, "fs": 1e-15}
-
-
-_E = letter_index("E")
-
-
-def _exact_e(ln):
-    """The line's E word in mm, exactly, rounded to the nanometre as the firmware reads it."""
-    return Fraction(ln.fixed_at(_E, 6), NM_PER_MM)
 
 
 class TraceError(Exception):
@@ -84,104 +84,39 @@ class TraceError(Exception):
 # --- Expected: what the G-code asks ------------------------------------------------
 
 def expected_from_gcode(gcode_path, settings):
-    """Net steps per axis and drive, and the E moves in order, from a G-code file.
+    """Net steps per axis and drive, and the E moves in order, from a G-code file,
+    worked out by mixstep.tracemodel (which shares no code with the firmware).
 
     Returns {"steps": {axis: n}, "moves": [(line, weights, drive_steps)], "moved":
-    {axis}, "unmodelled": {command: first line}}: drive_steps are every drive's
-    absolute planned steps after the move, weights the mix it prints with; moved names
-    every axis and drive that some move steps, even if it ends where it started. Modal
-    state follows the firmware's cmd_motion and cmd_mixing; the arithmetic is the
-    planner's, in the same order, so rounding is identical."""
-    drives = settings["drives"]
-    spm = settings["steps_per_mm"]
-    mixes = list(default_tool_mixes(drives, settings.get("virtual_tools", 16)))
-    parser = Parser(cmd_config.RAW_COMMANDS + cmd_files.RAW_COMMANDS
-                    + cmd_mixing.RAW_COMMANDS)
-    pos = [0.0, 0.0, 0.0, Fraction(0)]
-    off = [0.0, 0.0, 0.0, Fraction(0)]
-    absolute = absolute_e = True
-    tool = 0
-    collector = [0.0] * drives
-    # E and each drive's filament are exact (fractions of mm), as the firmware keeps
-    # them in integers: E words to the nanometre, steps/mm to a millionth, so a share
-    # that lands exactly on half a step rounds as the firmware's does, not as a float
-    # that happens to fall either side of it.
-    e_spm = Fraction(spm_fixed(spm[3]), SPM_SCALE)
-    drive_mm = [Fraction(0)] * drives
-    drive_steps = [0] * drives
-    moves = []
-    moved = set()
-    unmodelled = {}
-    with open(gcode_path, "rb") as f:
-        for number, raw in enumerate(f, 1):
-            try:
-                ln = parser.parse(raw, len(raw))
-            except GcodeError:
-                continue  # the firmware answers Error: and does not run it
-            cmd = "%s%d" % (ln.letter, ln.number) if ln.letter else ""
-            try:
-                if cmd in ("G0", "G1"):
-                    target = list(pos)
-                    for i, ch in enumerate("XYZE"):
-                        if ln.has_value(ch):
-                            rel = not (absolute_e if i == 3 else absolute)
-                            v = _exact_e(ln) if i == 3 else ln.float(ch)
-                            target[i] = target[i] + v if rel else v
-                    e_mm = target[3] - pos[3]
-                    if e_mm:
-                        w = mixes[tool]
-                        total = sum(w)
-                        drive_mm = [drive_mm[i] + e_mm * w[i] / total for i in range(drives)]
-                        now = [steps_from_mm(drive_mm[i], e_spm) for i in range(drives)]
-                        if now != drive_steps:
-                            moves.append((number, w, tuple(now)))
-                            moved.update("e%d" % d for d in range(drives)
-                                         if now[d] != drive_steps[d])
-                            drive_steps = now
-                    for i, a in enumerate(AXES):
-                        if target[i] != pos[i] and a not in moved and (
-                                steps_from_mm(target[i] + off[i], spm[i])
-                                != steps_from_mm(pos[i] + off[i], spm[i])):
-                            moved.add(a)
-                    pos = target
-                elif cmd == "G92":
-                    named = [i for i in range(4) if ln.has("XYZE"[i])]
-                    for i in named or range(4):
-                        v = (_exact_e(ln) if ln.has_value("E") else Fraction(0)) if i == 3 \
-                            else ln.float("XYZE"[i], 0.0)
-                        off[i] += pos[i] - v
-                        pos[i] = v
-                elif cmd == "G28":
-                    for i in [i for i in range(3) if ln.has("XYZ"[i])] or range(3):
-                        pos[i] = off[i] = 0.0
-                elif cmd in ("G90", "G91"):
-                    absolute = absolute_e = cmd == "G90"
-                elif cmd in ("M82", "M83"):
-                    absolute_e = cmd == "M82"
-                elif ln.letter == "T":
-                    if ln.number < len(mixes):
-                        tool = ln.number
-                elif cmd == "M163":
-                    collector[ln.int("S")] = ln.float("P")
-                elif cmd == "M164":
-                    mixes[ln.int("S", tool)] = normalize(collector, drives)
-                elif cmd == "M165" and not ln.has("R"):
-                    mixes[tool] = normalize([ln.float(ch, 0.0) for ch in _MARLIN_LETTERS[:drives]],
-                                            drives)
-                elif cmd == "M567":
-                    words = dict((w[:1].upper(), w[1:]) for w in ln.args_text.split())
-                    if "U" in words:
-                        unmodelled.setdefault("M567 U", number)
-                    else:
-                        mixes[int(words["P"])] = normalize(
-                            [float(v) for v in words["E"].split(":")], drives)
-                elif cmd in ("M166", "M168", "M169", "M92", "G10", "G11"):
-                    unmodelled.setdefault(cmd, number)
-            except (GcodeError, MixError, ValueError, KeyError, IndexError):
-                continue  # refused by the firmware as well
-    steps = {a: steps_from_mm(pos[i] + off[i], spm[i]) for i, a in enumerate(AXES)}
-    steps.update({"e%d" % d: drive_steps[d] for d in range(drives)})
-    return {"steps": steps, "moves": moves, "moved": moved, "unmodelled": unmodelled}
+    {axis}, "unmodelled": {command: first line}, "refused": [(line, reason)]}:
+    drive_steps are every drive's absolute planned steps after a block, weights the
+    mix it prints with; moved names every axis and drive that some block steps, even
+    if it ends where it started."""
+    return tracemodel.expected(gcode_path, settings)
+
+
+def board_settings(board="sim", overrides=None):
+    """A board's settings with --set overrides applied, as `mixstep serve` applies them
+    before the firmware starts. overrides: {key: value or value text}."""
+    settings = dict(paths.load_board(board)["SETTINGS"])
+    for key, value in (overrides or {}).items():
+        settings[key] = parse_value(value) if isinstance(value, str) else value
+    return settings
+
+
+def parse_value(text):
+    """--set VALUE as the simulated board reads it: a number, a comma-separated tuple
+    (a trailing comma makes a tuple of one), or text."""
+    if "," in text:
+        return tuple(parse_value(w) for w in text.split(",") if w)
+    if text[:1] not in "0123456789+-.":
+        return text
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
 
 
 # --- Reading: VCD (or .sr via sigrok-cli), streamed ---------------------------------
@@ -557,9 +492,10 @@ class _MoveWalk:
             line, weights, target = self.moves[self.m]
             self.target = list(target)
             self.left = sum(abs(target[d] - self.pos[d]) for d in range(self.drives))
-            total = sum(weights)
-            shares = [w / total for w in weights]
-            if shares != self._shares:
+            # A replayed retraction (retract_policy 2) runs the steps of earlier blocks
+            # backwards, so no one mix holds within it: it has no weights, and no windows.
+            shares = None if weights is None else [w / sum(weights) for w in weights]
+            if shares != self._shares or shares is None:
                 self._shares = shares
                 self._counts = [0] * self.drives
                 self._n = 0
@@ -580,10 +516,11 @@ class _MoveWalk:
             pos[d] += s
             self.left -= 1
             self.steps += 1
-            counts[d] += s
-            self._n += 1
-            if self._n == self.window:
-                self._check_window(t)
+            if self._shares is not None:
+                counts[d] += s
+                self._n += 1
+                if self._n == self.window:
+                    self._check_window(t)
             if self.left == 0:
                 self._next_move()
                 target = self.target
@@ -608,12 +545,14 @@ class _MoveWalk:
 
 def check(trace_path, gcode_path, board="sim", mapping=None, step_pulse_us=None,
           dir_setup_us=None, rate_margin=0.02, window=100, mix_tolerance=2.0,
-          chunk_bytes=CHUNK_BYTES):
-    """Check a trace (VCD or sigrok .sr) against a G-code file. Returns the report:
-    {"ok": bool, "checks": [{name, expected, measured, ok, detail}], ...}. Raises
-    TraceError for input that cannot be read."""
-    b = paths.load_board(board)
-    settings, pins = b["SETTINGS"], b["PINS"]
+          chunk_bytes=CHUNK_BYTES, settings=None):
+    """Check a trace (VCD or sigrok .sr) against a G-code file. settings: board
+    settings to override ({key: value}, as `mixstep serve --set`), e.g. retract_policy
+    or transition_l1_mm. Returns the report: {"ok": bool, "checks": [{name, expected,
+    measured, ok, detail}], ...}. Raises TraceError for input that cannot be read."""
+    pins = paths.load_board(board)["PINS"]
+    overrides = settings or {}
+    settings = board_settings(board, overrides)
     expected = expected_from_gcode(gcode_path, settings)
     names = [n for n in pins if n.endswith(("_step", "_dir"))]
     tmp = None
@@ -645,10 +584,12 @@ def check(trace_path, gcode_path, board="sim", mapping=None, step_pulse_us=None,
         "trace": str(trace_path),
         "gcode": str(gcode_path),
         "board": board,
+        "settings": {k: overrides[k] for k in sorted(overrides)},
         "signals": reader.signals,
         "timescale_us": unit_us,
         "missing_signals": checker.missing,
         "unmodelled": expected["unmodelled"],
+        "refused_lines": len(expected["refused"]),
         "checks": checks,
         "input": {"bytes": reader.bytes_read, "lines": reader.lines,
                   "seconds": round(wall, 3)},
@@ -735,6 +676,9 @@ def format_report(report):
     for cmd, line in sorted(report["unmodelled"].items()):
         lines.append("  note: %s (first at line %d) is not modelled; counts may differ"
                      % (cmd, line))
+    if report.get("refused_lines"):
+        lines.append("  note: %d lines the firmware refuses (bad words, checksums, limits) "
+                     "are not run" % report["refused_lines"])
     if report["missing_signals"]:
         lines.append("FAILED: the G-code moves what the trace does not show: %s missing"
                      % ", ".join(report["missing_signals"]))
@@ -761,6 +705,9 @@ def add_parser(sub):
     p.add_argument("trace", help="VCD file, or sigrok .sr capture")
     p.add_argument("--gcode", required=True, help="the G-code the trace should show")
     p.add_argument("--board", default="sim", help="board whose pins and settings apply")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="a board setting the printer ran with, as `mixstep serve --set`, "
+                        "e.g. retract_policy=2 or transition_l1_mm=1.5 (repeatable)")
     p.add_argument("--json", metavar="OUT", help="write the report as JSON here ('-': stdout)")
     p.add_argument("--map", metavar="NAME=CHANNEL,...",
                    help="VCD names of signals, e.g. x_step=D0,x_dir=D1")
@@ -777,10 +724,17 @@ def add_parser(sub):
 
 
 def _run(args):
+    overrides = {}
+    for item in args.set:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            print("mixstep trace check: --set wants KEY=VALUE, got %r" % item, file=sys.stderr)
+            return 2
+        overrides[key] = value
     try:
         report = check(args.trace, args.gcode, args.board, parse_map(args.map),
                        args.step_pulse_us, args.dir_setup_us, args.rate_margin, args.window,
-                       args.mix_tolerance)
+                       args.mix_tolerance, settings=overrides)
     except TraceError as e:
         print("mixstep trace check: %s" % e, file=sys.stderr)
         return 2
