@@ -22,8 +22,9 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet pyserial==3.5
 	touch $(STAMP)
 
+# The tests run in parallel, one worker per core (pytest-xdist).
 test: setup
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n auto
 
 sim: setup
 	@mkdir -p $(dir $(TRACE)) $(dir $(REPORT))
