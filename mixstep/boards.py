@@ -62,6 +62,21 @@ PIN_WRITERS = ("registers", "pin")
 TMC_ADDRESSES = range(4)  # TMC2209: MS1/MS2 straps give 0..3
 
 
+def setting_value(text):
+    """VALUE of --set KEY=VALUE, read as the simulated board reads it: a number, a
+    comma-separated tuple (a trailing comma makes a tuple of one), or text."""
+    if "," in text:
+        return tuple(setting_value(w) for w in text.split(",") if w)
+    if text[:1] not in "0123456789+-.":
+        return text
+    for kind in (int, float):
+        try:
+            return kind(text)
+        except ValueError:
+            pass
+    return text
+
+
 def board_names():
     return sorted(p.parent.name for p in paths.BOARDS.glob("*/board.py"))
 

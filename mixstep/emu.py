@@ -394,18 +394,9 @@ def summarize(printed, final, board, gcode_path, steps, boot_lines):
 
 
 def _setting(text):
-    """KEY=VALUE of --set: VALUE a number, a comma-separated tuple, or text, as
-    `mixstep serve --set` reads it."""
+    """KEY=VALUE of --set, as `mixstep serve --set` reads it."""
     key, _, value = text.partition("=")
-
-    def one(v):
-        for kind in (int, float):
-            try:
-                return kind(v)
-            except ValueError:
-                pass
-        return v
-    return key, tuple(one(v) for v in value.split(",") if v) if "," in value else one(value)
+    return key, boards.setting_value(value)
 
 
 def _print(args):

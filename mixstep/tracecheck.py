@@ -70,6 +70,7 @@ import time
 import numpy as np
 
 from mixstep import paths, tracemodel
+from mixstep.boards import setting_value
 
 AXES = ("x", "y", "z")
 RATE_RUN = 20  # steps over which the step rate is measured
@@ -100,23 +101,8 @@ def board_settings(board="sim", overrides=None):
     before the firmware starts. overrides: {key: value or value text}."""
     settings = dict(paths.load_board(board)["SETTINGS"])
     for key, value in (overrides or {}).items():
-        settings[key] = parse_value(value) if isinstance(value, str) else value
+        settings[key] = setting_value(value) if isinstance(value, str) else value
     return settings
-
-
-def parse_value(text):
-    """--set VALUE as the simulated board reads it: a number, a comma-separated tuple
-    (a trailing comma makes a tuple of one), or text."""
-    if "," in text:
-        return tuple(parse_value(w) for w in text.split(",") if w)
-    if text[:1] not in "0123456789+-.":
-        return text
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text
 
 
 # --- Reading: VCD (or .sr via sigrok-cli), streamed ---------------------------------
