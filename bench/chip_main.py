@@ -50,6 +50,7 @@ def stepper_steps(printer):
 def plan(path, stepping):
     gc.collect()
     stepper = stepping_printer() if stepping else None
+    gc.collect()  # the second printer needs whole blocks the first one's garbage splits
     printer = fwmain.build(files_root=None)
     planner = printer.planner
     planner.idle = retire_one(printer.mem, planner.queue)

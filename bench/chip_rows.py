@@ -202,7 +202,7 @@ def chip_planner(res, work):
                 raise RuntimeError("chip_main.py answered %s" % answer)
             r = json.loads(found[0][len("bench:"):])
             if r.get("failed") or r["errors"]:
-                raise RuntimeError("planning on the chip: %s" % (r.get("failed") or r["errors"]))
+                raise RuntimeError("planning on the chip: %s" % r)
             got[stepping] = r
     r = got[1]
     if not r["stepper_still_moving"]:

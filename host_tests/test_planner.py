@@ -1,5 +1,7 @@
 """The planner's look-ahead, on the unix port: blocks planned against a full ring, with
 one block taken by the step loop at every wait (as bench/plan_rate.py does)."""
+import json
+
 from mixstep import paths
 
 LOOK_AHEAD = """
@@ -84,3 +86,75 @@ def test_look_ahead_is_a_full_pass_and_speed_is_continuous_where_blocks_meet(mp)
     got = mp.json("import json\n" + LOOK_AHEAD % str(paths.EXAMPLE_GCODE), heap="4M")
     assert got["errors"] == []
     assert got["blocks"] > 2500 and got["checked"] == got["blocks"]
+
+
+# --- the schedule of a record in integers (mixfw/ramp.py) --------------------------
+
+RAMP_CASES = """
+import sys, json
+from mixfw.planner import ramp_ticks
+print(json.dumps([list(ramp_ticks(*c)) for c in json.loads(sys.stdin.read())]))
+"""
+
+
+def _ramp_cases():
+    """Records as the planner writes them (rates from the floor it allows up to half a
+    step per tick, entry and exit reachable in n steps), with the extremes of n and acc."""
+    import random
+    from math import isqrt
+    one = 1 << 28
+    rnd = random.Random(13)
+    cases = []
+    while len(cases) < 1500:
+        acc = rnd.choice([1, 3, 7, 50, 161, 500, 5000, 20000, 100000, 1 << 20])
+        floor = isqrt(acc * one)
+        r_nom = rnd.randint(floor, one // 2)
+        r0 = min(rnd.randint(floor, one // 2), r_nom) if rnd.random() < 0.7 else r_nom
+        r1 = min(rnd.randint(floor, one // 2), r_nom) if rnd.random() < 0.7 else r_nom
+        n = rnd.choice([1, 2, 5, 30, 300, 5000, 10 ** 6, 10 ** 8, (1 << 30) - 1])
+        if abs(r0 * r0 - r1 * r1) <= 2 * acc * n * one:
+            cases.append((n, r0, r_nom, r1, acc))
+    return cases
+
+
+def _exact_schedule(n, r0, r_nom, r1, acc):
+    """The trapezoid's corners from their definition, in exact fractions: accelerate at
+    acc from r0 to r_nom or to the peak where the ramps meet, cruise, decelerate to r1
+    over the n steps (times ONE); ACCEL_UNTIL and DECEL_AFTER are the ticks holding the
+    two corners, RATE_DECEL the mean rate of the tick after the second."""
+    from fractions import Fraction as F
+    from math import ceil
+    one = 1 << 28
+    dist = F(n * one)
+    up = F(r_nom * r_nom - r0 * r0, 2 * acc)
+    down = F(r_nom * r_nom - r1 * r1, 2 * acc)
+    vn = F(r_nom)
+    if up + down > dist:
+        peak2 = acc * dist + F(r0 * r0 + r1 * r1, 2)
+        vn = F(int(float(peak2) ** 0.5))  # to a rate unit: the plan's floor
+        up, down = F(vn * vn - r0 * r0, 2 * acc), F(vn * vn - r1 * r1, 2 * acc)
+        cruise = 0
+    else:
+        cruise = (dist - up - down) / vn
+    accel_s = (vn - r0) / acc
+    decel_s = accel_s + cruise
+    decel_after = max(1, ceil(decel_s))
+    return ceil(accel_s), decel_after, max(r1, vn - acc * (decel_after + F(1, 2) - decel_s))
+
+
+def test_the_schedule_is_the_same_integers_on_every_build_and_the_exact_trapezoid(mp):
+    """CPython runs ramp.py's viper code as plain Python with unbounded integers: the
+    same answers on the unix port (64-bit words) and, in CI's second pass, on the 32-bit
+    build show no intermediate overflows a machine word. And against the exact corners:
+    within a tick, and the decelerating rate within one tick's change."""
+    from mixfw.planner import ramp_ticks
+    cases = _ramp_cases()
+    on_host = [list(ramp_ticks(*c)) for c in cases]
+    assert mp.json(RAMP_CASES, stdin=json.dumps(cases).encode()) == on_host
+    for case, (until, after, r_decel) in zip(cases, on_host):
+        if after >= 0x3FFFFFFF:
+            continue  # over 2**30 ticks (15 hours at 50 us): the end is never reached
+        e_until, e_after, e_decel = _exact_schedule(*case)
+        acc = case[4]
+        assert abs(until - e_until) <= 1 and abs(after - e_after) <= 1, case
+        assert abs(r_decel - e_decel) <= acc + 1, case

@@ -8,6 +8,7 @@
 from array import array
 from math import sqrt
 from mixfw.compat import const
+from mixfw import ramp
 from mixfw import stepper as st
 from mixfw.mixer import MAX_DRIVES, normalize
 from mixfw.stepper import schedule_counts
@@ -126,56 +127,25 @@ def ramp_ticks(n, r0, r_nom, r1, acc, out=None, at=0):
     ticks then differ from the trapezoid, by less than acc each, so the position
     stays on the plan to well under a step, however slow the end of the block.
 
-    Written for the chips: every float operation allocates there, so the common
-    cases take the fewest (a block that cruises throughout takes two)."""
-    vn = float(r_nom)
-    if r0 == r_nom and r1 == r_nom:
-        decel_s = n * _ONE_F / vn
-        accel_until = 0
-    else:
-        # Distances in lead steps times ONE, times 2 * acc (saves a division each).
-        vn2 = vn * vn
-        v0v0 = float(r0) * r0
-        v1v1 = float(r1) * r1
-        d_acc = vn2 - v0v0 if r_nom > r0 else 0.0
-        d_dec = vn2 - v1v1 if r_nom > r1 else 0.0
-        dist = (2.0 * acc) * (n * _ONE_F)
-        if d_acc + d_dec > dist:  # the ramps meet below r_nom
-            peak2 = (dist + v0v0 + v1v1) * 0.5
-            if peak2 < v0v0:
-                peak2 = v0v0
-            if peak2 < v1v1:
-                peak2 = v1v1
-            vn = sqrt(peak2)
-            d_acc = peak2 - v0v0
-            if d_acc > dist:
-                d_acc = dist
-            d_dec = dist - d_acc
-        accel_s = (vn - r0) / acc  # in ticks, as every time here
-        decel_s = accel_s + (dist - d_acc - d_dec) / ((2.0 * acc) * vn)
-        accel_until = int(accel_s)
-        if accel_until < accel_s:
-            accel_until += 1
-    decel_after = int(decel_s)
-    if decel_after < decel_s:
-        decel_after += 1
-    if decel_after < 1:
-        decel_after = 1
-    r_decel = int(vn - acc * (decel_after + 0.5 - decel_s) + 0.5)
-    if r_decel < r1:
-        r_decel = r1
-    if accel_until > _MAX_TICK:
-        accel_until = _MAX_TICK
-    if decel_after > _MAX_TICK:
-        decel_after = _MAX_TICK
+    Worked out in integers by ramp.ramp_into (viper): on the chips every float
+    operation allocates."""
+    io = _RAMP_IO
+    io[ramp.IO_N] = n
+    io[ramp.IO_R0] = r0
+    io[ramp.IO_RNOM] = r_nom
+    io[ramp.IO_R1] = r1
+    io[ramp.IO_ACC] = acc
+    ramp.ramp_into(io)
     if out is None:
-        return accel_until, decel_after, r_decel
-    out[at] = accel_until
-    out[at + 1] = decel_after
-    out[at + 2] = r_decel
+        return io[ramp.IO_ACCEL_UNTIL], io[ramp.IO_DECEL_AFTER], io[ramp.IO_RATE_DECEL]
+    out[at] = io[ramp.IO_ACCEL_UNTIL]
+    out[at + 1] = io[ramp.IO_DECEL_AFTER]
+    out[at + 2] = io[ramp.IO_RATE_DECEL]
 
 
-_MAX_TICK = 0x3FFFFFFF
+_RAMP_IO = array("i", bytes(4 * ramp.IO_WORDS))
+
+
 
 
 class PlanError(ValueError):

@@ -1,0 +1,228 @@
+# The step loop's schedule for a block's trapezoid (see planner.ramp_ticks), in viper on
+# integers. It runs for most G-code lines, and on the chips every float operation
+# allocates: the float version cost the RP2040 about 0.4 ms a call, and its garbage a
+# collection every few dozen lines.
+#
+# The squares of rates need about 56 bits, more than a chip's machine word, so they are
+# kept as two 30-bit limbs (hi, lo) in words of the io array. Every intermediate stays
+# below 2**31, so the 32-bit chips and the 64-bit unix port give the same results.
+from mixfw.compat import const, micropython, ptr32
+
+MAX_TICK = const(0x3FFFFFFF)
+_M30 = const(0x3FFFFFFF)
+# Fraction bits of the deceleration's start time, in ticks: enough that the rate the
+# first decelerating tick gets is exact to a rate unit for any acceleration the step
+# loop takes.
+_FRAC = const(16)
+_HALF = const(0x8000)
+_ONE_FRAC = const(0x10000)
+
+# The io array's words: the record's inputs, the schedule out, and scratch.
+IO_N = const(0)
+IO_R0 = const(1)
+IO_RNOM = const(2)
+IO_R1 = const(3)
+IO_ACC = const(4)
+IO_ACCEL_UNTIL = const(5)
+IO_DECEL_AFTER = const(6)
+IO_RATE_DECEL = const(7)
+_HI = const(8)
+_LO = const(9)
+_REM = const(10)
+IO_WORDS = const(11)
+
+
+@micropython.viper
+def _mul(w_buf, a: int, b: int):
+    """(hi, lo) = a * b, for 0 <= a, b < 2**30."""
+    w = ptr32(w_buf)
+    a1 = a >> 15
+    a0 = a & 0x7FFF
+    b1 = b >> 15
+    b0 = b & 0x7FFF
+    mid = a1 * b0 + a0 * b1
+    lo = ((mid & 0x7FFF) << 15) + a0 * b0
+    w[_HI] = a1 * b1 + (mid >> 15) + (lo >> 30)
+    w[_LO] = lo & _M30
+
+
+@micropython.viper
+def _div(w_buf, c: int):
+    """(hi, lo) //= c and REM = the remainder, for 0 < c < 2**29: long division in
+    digits of lo as wide as keep the partial remainder below 2**30, so each takes one
+    machine division (the RP2040's divider) where bit by bit took 60 loop turns."""
+    w = ptr32(w_buf)
+    hi = w[_HI]
+    lo = w[_LO]
+    qh = hi // c
+    r = hi - qh * c
+    # k = 30 - bits(c), found in five steps
+    t = c
+    k = 29
+    if t >= 0x10000:
+        t = t >> 16
+        k -= 16
+    if t >= 0x100:
+        t = t >> 8
+        k -= 8
+    if t >= 0x10:
+        t = t >> 4
+        k -= 4
+    if t >= 4:
+        t = t >> 2
+        k -= 2
+    if t >= 2:
+        k -= 1
+    pos = 30
+    ql = 0
+    while pos > 0:
+        s = k
+        if s > pos:
+            s = pos
+        pos -= s
+        cur = (r << s) | ((lo >> pos) & ((1 << s) - 1))
+        d = cur // c
+        r = cur - d * c
+        ql = (ql << s) | d
+    w[_HI] = qh
+    w[_LO] = ql
+    w[_REM] = r
+
+
+@micropython.viper
+def _isqrt(w_buf) -> int:
+    """floor(sqrt((hi, lo))), for a root below 2**28 (two bits a step)."""
+    w = ptr32(w_buf)
+    hi = w[_HI]
+    lo = w[_LO]
+    res = 0
+    rem = 0
+    i = 29
+    while i >= 0:
+        if i >= 15:
+            pair = (hi >> (2 * (i - 15))) & 3
+        else:
+            pair = (lo >> (2 * i)) & 3
+        rem = (rem << 2) | pair
+        t = (res << 2) | 1
+        res = res << 1
+        if rem >= t:
+            rem -= t
+            res |= 1
+        i -= 1
+    return res
+
+
+@micropython.viper
+def ramp_into(io_buf):
+    """The schedule (ACCEL_UNTIL, DECEL_AFTER, RATE_DECEL) of io's record (N, R0, RNOM,
+    R1, ACC): planner.ramp_ticks says what it means. Distances are in steps << 28 (the
+    step loop's ONE), so n up to 2**30 steps fits the two limbs."""
+    io = ptr32(io_buf)
+    n = io[IO_N]
+    r0 = io[IO_R0]
+    vn = io[IO_RNOM]
+    r1 = io[IO_R1]
+    acc = io[IO_ACC]
+    # The whole block: n << 28.
+    all_hi = n >> 2
+    all_lo = (n & 3) << 28
+    # Steps (<< 28) to accelerate from r0 and to decelerate to r1: (vn^2 - r^2) / 2acc.
+    sa_hi = 0
+    sa_lo = 0
+    if vn > r0:
+        _mul(io_buf, vn - r0, vn + r0)
+        _div(io_buf, 2 * acc)
+        sa_hi = io[_HI]
+        sa_lo = io[_LO]
+    sd_hi = 0
+    sd_lo = 0
+    if vn > r1:
+        _mul(io_buf, vn - r1, vn + r1)
+        _div(io_buf, 2 * acc)
+        sd_hi = io[_HI]
+        sd_lo = io[_LO]
+    s_lo = sa_lo + sd_lo
+    s_hi = sa_hi + sd_hi + (s_lo >> 30)
+    s_lo &= _M30
+    c_hi = 0
+    c_lo = 0
+    if s_hi > all_hi or (s_hi == all_hi and s_lo > all_lo):
+        # The ramps meet below vn: peak^2 = acc n ONE + (r0^2 + r1^2) / 2, with no
+        # cruise. Then peak < vn < 2**28, so acc * n < 2**26 here.
+        p = acc * n
+        _mul(io_buf, r0, r0)
+        h0 = io[_HI]
+        l0 = io[_LO]
+        _mul(io_buf, r1, r1)
+        h1 = io[_HI]
+        l1 = io[_LO]
+        # 2 acc n ONE = p << 29
+        lo = l0 + l1 + ((p & 1) << 29)
+        hi = h0 + h1 + (p >> 1) + (lo >> 30)
+        lo &= _M30
+        lo = (lo >> 1) | ((hi & 1) << 29)
+        hi = hi >> 1
+        if hi < h0 or (hi == h0 and lo < l0):
+            hi = h0
+            lo = l0
+        if hi < h1 or (hi == h1 and lo < l1):
+            hi = h1
+            lo = l1
+        io[_HI] = hi
+        io[_LO] = lo
+        vn = int(_isqrt(io_buf))
+    else:
+        # Cruise: what the ramps leave.
+        c_lo = all_lo - s_lo
+        c_hi = all_hi - s_hi
+        if c_lo < 0:
+            c_lo = c_lo + _M30 + 1
+            c_hi -= 1
+    # Acceleration time in ticks: (vn - r0) / acc, with FRAC fraction bits.
+    a_int = (vn - r0) // acc
+    a_rem = (vn - r0) - a_int * acc
+    _mul(io_buf, a_rem, _ONE_FRAC)
+    _div(io_buf, acc)
+    frac = io[_LO]
+    # Cruise time: its steps / vn.
+    c_int = 0
+    if c_hi or c_lo:
+        io[_HI] = c_hi
+        io[_LO] = c_lo
+        _div(io_buf, vn)
+        if io[_HI]:
+            c_int = MAX_TICK
+        else:
+            c_int = io[_LO]
+            _mul(io_buf, io[_REM], _ONE_FRAC)
+            _div(io_buf, vn)
+            frac += io[_LO]
+    decel = a_int + c_int
+    if frac >= _ONE_FRAC:
+        frac -= _ONE_FRAC
+        decel += 1
+    if decel > MAX_TICK or decel < 0:
+        decel = MAX_TICK
+    accel_until = a_int + (1 if a_rem else 0)
+    decel_after = decel + (1 if frac else 0)
+    if decel_after < 1:
+        decel_after = 1
+    # The first wholly decelerating tick's mean rate: vn - acc (DECEL_AFTER + 1/2 -
+    # its start), rounded.
+    late = (decel_after - decel) * _ONE_FRAC - frac + _HALF
+    r_decel = r1
+    if decel_after < MAX_TICK:
+        _mul(io_buf, acc, late)
+        lo = io[_LO] + _HALF
+        fall = (io[_HI] << 14) + (lo >> _FRAC)
+        r_decel = vn - fall
+        if r_decel < r1:
+            r_decel = r1
+    if accel_until > MAX_TICK:
+        accel_until = MAX_TICK
+    if decel_after > MAX_TICK:
+        decel_after = MAX_TICK
+    io[IO_ACCEL_UNTIL] = accel_until
+    io[IO_DECEL_AFTER] = decel_after
+    io[IO_RATE_DECEL] = r_decel
