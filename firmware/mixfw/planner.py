@@ -144,8 +144,9 @@ def ramp_ticks(n, r0, r_nom, r1, acc, out=None, at=0):
 
 
 _RAMP_IO = array("i", bytes(4 * ramp.IO_WORDS))
-
-
+_ramp_into = ramp.ramp_into
+assert (ramp.IO_N, ramp.IO_R0, ramp.IO_RNOM, ramp.IO_R1, ramp.IO_ACC, ramp.IO_ACCEL_UNTIL,
+        ramp.IO_DECEL_AFTER, ramp.IO_RATE_DECEL) == tuple(range(8))  # as _write_trapezoid has them
 
 
 class PlanError(ValueError):
@@ -741,7 +742,16 @@ class Planner:
         rates = self._rates
         ramp = self._ramps
         if rates[c] != r0 or rates[c + 1] != r_nom or rates[c + 2] != r1:
-            ramp_ticks(m[b + _B_N], r0, r_nom, r1, acc_i, ramp, c)
+            io = _RAMP_IO  # ramp_ticks written out: a call costs the chips more than this
+            io[0] = m[b + _B_N]
+            io[1] = r0
+            io[2] = r_nom
+            io[3] = r1
+            io[4] = acc_i
+            _ramp_into(io)
+            ramp[c] = io[5]
+            ramp[c + 1] = io[6]
+            ramp[c + 2] = io[7]
             rates[c] = r0
             rates[c + 1] = r_nom
             rates[c + 2] = r1
