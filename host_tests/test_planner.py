@@ -6,11 +6,10 @@ from mixstep import paths
 
 LOOK_AHEAD = """
 import sys
-from math import sqrt
 import simmachine
 sys.modules["machine"] = simmachine
 import board, main
-from mixfw import stepper as st
+from mixfw import lookahead, stepper as st
 
 simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%%d" %% i for i in range(6)])
 printer = main.build(files_root=None)
@@ -18,18 +17,23 @@ pl = printer.planner
 mem = printer.mem
 q = pl.queue
 errors = []
-last_exit = [0.0]
+last_exit = [0]
 counts = {"blocks": 0, "checked": 0}
+lk = pl.lk
+W = lookahead.L_WORDS
+
+def field(slot, word):
+    return lk[slot * W + word]
 
 def take_one():
     # The step loop runs the tail block: it enters at its planned entry, which must be
     # no faster than the block before it left.
     t = mem[st.S_TAIL]
     if t != mem[st.S_HEAD]:
-        if pl.entry[t] > last_exit[0]:
-            errors.append("block %%d enters at %%r after an exit at %%r"
-                          %% (counts["blocks"], pl.entry[t], last_exit[0]))
-        last_exit[0] = pl.exit[t]
+        if field(t, lookahead.L_ENTRY) > last_exit[0]:
+            errors.append("block %%d enters at V2 %%d after an exit at %%d"
+                          %% (counts["blocks"], field(t, lookahead.L_ENTRY), last_exit[0]))
+        last_exit[0] = field(t, lookahead.L_EXIT)
         counts["blocks"] += 1
         mem[st.S_TAIL] = t + 1 if t + 1 < q else 0
     mem[st.S_ACTIVE] = 0
@@ -39,7 +43,8 @@ pl.idle = take_one
 recalculate = pl._recalculate
 
 def checked_recalculate(newest):
-    # The incremental look-ahead must plan what a full pass over the queue plans.
+    # The incremental look-ahead must plan what a full pass over the queue plans: in
+    # V2 (speed squared), v**2 = v0**2 + 2 a s exactly, within each junction's limit.
     recalculate(newest)
     first = mem[st.S_TAIL]
     slots = []
@@ -50,17 +55,16 @@ def checked_recalculate(newest):
             break
         k = k + 1 if k + 1 < q else 0
     back = {}
-    e = 0.0
+    e = 0
     for k in reversed(slots):
-        e = min(pl.max_entry[k], sqrt(e * e + 2.0 * pl.accel[k] * pl.mm[k]))
+        e = min(field(k, lookahead.L_MAX_ENTRY), e + field(k, lookahead.L_GAIN))
         back[k] = e
-    v = min(back[first], pl.exit[first - 1 if first > 0 else q - 1])
+    v = min(back[first], field(first - 1 if first > 0 else q - 1, lookahead.L_EXIT))
     for i, k in enumerate(slots):
-        v1 = 0.0 if k == newest else min(back[slots[i + 1]],
-                                         sqrt(v * v + 2.0 * pl.accel[k] * pl.mm[k]))
-        if (pl.entry[k], pl.exit[k]) != (v, v1):
-            errors.append("slot %%d planned %%r, a full pass gives %%r"
-                          %% (k, (pl.entry[k], pl.exit[k]), (v, v1)))
+        v1 = 0 if k == newest else min(back[slots[i + 1]], v + field(k, lookahead.L_GAIN))
+        got = (field(k, lookahead.L_ENTRY), field(k, lookahead.L_EXIT))
+        if got != (v, v1):
+            errors.append("slot %%d planned %%r, a full pass gives %%r" %% (k, got, (v, v1)))
         v = v1
     counts["checked"] += 1
 

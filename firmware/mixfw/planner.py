@@ -6,9 +6,10 @@
 # Pure logic: the hooks that touch the chip (waiting, masking the interrupt) are
 # passed in by main.py, so host tools can plan on CPython too.
 from array import array
-from math import sqrt
+from math import frexp, ldexp, sqrt
 from mixfw.compat import const
-from mixfw import ramp
+from mixfw import lookahead, ramp
+from mixfw.lookahead import v2 as v2_of, v2_gain
 from mixfw import stepper as st
 from mixfw.mixer import MAX_DRIVES, normalize
 from mixfw.stepper import schedule_counts
@@ -44,6 +45,22 @@ assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _BLOCK_BASE, _B_WORDS, _B_N, _B_STEPS, _B_D
     st.B_RATE_INIT, st.B_RATE_NOM, st.B_RATE_FINAL, st.B_ACCEL, st.B_ACCEL_UNTIL,
     st.B_DECEL_AFTER, st.B_RATE_DECEL)
 _ONE_F = float(st.ONE)
+_L_WORDS = const(18)
+_L_GAIN = const(0)
+_L_MAX_ENTRY = const(1)
+_L_NOMINAL = const(2)
+_L_K2 = const(6)
+_L_K_SHIFT = const(7)
+_L_RATE_NOM = const(8)
+_L_FLOOR = const(9)
+_L_ACC = const(10)
+_L_RN = const(12)
+_L_DWELL = const(17)
+assert (_L_WORDS, _L_GAIN, _L_MAX_ENTRY, _L_NOMINAL, _L_K2, _L_K_SHIFT, _L_RATE_NOM, _L_FLOOR,
+        _L_ACC, _L_RN, _L_DWELL) == (
+    lookahead.L_WORDS, lookahead.L_GAIN, lookahead.L_MAX_ENTRY, lookahead.L_NOMINAL,
+    lookahead.L_K2, lookahead.L_K_SHIFT, lookahead.L_RATE_NOM, lookahead.L_FLOOR,
+    lookahead.L_ACC, lookahead.L_RN, lookahead.L_DWELL)
 
 # Largest schedule period the step loop's mixer takes: its products stay below 2**30.
 MAX_PERIOD = 20000
@@ -145,8 +162,9 @@ def ramp_ticks(n, r0, r_nom, r1, acc, out=None, at=0):
 
 _RAMP_IO = array("i", bytes(4 * ramp.IO_WORDS))
 _ramp_into = ramp.ramp_into
+_recalculate = lookahead.recalculate
 assert (ramp.IO_N, ramp.IO_R0, ramp.IO_RNOM, ramp.IO_R1, ramp.IO_ACC, ramp.IO_ACCEL_UNTIL,
-        ramp.IO_DECEL_AFTER, ramp.IO_RATE_DECEL) == tuple(range(8))  # as _write_trapezoid has them
+        ramp.IO_DECEL_AFTER, ramp.IO_RATE_DECEL) == tuple(range(8))  # as lookahead._write has them
 
 
 class PlanError(ValueError):
@@ -174,23 +192,10 @@ class Planner:
         # A STEP pin is high for pulse_ticks and low at least as long.
         self.max_step_rate = 1.0 / (2 * pulse_ticks * self.tick_s)
         self.position_steps = [0, 0, 0, 0]
-        # Per-slot planning data, float side.
-        self.mm = [0.0] * q
-        self.accel = [0.0] * q
-        self.nominal = [0.0] * q
-        self.max_entry = [0.0] * q
-        self.entry = [0.0] * q
-        self.back_entry = [0.0] * q  # see _recalculate
-        self.gain_v2 = [0.0] * q  # 2 * accel * mm: the v**2 a block gains or sheds
-        self.exit = [0.0] * q  # exit speed baked into the slot's integer record
-        # Per slot, from _set_plan: mm/s -> rate, rate change per tick, slowest rate.
+        # Per-slot planning data in integers, for the look-ahead (see lookahead.py).
         self._tick_one = self.tick_s * st.ONE
-        self.rate_k = [0.0] * q
-        self.rate_acc = [1] * q
-        self.rate_floor = [0] * q
-        # Per slot: the rates (r0, r_nom, r1) of its record and their ramp_ticks schedule.
-        self._rates = array("i", bytes(12 * q))
-        self._ramps = array("i", bytes(12 * q))
+        self.lk = array("i", bytes(4 * lookahead.L_WORDS * q))
+        self._hooks = (irq_off, irq_on, _RAMP_IO)
         self.prev_unit = None  # one of _units, or None after a stop
         self._units = ([0.0] * 4, [0.0] * 4)
         self._delta = [0] * 4
@@ -610,161 +615,39 @@ class Planner:
         return True
 
     def _set_plan(self, slot, mm, accel, nominal, max_entry, n=0):
-        """A new block's planning data; n: its lead-axis steps (0 for a dwell)."""
-        self.mm[slot] = mm
-        self.accel[slot] = accel
-        self.gain_v2[slot] = 2.0 * accel * mm
-        self.nominal[slot] = nominal
-        self.max_entry[slot] = max_entry
-        self.entry[slot] = 0.0
-        self.exit[slot] = 0.0
-        self._rates[3 * slot + 1] = -1  # no schedule worked out yet
-        if n:
-            # mm/s -> the step loop's rate; mm/s**2 -> its rate change per tick.
-            k = self._tick_one * n / mm
-            acc = k * (accel * self.tick_s)
-            acc_i = int(acc + 0.5)
-            self.rate_k[slot] = k
-            self.rate_acc[slot] = acc_i if acc_i > 1 else 1
-            # The slowest rate a block may fall to: reached from rest within half a
-            # step, so a block that ends at a stop still finishes.
-            self.rate_floor[slot] = int(sqrt(acc * _ONE_F))
+        """A new block's planning data; n: its lead-axis steps (0 for a dwell). The
+        floats end here: the look-ahead works on integers."""
+        lk = self.lk
+        at = slot * _L_WORDS
+        for i in range(_L_WORDS):
+            lk[at + i] = 0
+        lk[at + _L_RN] = -1  # no schedule worked out yet
+        if not n:
+            lk[at + _L_DWELL] = 1
+            return
+        lk[at + _L_GAIN] = v2_gain(accel, mm)
+        lk[at + _L_MAX_ENTRY] = v2_of(max_entry)
+        lk[at + _L_NOMINAL] = v2_of(nominal)
+        # mm/s -> the step loop's rate; mm/s**2 -> its rate change per tick.
+        k = self._tick_one * n / mm
+        acc = k * (accel * self.tick_s)
+        acc_i = int(acc + 0.5)
+        lk[at + _L_ACC] = acc_i if acc_i > 1 else 1
+        # The slowest rate a block may fall to: reached from rest within half a step,
+        # so a block that ends at a stop still finishes.
+        floor = int(sqrt(acc * _ONE_F))
+        lk[at + _L_FLOOR] = floor
+        r_nom = int(nominal * k)
+        lk[at + _L_RATE_NOM] = r_nom if r_nom > floor else floor
+        # rate = k sqrt(V2 / V2_SCALE) = isqrt(V2 * K2) scaled by 2**K_SHIFT, with K2 in
+        # [2**24, 2**26]: V2 * K2 stays below 2**55, and the root keeps 15 bits or more.
+        kk = k * k / lookahead.V2_SCALE
+        e = frexp(kk)[1]
+        shift = (e - 25) >> 1
+        lk[at + _L_K2] = int(ldexp(kk, -2 * shift) + 0.5)
+        lk[at + _L_K_SHIFT] = shift
 
     # --- look-ahead ---
     def _recalculate(self, newest):
-        """Bring the look-ahead up to date after `newest` was queued (it stops at its
-        end) and rewrite the records of the blocks not yet started whose entry or exit
-        speed changed.
-
-        back_entry[k], the fastest block k may enter and still stop by the end of the
-        queue, only grows as blocks are queued. The backward pass stops at the first
-        block whose back_entry stays the same (Grbl's and Marlin's optimal marker): the
-        plan before it stands, and the forward pass starts there."""
-        m = self.mem
-        q = self.queue
-        back = self.back_entry
-        gain = self.gain_v2
-        max_entry = self.max_entry
-        tail = m[_S_TAIL]
-        first = tail
-        if m[_S_ACTIVE]:
-            first = tail + 1 if tail + 1 < q else 0
-        # Backward pass.
-        k = newest
-        e = sqrt(gain[k])
-        if max_entry[k] <= e:
-            e = max_entry[k]
-        back[k] = e
-        while k != first:
-            j = k - 1 if k > 0 else q - 1
-            e = sqrt(e * e + gain[j])
-            if max_entry[j] <= e:
-                e = max_entry[j]
-            k = j
-            if e == back[j]:
-                break
-            back[j] = e
-        # Forward pass from block k, whose entry stands, then records.
-        entry = self.entry
-        exit_speed = self.exit
-        if k == first:
-            # The block before the first one is running or has run: the first one
-            # enters at most at the exit baked into that record, also between blocks
-            # (tail advanced, not yet started), where more look-ahead would otherwise
-            # raise it above the speed the step loop left at. After a stop, max_entry
-            # is 0 anyway.
-            v0 = back[k]
-            handed_over = exit_speed[k - 1 if k > 0 else q - 1]
-            if handed_over < v0:
-                v0 = handed_over
-        else:
-            v0 = entry[k]
-        while True:
-            if k == newest:
-                v1 = 0.0
-            else:
-                nk = k + 1 if k + 1 < q else 0
-                v1 = back[nk]
-                reach = sqrt(v0 * v0 + gain[k])
-                if v1 > reach:
-                    v1 = reach
-            # A record is a function of its entry and exit speeds: rewrite changed ones.
-            if k == newest or v0 != entry[k] or v1 != exit_speed[k]:
-                entry[k] = v0
-                self._write_trapezoid(k, v1)
-            if k == newest:
-                break
-            # The step loop may have started block k meanwhile: then the next block
-            # enters at most at the exit it was given before.
-            v0 = v1 if v1 <= exit_speed[k] else exit_speed[k]
-            k = nk
-
-    def _write_trapezoid(self, slot, exit_speed):
-        """The slot's record for its entry speed and this exit speed. The factors that
-        depend on the block alone were worked out once, by _set_plan."""
-        m = self.mem
-        b = _BLOCK_BASE + slot * _B_WORDS
-        if m[b + _B_FLAGS] & _F_DWELL:
-            return
-        v0 = self.entry[slot]
-        vn = self.nominal[slot]
-        v02 = v0 * v0
-        v12 = exit_speed * exit_speed
-        vn2 = vn * vn
-        gain = self.gain_v2[slot]
-        if (vn2 - v02) + (vn2 - v12) > gain:
-            # The nominal speed is never reached: accelerate to where the ramps meet.
-            vn2 = (v02 + v12 + gain) * 0.5
-            if vn2 < v02:
-                vn2 = v02
-            elif vn2 > v02 + gain:
-                vn2 = v02 + gain
-            vn = sqrt(vn2)
-        k = self.rate_k[slot]
-        floor = self.rate_floor[slot]
-        r_nom = int(vn * k)
-        if r_nom < floor:
-            r_nom = floor
-        r0 = int(v0 * k)
-        if r0 < floor:
-            r0 = floor
-        if r0 > r_nom:
-            r0 = r_nom
-        r1 = int(exit_speed * k)
-        if r1 < floor:
-            r1 = floor
-        if r1 > r_nom:
-            r1 = r_nom
-        acc_i = self.rate_acc[slot]
-        # The look-ahead rewrites every waiting block for each new one, mostly with
-        # the same rates: the schedule is worked out again only when they change.
-        c = 3 * slot
-        rates = self._rates
-        ramp = self._ramps
-        if rates[c] != r0 or rates[c + 1] != r_nom or rates[c + 2] != r1:
-            io = _RAMP_IO  # ramp_ticks written out: a call costs the chips more than this
-            io[0] = m[b + _B_N]
-            io[1] = r0
-            io[2] = r_nom
-            io[3] = r1
-            io[4] = acc_i
-            _ramp_into(io)
-            ramp[c] = io[5]
-            ramp[c + 1] = io[6]
-            ramp[c + 2] = io[7]
-            rates[c] = r0
-            rates[c + 1] = r_nom
-            rates[c + 2] = r1
-        state = self._irq_off()
-        if slot == m[_S_TAIL] and m[_S_ACTIVE]:
-            self._irq_on(state)
-            return  # the step loop has it: too late to change
-        m[b + _B_RATE_INIT] = r0
-        m[b + _B_RATE_NOM] = r_nom
-        m[b + _B_RATE_FINAL] = r1
-        m[b + _B_ACCEL] = acc_i
-        m[b + _B_ACCEL_UNTIL] = ramp[c]
-        m[b + _B_DECEL_AFTER] = ramp[c + 1]
-        m[b + _B_RATE_DECEL] = ramp[c + 2]
-        self._irq_on(state)
-        self.exit[slot] = exit_speed
+        """The look-ahead after `newest` was queued: lookahead.recalculate."""
+        _recalculate(self.lk, self.mem, newest, self._hooks)

@@ -33,7 +33,7 @@ IO_WORDS = const(11)
 
 
 @micropython.viper
-def _mul(w_buf, a: int, b: int):
+def mul_limbs(w_buf, a: int, b: int):
     """(hi, lo) = a * b, for 0 <= a, b < 2**30."""
     w = ptr32(w_buf)
     a1 = a >> 15
@@ -90,7 +90,7 @@ def _div(w_buf, c: int):
 
 
 @micropython.viper
-def _isqrt(w_buf) -> int:
+def isqrt_limbs(w_buf) -> int:
     """floor(sqrt((hi, lo))), for a root below 2**28 (two bits a step)."""
     w = ptr32(w_buf)
     hi = w[_HI]
@@ -131,14 +131,14 @@ def ramp_into(io_buf):
     sa_hi = 0
     sa_lo = 0
     if vn > r0:
-        _mul(io_buf, vn - r0, vn + r0)
+        mul_limbs(io_buf, vn - r0, vn + r0)
         _div(io_buf, 2 * acc)
         sa_hi = io[_HI]
         sa_lo = io[_LO]
     sd_hi = 0
     sd_lo = 0
     if vn > r1:
-        _mul(io_buf, vn - r1, vn + r1)
+        mul_limbs(io_buf, vn - r1, vn + r1)
         _div(io_buf, 2 * acc)
         sd_hi = io[_HI]
         sd_lo = io[_LO]
@@ -151,10 +151,10 @@ def ramp_into(io_buf):
         # The ramps meet below vn: peak^2 = acc n ONE + (r0^2 + r1^2) / 2, with no
         # cruise. Then peak < vn < 2**28, so acc * n < 2**26 here.
         p = acc * n
-        _mul(io_buf, r0, r0)
+        mul_limbs(io_buf, r0, r0)
         h0 = io[_HI]
         l0 = io[_LO]
-        _mul(io_buf, r1, r1)
+        mul_limbs(io_buf, r1, r1)
         h1 = io[_HI]
         l1 = io[_LO]
         # 2 acc n ONE = p << 29
@@ -171,7 +171,7 @@ def ramp_into(io_buf):
             lo = l1
         io[_HI] = hi
         io[_LO] = lo
-        vn = int(_isqrt(io_buf))
+        vn = int(isqrt_limbs(io_buf))
     else:
         # Cruise: what the ramps leave.
         c_lo = all_lo - s_lo
@@ -182,7 +182,7 @@ def ramp_into(io_buf):
     # Acceleration time in ticks: (vn - r0) / acc, with FRAC fraction bits.
     a_int = (vn - r0) // acc
     a_rem = (vn - r0) - a_int * acc
-    _mul(io_buf, a_rem, _ONE_FRAC)
+    mul_limbs(io_buf, a_rem, _ONE_FRAC)
     _div(io_buf, acc)
     frac = io[_LO]
     # Cruise time: its steps / vn.
@@ -195,7 +195,7 @@ def ramp_into(io_buf):
             c_int = MAX_TICK
         else:
             c_int = io[_LO]
-            _mul(io_buf, io[_REM], _ONE_FRAC)
+            mul_limbs(io_buf, io[_REM], _ONE_FRAC)
             _div(io_buf, vn)
             frac += io[_LO]
     decel = a_int + c_int
@@ -213,7 +213,7 @@ def ramp_into(io_buf):
     late = (decel_after - decel) * _ONE_FRAC - frac + _HALF
     r_decel = r1
     if decel_after < MAX_TICK:
-        _mul(io_buf, acc, late)
+        mul_limbs(io_buf, acc, late)
         lo = io[_LO] + _HALF
         fall = (io[_HI] << 14) + (lo >> _FRAC)
         r_decel = vn - fall

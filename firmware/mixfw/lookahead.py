@@ -1,0 +1,229 @@
+# The planner's look-ahead and its records, in viper on integers. It runs for every
+# G-code line; on the chips every float operation allocates, so the float version cost
+# about 2 ms a line there, and the garbage a collection every few dozen lines.
+#
+# Speeds are kept squared, as V2 = (mm/s)**2 * 64 (V2_SCALE), below 2**29 (about
+# 2,900 mm/s): then the passes only add and compare (v**2 = v0**2 + 2 a s), a sum of
+# three stays below 2**31, and the 32-bit chips and the 64-bit unix port give the same
+# integers. A record's rates come from V2 by an exact integer square root.
+from mixfw.compat import const, micropython, ptr32
+from mixfw import stepper as st
+from mixfw.ramp import mul_limbs, isqrt_limbs, ramp_into
+
+V2_SCALE = 64
+V2_MAX = const(0x1FFFFFFF)
+
+# Words per slot in the planner's lk array.
+L_GAIN = const(0)  # the V2 a block gains over its length: 2 a mm
+L_MAX_ENTRY = const(1)  # junction limit
+L_NOMINAL = const(2)
+L_BACK = const(3)  # the fastest entry that can still stop by the end of the queue
+L_ENTRY = const(4)
+L_EXIT = const(5)  # the exit baked into the slot's record
+L_K2 = const(6)  # rate = isqrt(V2 * K2) << K_SHIFT (>> -K_SHIFT)
+L_K_SHIFT = const(7)
+L_RATE_NOM = const(8)  # the nominal speed's rate, worked out in floats once
+L_FLOOR = const(9)  # the slowest rate: reached from rest within half a step
+L_ACC = const(10)
+L_R0 = const(11)  # the rates of the record's schedule (R_NOM -1: none yet)
+L_RN = const(12)
+L_R1 = const(13)
+L_UNTIL = const(14)
+L_AFTER = const(15)
+L_RATE_DECEL = const(16)
+L_DWELL = const(17)
+L_WORDS = const(18)
+
+# The step loop's words (checked against stepper.py below: viper folds only this
+# module's constants).
+_S_HEAD = const(0)
+_S_TAIL = const(1)
+_S_ACTIVE = const(2)
+_S_QUEUE = const(26)
+_BLOCK_BASE = const(112)
+_B_WORDS = const(24)
+_B_N = const(0)
+_B_RATE_INIT = const(8)
+_B_RATE_NOM = const(9)
+_B_RATE_FINAL = const(10)
+_B_ACCEL = const(11)
+_B_ACCEL_UNTIL = const(12)
+_B_DECEL_AFTER = const(13)
+_B_RATE_DECEL = const(22)
+assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _S_QUEUE, _BLOCK_BASE, _B_WORDS, _B_N, _B_RATE_INIT,
+        _B_RATE_NOM, _B_RATE_FINAL, _B_ACCEL, _B_ACCEL_UNTIL, _B_DECEL_AFTER,
+        _B_RATE_DECEL) == (
+    st.S_HEAD, st.S_TAIL, st.S_ACTIVE, st.S_QUEUE, st.BLOCK_BASE, st.B_WORDS, st.B_N,
+    st.B_RATE_INIT, st.B_RATE_NOM, st.B_RATE_FINAL, st.B_ACCEL, st.B_ACCEL_UNTIL,
+    st.B_DECEL_AFTER, st.B_RATE_DECEL)
+
+
+def v2(speed_mm_s):
+    """A speed (float mm/s) as V2, within the range kept."""
+    x = speed_mm_s * speed_mm_s * V2_SCALE
+    return V2_MAX if x >= V2_MAX else int(x + 0.5)
+
+
+def v2_gain(accel_mm_s2, length_mm):
+    """What a block of this length and acceleration adds to v**2 (2 a s), as V2."""
+    x = 2.0 * V2_SCALE * accel_mm_s2 * length_mm
+    return V2_MAX if x >= V2_MAX else int(x + 0.5)
+
+
+@micropython.viper
+def _rate(lk_buf, at: int, x2: int, io_buf) -> int:
+    """The step loop's rate for V2 x2 in the slot at word `at`, within its floor and
+    nominal rate."""
+    lk = ptr32(lk_buf)
+    if x2 >= lk[at + L_NOMINAL]:
+        return lk[at + L_RATE_NOM]
+    mul_limbs(io_buf, x2, lk[at + L_K2])
+    r = int(isqrt_limbs(io_buf))
+    s = lk[at + L_K_SHIFT]
+    if s >= 0:
+        r = r << s
+    else:
+        r = r >> (0 - s)
+    if r > lk[at + L_RATE_NOM]:
+        r = lk[at + L_RATE_NOM]
+    if r < lk[at + L_FLOOR]:
+        r = lk[at + L_FLOOR]
+    return r
+
+
+@micropython.viper
+def _write(lk_buf, mem_buf, slot: int, x2: int, hooks):
+    """The slot's record for its entry and this exit (V2), unless the step loop has
+    started it. hooks: (irq_off, irq_on, io array for ramp)."""
+    lk = ptr32(lk_buf)
+    mem = ptr32(mem_buf)
+    at = slot * L_WORDS
+    if lk[at + L_DWELL]:
+        return
+    io_buf = hooks[2]
+    v02 = lk[at + L_ENTRY]
+    vn2 = lk[at + L_NOMINAL]
+    gain = lk[at + L_GAIN]
+    if (vn2 - v02) + (vn2 - x2) > gain:
+        # The nominal speed is never reached: accelerate to where the ramps meet.
+        vn2 = (v02 + x2 + gain) >> 1
+        if vn2 < v02:
+            vn2 = v02
+        elif vn2 > v02 + gain:
+            vn2 = v02 + gain
+    r_nom = int(_rate(lk_buf, at, vn2, io_buf))
+    r0 = int(_rate(lk_buf, at, v02, io_buf))
+    if r0 > r_nom:
+        r0 = r_nom
+    r1 = int(_rate(lk_buf, at, x2, io_buf))
+    if r1 > r_nom:
+        r1 = r_nom
+    b = _BLOCK_BASE + slot * _B_WORDS
+    # The look-ahead rewrites every waiting block for each new one, mostly with the
+    # same rates: the schedule is worked out again only when they change.
+    if lk[at + L_R0] != r0 or lk[at + L_RN] != r_nom or lk[at + L_R1] != r1:
+        io = ptr32(io_buf)
+        io[0] = mem[b + _B_N]  # ramp.IO_N .. IO_ACC, checked in planner.py
+        io[1] = r0
+        io[2] = r_nom
+        io[3] = r1
+        io[4] = lk[at + L_ACC]
+        ramp_into(io_buf)
+        lk[at + L_UNTIL] = io[5]
+        lk[at + L_AFTER] = io[6]
+        lk[at + L_RATE_DECEL] = io[7]
+        lk[at + L_R0] = r0
+        lk[at + L_RN] = r_nom
+        lk[at + L_R1] = r1
+    state = hooks[0]()
+    if slot == mem[_S_TAIL] and mem[_S_ACTIVE]:
+        hooks[1](state)
+        return  # the step loop has it: too late to change
+    mem[b + _B_RATE_INIT] = r0
+    mem[b + _B_RATE_NOM] = r_nom
+    mem[b + _B_RATE_FINAL] = r1
+    mem[b + _B_ACCEL] = lk[at + L_ACC]
+    mem[b + _B_ACCEL_UNTIL] = lk[at + L_UNTIL]
+    mem[b + _B_DECEL_AFTER] = lk[at + L_AFTER]
+    mem[b + _B_RATE_DECEL] = lk[at + L_RATE_DECEL]
+    hooks[1](state)
+    lk[at + L_EXIT] = x2
+
+
+@micropython.viper
+def recalculate(lk_buf, mem_buf, newest: int, hooks):
+    """Bring the look-ahead up to date after `newest` was queued (it stops at its end)
+    and rewrite the records of the blocks not yet started whose entry or exit changed.
+
+    BACK of a slot, the fastest it may enter and still stop by the end of the queue,
+    only grows as blocks are queued. The backward pass stops at the first block whose
+    BACK stays the same (Grbl's and Marlin's optimal marker): the plan before it stands,
+    and the forward pass starts there."""
+    lk = ptr32(lk_buf)
+    mem = ptr32(mem_buf)
+    q = mem[_S_QUEUE]
+    tail = mem[_S_TAIL]
+    first = tail
+    if mem[_S_ACTIVE]:
+        first = tail + 1
+        if first >= q:
+            first = 0
+    # Backward pass.
+    k = newest
+    at = k * L_WORDS
+    e = lk[at + L_GAIN]
+    if lk[at + L_MAX_ENTRY] <= e:
+        e = lk[at + L_MAX_ENTRY]
+    lk[at + L_BACK] = e
+    while k != first:
+        j = k - 1
+        if j < 0:
+            j = q - 1
+        at = j * L_WORDS
+        e = e + lk[at + L_GAIN]
+        if lk[at + L_MAX_ENTRY] <= e:
+            e = lk[at + L_MAX_ENTRY]
+        k = j
+        if e == lk[at + L_BACK]:
+            break
+        lk[at + L_BACK] = e
+    # Forward pass from block k, whose entry stands, then records.
+    at = k * L_WORDS
+    if k == first:
+        # The block before the first one is running or has run: the first one enters
+        # at most at the exit baked into that record, also between blocks (tail
+        # advanced, not yet started), where more look-ahead would otherwise raise it
+        # above the speed the step loop left at. After a stop, MAX_ENTRY is 0 anyway.
+        v0 = lk[at + L_BACK]
+        p = k - 1
+        if p < 0:
+            p = q - 1
+        handed_over = lk[p * L_WORDS + L_EXIT]
+        if handed_over < v0:
+            v0 = handed_over
+    else:
+        v0 = lk[at + L_ENTRY]
+    while True:
+        at = k * L_WORDS
+        nk = k + 1
+        if nk >= q:
+            nk = 0
+        if k == newest:
+            v1 = 0
+        else:
+            v1 = lk[nk * L_WORDS + L_BACK]
+            reach = v0 + lk[at + L_GAIN]
+            if v1 > reach:
+                v1 = reach
+        # A record is a function of its entry and exit: rewrite changed ones.
+        if k == newest or v0 != lk[at + L_ENTRY] or v1 != lk[at + L_EXIT]:
+            lk[at + L_ENTRY] = v0
+            _write(lk_buf, mem_buf, k, v1, hooks)
+        if k == newest:
+            break
+        # The step loop may have started block k meanwhile: then the next block enters
+        # at most at the exit it was given before.
+        v0 = v1
+        if v1 > lk[at + L_EXIT]:
+            v0 = lk[at + L_EXIT]
+        k = nk
