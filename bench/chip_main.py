@@ -1,6 +1,6 @@
 # The chip bench's planner run on the emulated Pico: bench/chip_rows.py puts it on the
 # flash compiled as chip_main.mpy, with a main.py that imports it in place of the
-# firmware's main.py, which goes there as fwmain.mpy and is only imported.
+# firmware's main.py; the firmware's modules are the board's mixfw/*.mpy.
 # It answers requests on the USB console, one line each, then `ok`:
 #   M115                   ok (the harness asks it once it has booted)
 #   plan FILE STEP         parse and plan FILE's lines (read into RAM first) through
@@ -8,8 +8,8 @@
 #                          queue retired by hand as boards/sim/plan_only.py's retire_one
 #                          does; with STEP 1 the step path runs meanwhile (see
 #                          stepping_printer). Answers `bench:{json}`.
-# Written against the firmware's API: fwmain.build(files_root=None),
-# fwmain.start_timer(printer, tick_us) (returns what has deinit()), printer.parser.parse,
+# Written against the firmware's API: assemble.build(files_root=None),
+# assemble.start_timer(printer, tick_us) (returns what has deinit()), printer.parser.parse,
 # printer.run_line, printer.planner (.idle, .queue, .synchronize), printer.mem with the
 # stepper's S_HEAD/S_TAIL/S_ACTIVE/S_POS words (plan_only.retire_one).
 import sys
@@ -17,7 +17,7 @@ import gc
 import io
 import json
 import time
-import fwmain
+from mixfw import assemble
 from mixfw import stepper as st
 from plan_only import retire_one
 
@@ -36,7 +36,7 @@ def stepping_printer():
     the step path busy with one long six-drive mixed move, as while printing. The
     planner measured is another printer whose queue is retired by hand, so what it
     plans never reaches the pins and never waits for them; both share the CPU."""
-    printer = fwmain.build(files_root=None)
+    printer = assemble.build(files_root=None)
     for line in STEP_SETUP + (STEP_MOVE,):
         printer.run_line(printer.parser.parse(line, len(line)))
     return printer
@@ -51,7 +51,7 @@ def plan(path, stepping):
     gc.collect()
     stepper = stepping_printer() if stepping else None
     gc.collect()  # the second printer needs whole blocks the first one's garbage splits
-    printer = fwmain.build(files_root=None)
+    printer = assemble.build(files_root=None)
     planner = printer.planner
     planner.idle = retire_one(printer.mem, planner.queue)
     parse = printer.parser.parse
@@ -64,7 +64,7 @@ def plan(path, stepping):
     timer = None
     steps0 = 0
     if stepper:
-        timer = fwmain.start_timer(stepper, stepper.settings["tick_us"])
+        timer = assemble.start_timer(stepper, stepper.settings["tick_us"])
         time.sleep_ms(300)  # past the move's acceleration, into its cruise
         steps0 = stepper_steps(stepper)
     gc.collect()

@@ -6,8 +6,8 @@ board pico_6drives. The emulator is optimistic (no flash wait states, free inter
 entry, see ../shared/rp2emu/README.md): each figure is an estimate, and real silicon
 is slower. Three emulator sessions, one at a time:
 
-  planner   bench/chip_main.py run by main.py (the firmware's main.py beside it as
-            fwmain, all compiled with mpy-cross as `make deploy` compiles mixfw):
+  planner   bench/chip_main.py run by main.py, compiled with mpy-cross as `make
+            deploy` compiles mixfw, with the board's mixfw beside it:
             plans an excerpt of the example with the queue retired by hand, alone
             and while a second printer's step path runs a six-drive mixed move.
   stepping  the firmware as deployed, over USB: one move at 20,000 steps/s for the CPU
@@ -81,7 +81,7 @@ NOTES = {
         "retired by hand one block per wait as boards/sim/plan_only.py's retire_one "
         "does (full look-ahead), WHILE the step path runs a six-drive mixed move of "
         "about 20,000 steps/s (X, Y, E 8:6:6). The stepping is a second printer built "
-        "by the same main.build and started by main.start_timer with one long move, so "
+        "by the same assemble.build and started by assemble.start_timer with one long move, so "
         "what is planned never waits for the pins (bench/chip_main.py). "
         "chip_planner_lines_per_s_no_stepping: the same with no step path running; "
         "chip_planner_stepper_steps_per_s: the steps the stepping printer made meanwhile. "
@@ -189,7 +189,7 @@ def chip_planner(res, work):
     lines = paths.EXAMPLE_GCODE.read_text().splitlines()[PLAN_LINES[0] - 1:PLAN_LINES[1]]
     excerpt.write_text("\n".join(lines) + "\n")
     files = _compiled(work / "chip_flash", {
-        "chip_main": BENCH_DIR / "chip_main.py", "fwmain": paths.FIRMWARE / "main.py",
+        "chip_main": BENCH_DIR / "chip_main.py",
         "plan_only": paths.BOARDS / "sim" / "plan_only.py"})
     files["plan.gcode"] = excerpt
     with emu.Chip(BOARD, settings=OVERRIDES, files=files, max_emu_s=60,

@@ -14,7 +14,7 @@ import simmachine
 
 sys.modules["machine"] = simmachine
 import board
-import main
+from mixfw import assemble
 from plan_only import retire_one, retire_all
 
 SKIPPED = (b"M109", b"M190", b"M116")
@@ -61,7 +61,7 @@ def file_lines(path, chunk_bytes=4096):
 def plan_file(path, mode):
     names = ["x", "y", "z"] + ["e%d" % i for i in range(board.SETTINGS["drives"])]
     simmachine.attach_world(board.PINS, names)
-    printer = main.build(files_root=None)
+    printer = assemble.build(files_root=None)
     mem = printer.mem
     hook = retire_all if mode == "empty" else retire_one
     printer.planner.idle = hook(mem, printer.planner.queue)

@@ -15,7 +15,7 @@ import simmachine
 
 sys.modules["machine"] = simmachine
 import board
-import main
+from mixfw import assemble
 from mixfw import stepper as st
 
 CALLS = 200000
@@ -48,7 +48,7 @@ def time_calls(fn, mem, out, endstops):
 def stepping_printer(settings, registers=False):
     if registers:
         settings = dict(settings, pin_writer="registers", chip="rp2040")
-    printer = main.build(main.Config(settings, None), files_root=None)
+    printer = assemble.build(assemble.Config(settings, None), files_root=None)
     # The register writer passes the bank, not a function, as `out`.
     printer.out = printer.pins.registers[0] if registers else printer.pins.out
     mem = printer.mem

@@ -108,8 +108,8 @@ def step_call_us():
     """(cost of one idle step-loop call in us, cost of an empty viper call), or an
     error text if the firmware isn't on the board."""
     try:
-        import main
-        printer = main.build(files_root=None)
+        from mixfw import assemble
+        printer = assemble.build(files_root=None)
     except Exception as e:  # report, don't fail: the pin and timer checks still count
         return None, None, "firmware not importable: %r" % (e,)
     return call_cost_us(printer.irq, STEP_CALLS), call_cost_us(_empty, STEP_CALLS), None

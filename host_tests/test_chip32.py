@@ -44,11 +44,11 @@ import sys, json
 import simmachine
 sys.modules["machine"] = simmachine
 import board
-import main
+from mixfw import assemble
 from plan_only import retire_one
 names = ["x", "y", "z"] + ["e%%d" %% i for i in range(board.SETTINGS["drives"])]
 simmachine.attach_world(board.PINS, names)
-printer = main.build(files_root=None)
+printer = assemble.build(files_root=None)
 printer.planner.idle = retire_one(printer.mem, printer.planner.queue)
 replies = []
 printer.reply = replies.append

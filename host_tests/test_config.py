@@ -10,7 +10,7 @@ from hypothesis import given, settings, strategies as st, HealthCheck
 
 from mixstep import paths
 
-# The whole simulated printer, assembled by main.py, with the configuration loaded at
+# The whole simulated printer, assembled by mixfw.assemble, with the configuration loaded at
 # boot from CFG_PATH. A counting applier shows when settings are applied.
 MACHINE = r"""
 import sys, json, simmachine, simtime
@@ -18,7 +18,7 @@ sys.modules["machine"] = simmachine
 sys.modules["time"] = simtime
 import board
 simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(6)])
-import main as firmware
+from mixfw import assemble as firmware
 from mixfw.console import StreamConsole
 
 console = StreamConsole(sys.stdin.buffer, sys.stdout.buffer, blocking=True)

@@ -8,11 +8,12 @@ LOOK_AHEAD = """
 import sys
 import simmachine
 sys.modules["machine"] = simmachine
-import board, main
+import board
+from mixfw import assemble
 from mixfw import lookahead, stepper as st
 
 simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%%d" %% i for i in range(6)])
-printer = main.build(files_root=None)
+printer = assemble.build(files_root=None)
 pl = printer.planner
 mem = printer.mem
 q = pl.queue

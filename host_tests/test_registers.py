@@ -108,12 +108,13 @@ def test_inverted_dir_pins_drive_the_motor_the_same_way(tmp_path, board):
 
 def test_rp2_needs_micropython_1_26_for_a_hard_timer(mp):
     out = mp.json("""
-import json, main
+import json
+from mixfw import assemble
 res = []
 for chip, version in (("rp2040", (1, 25, 0)), ("rp2350", (1, 24, 1)), ("rp2040", (1, 26, 0)),
                       ("esp32", (1, 20, 0)), ("sim", (1, 0, 0))):
     try:
-        main.check_timer_support(chip, version)
+        assemble.check_timer_support(chip, version)
         res.append("ok")
     except RuntimeError as e:
         res.append(str(e))

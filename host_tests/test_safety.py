@@ -81,7 +81,7 @@ def test_the_main_loop_leaves_heaters_and_drivers_off():
 def test_m997_leaves_the_firmware_once_for_an_update(tmp_path, mp):
     # Ctrl-C bytes are data while serving, so mpremote can't stop the firmware: M997
     # finishes the moves, turns everything off and leaves; on a board the next boot
-    # then skips the firmware once (main.repl_boot).
+    # then skips the firmware once (assemble.repl_boot).
     code, out = _run(["G1 X10 F3000", "M104 S200", "M997", "G1 X20"])
     assert code == 0
     report = json.loads(out[-1][6:])
@@ -93,8 +93,8 @@ def test_m997_leaves_the_firmware_once_for_an_update(tmp_path, mp):
     got = mp.run("""
         import sys, simmachine
         sys.modules['machine'] = simmachine
-        import main
-        print(main.repl_boot(%r), main.repl_boot(%r))
+        from mixfw import assemble
+        print(assemble.repl_boot(%r), assemble.repl_boot(%r))
     """ % (str(flag), str(flag)))
     assert got.splitlines()[-1] == "True False" and not flag.exists()
 

@@ -279,8 +279,9 @@ def test_fan_drives_its_pwm(mp):
         import json, sys, simmachine, simtime
         sys.modules["machine"] = simmachine
         sys.modules["time"] = simtime
-        import simanalog, board, main
-        p = main.build()
+        import simanalog, board
+        from mixfw import assemble
+        p = assemble.build()
         out = []
         for line in (b"M106 S128", b"M106", b"M107"):
             p.parser.parse(line, len(line))

@@ -160,7 +160,7 @@ def main():
     if opts["edges"]:
         simmachine.record_to(opts["edges"])
     before = _heap_bytes()
-    import main as firmware
+    from mixfw import assemble as firmware
     from mixfw.console import StreamConsole
     if opts["tcp"]:
         from mixfw.netconsole import TcpListener

@@ -15,7 +15,7 @@ import simthermal
 sys.modules["machine"] = simmachine
 sys.modules["time"] = simtime
 import board
-import main as firmware
+from mixfw import assemble as firmware
 from mixfw import stepper as st
 from mixfw.console import StreamConsole
 

@@ -1,1 +1,1 @@
-# mixstep firmware: one module per concern; main.py assembles them from the board's settings.
+# mixstep firmware: one module per concern; assemble.py assembles them from the board's settings.

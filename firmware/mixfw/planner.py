@@ -4,7 +4,7 @@
 # change reaches only moves queued after it.
 #
 # Pure logic: the hooks that touch the chip (waiting, masking the interrupt) are
-# passed in by main.py, so host tools can plan on CPython too.
+# passed in by assemble.py, so host tools can plan on CPython too.
 from array import array
 from math import frexp, ldexp, sqrt
 from mixfw.compat import const

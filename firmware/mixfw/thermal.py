@@ -242,7 +242,7 @@ class Heater:
 
 
 class Thermal:
-    """Every heater and the part fan of the board. Built by main.py."""
+    """Every heater and the part fan of the board. Built by assemble.py."""
 
     def __init__(self, machine, pin_map, settings, printer):
         self.printer = printer

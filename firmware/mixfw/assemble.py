@@ -1,0 +1,236 @@
+# Assembles the printer from the board's settings, as APrinter does in one place:
+# each part gets its pins, timer and parameters passed in, in dependency order. main.py
+# runs it at boot; the simulation calls run() with its own consoles.
+from array import array
+import gc
+import sys
+import machine
+import micropython
+import board
+from mixfw import stepper as st, mixer
+from mixfw.pins import Pins
+from mixfw.planner import Planner
+from mixfw.printer import Printer
+from mixfw.console import StreamConsole
+from mixfw.config import Config
+from mixfw.files import Files
+from mixfw.thermal import Thermal
+from mixfw.transition import Transitions, l0_mm
+from mixfw import cmd_motion, cmd_mixing, cmd_thermal, cmd_report, cmd_config, cmd_files, cmd_trace
+from mixfw import safety
+
+# Commands whose arguments are text, not numbers.
+RAW_COMMANDS = (cmd_config.RAW_COMMANDS + cmd_files.RAW_COMMANDS + cmd_mixing.RAW_COMMANDS
+                + cmd_report.RAW_COMMANDS)
+# Where G-code files for printing from flash live.
+FILES_ROOT = "/"
+# Where the configuration lives on the board's flash filesystem.
+CONFIG_PATH = "/mixstep.cfg"
+# Left by M997: the next boot skips the firmware once and leaves the REPL to mpremote.
+REPL_FLAG = "/mixstep.repl"
+
+
+def _ticks(us, tick_us):
+    return max(1, -(-us // tick_us))
+
+
+def load_config(path=CONFIG_PATH, warn=print):
+    """The board's defaults, overridden by the saved configuration if it is sound."""
+    config = Config(board.SETTINGS, path, warn=warn)
+    config.boot()
+    return config
+
+
+def _start_pio(mem, settings, pin_map):
+    """The step loop feeds a PIO state machine (rp2 only); returns what it calls."""
+    if settings.get("chip") not in ("rp2040", "rp2350"):
+        raise ValueError("step_backend pio needs an RP2040 or RP2350, not %r"
+                         % settings.get("chip"))
+    import rp2
+    from mixfw import pio
+    names = ["x", "y", "z"] + ["e%d" % i for i in range(settings["drives"])]
+    sm, first = pio.start(rp2, machine.Pin, pin_map, names, settings["tick_us"])
+    mem[st.S_PIO] = 1
+    mem[st.S_PIO_SHIFT] = first
+    mem[st.S_PIO_LATENCY] = pio.LATENCY_TICKS
+    return sm.put  # bound once: the interrupt must not look it up
+
+
+def build(config=None, pin_map=None, files_root=FILES_ROOT):
+    config = config or Config(board.SETTINGS, None)
+    settings = config.settings
+    pin_map = pin_map or board.PINS
+    tick_us = settings["tick_us"]
+    # Step-loop memory: one array for state, mixer, pin masks and the block ring; it
+    # and the DMA ring (step_backend pio_dma) are the largest blocks, so they come first.
+    capture = settings.get("trace_records", 0)
+    gc.collect()
+    mem = array("i", bytes(4 * st.mem_words(settings["queue_blocks"], capture)))
+    st.init_capture(mem, settings["queue_blocks"], capture)
+    feed = None
+    if settings.get("step_backend") == "pio_dma":
+        from mixfw import piodma
+        feed = piodma.Feed(machine, mem, settings, pin_map)
+    mem[st.S_PULSE_TICKS] = _ticks(settings["step_pulse_us"], tick_us)
+    mem[st.S_DIR_TICKS] = _ticks(settings["dir_setup_us"], tick_us)
+    mem[st.MIX_BASE + mixer.M_N] = settings["drives"]
+    mem[st.MIX_BASE + mixer.M_ID] = -1
+    pins = Pins(machine, pin_map, settings)
+    for i, m in enumerate(pins.step_masks):
+        mem[st.MASK_BASE + i] = m
+    for i, m in enumerate(pins.dir_masks):
+        mem[st.DIR_MASK_BASE + i] = m
+    out = pins.out
+    if settings.get("step_backend", "timer") == "pio":
+        out = _start_pio(mem, settings, pin_map)
+    elif pins.registers:
+        out, offsets = pins.registers
+        for i, word in enumerate(offsets):
+            mem[st.S_REG_SET + i] = word
+    printer = Printer(settings["line_buffer_bytes"], machine.idle, RAW_COMMANDS)
+    planner = Planner(mem, settings, printer.idle, machine.disable_irq, machine.enable_irq)
+    planner.dir_invert_mask = pins.dir_invert_mask
+    motion = cmd_motion.Motion(planner, pins, settings, printer.reply)
+    # A halt stops motion before anything is reported; steps the DMA ring still held
+    # never reached the pins, so they are taken back before the queue is dropped.
+    for stop in (printer.on_halt, printer.on_quick_stop):
+        if feed:
+            stop.append(feed.stop_and_take_back)
+        stop.append(planner.abort)
+        stop.append(motion.resync)
+    cmd_motion.register(printer, motion)
+    transitions = Transitions(
+        planner, l0_mm(settings["transition_l1_mm"], settings["transition_l2_mm"]),
+        settings["transition_pairs"], printer.reply)
+    if transitions.l0_mm > 0:
+        motion.queue = transitions
+        planner.before_sync.append(transitions.flush)
+        printer.on_halt.insert(0, motion.queue.drop)
+        printer.on_quick_stop.insert(0, motion.queue.drop)
+    mixing = cmd_mixing.Mixing(motion.queue, settings, config, printer.reply,
+                               lambda i: mem[st.S_DRIVE_POS + i])
+    config.before_save.append(mixing.filament_used_mm)
+    motion.before_extrude.append(mixing.before_extrude)
+    cmd_mixing.register(printer, mixing)
+    thermal = Thermal(machine, pin_map, settings, printer)
+    cmd_thermal.register(printer, thermal, motion)
+    cmd_report.register(printer, cmd_report.Reports(
+        printer, motion, planner, board.NAME,
+        storage=config.path is not None, files=bool(files_root)))
+    cmd_config.register(printer, config)
+    cmd_trace.register(printer, cmd_trace.Trace(mem, settings, printer.reply))
+    config.appliers.append(motion.apply)
+    config.appliers.append(thermal.apply)
+    config.appliers.append(mixing.apply)
+    if files_root:
+        cmd_files.register(printer, Files(files_root, printer))
+    printer.finish.append(planner.synchronize)
+    printer.mem = mem
+    printer.settings = settings
+    printer.planner = planner
+    printer.pins = pins
+    printer.motion = motion
+    printer.thermal = thermal
+    printer.irq = st.make_irq(mem, out, pins.endstops)
+    printer.feed = feed
+    if feed:  # the stopped feed runs again once everything else has stopped
+        printer.on_halt.append(feed.resume)
+        printer.on_quick_stop.append(feed.resume)
+    return printer
+
+
+# rp2 timer callbacks can be hard (run in the interrupt) only since MicroPython 1.26;
+# a soft one waits for the interpreter and would make the step timing worthless.
+HARD_TIMER_SINCE = (1, 26, 0)
+
+
+def check_timer_support(chip, version):
+    """Refuse to run the step loop on a MicroPython that can't time it properly."""
+    if chip in ("rp2040", "rp2350") and tuple(version[:3]) < HARD_TIMER_SINCE:
+        raise RuntimeError("mixstep needs MicroPython %d.%d or newer on %s for a hard "
+                           "machine.Timer; this is %d.%d.%d: flash a newer MicroPython"
+                           % (HARD_TIMER_SINCE[:2] + (chip,) + tuple(version[:3])))
+
+
+def start_timer(printer, tick_us):
+    """The timer owns the step loop: hard on rp2; soft on ESP32, whose timers have no
+    hard callbacks (see the README for the jitter that gives)."""
+    chip = printer.settings.get("chip", "sim")
+    if printer.feed:
+        printer.feed.start(printer.pins)  # the DMA IRQ runs the step loop: no timer
+        return printer.feed
+    check_timer_support(chip, sys.implementation.version)
+    freq = 1000000 // tick_us
+    if chip == "esp32":
+        return machine.Timer(0, mode=machine.Timer.PERIODIC, freq=freq, callback=printer.irq)
+    return machine.Timer(-1, mode=machine.Timer.PERIODIC, freq=freq, callback=printer.irq,
+                         hard=True)
+
+
+def board_consoles(settings):
+    """USB serial, a UART if configured, and TCP if the board is on a network."""
+    consoles = [StreamConsole(sys.stdin.buffer, sys.stdout.buffer)]
+    if settings.get("console_uart", -1) >= 0:
+        uart = machine.UART(settings["console_uart"], settings["console_baud"])
+        consoles.append(StreamConsole(uart, uart))
+    listeners = []
+    try:
+        import network
+        wlan = network.WLAN(network.STA_IF)
+        if wlan.isconnected() and settings.get("tcp_port"):
+            from mixfw.netconsole import TcpListener
+            listeners.append(TcpListener("0.0.0.0", settings["tcp_port"]))
+    except ImportError:
+        pass  # no network on this board
+    return consoles, listeners
+
+
+def run(consoles=None, listeners=(), printer=None, warnings=None, repl_flag=REPL_FLAG):
+    """Serve until every console closes or M997; repl_flag: where M997 leaves its flag
+    before the reset (None: no flag, no reset; the simulation)."""
+    if printer is None:
+        warnings = []
+        # The imports left garbage in every hole of the heap; collected first, the
+        # configuration's objects fill those holes and leave the large free blocks to
+        # the step loop's arrays (without it they end in pieces under 5 KB on rp2).
+        gc.collect()
+        printer = build(load_config(warn=warnings.append))
+    settings = printer.settings
+    timer = start_timer(printer, settings["tick_us"])
+    printer.add_background(safety.StepWatch(printer, printer.mem, settings["step_stall_ms"]))
+    safety.start_watchdog(machine, printer, settings["watchdog_ms"])
+    if consoles is None:
+        consoles, listeners = board_consoles(printer.settings)
+        printer.max_channels = len(consoles) + printer.settings.get("tcp_max_clients", 4)
+    for console in consoles:
+        printer.add_channel(console)
+        console.write("start\n")
+        for text in warnings or ():
+            console.write(text + "\n")
+    printer.listeners.extend(listeners)
+    # A host's 0x03 byte on the USB console is data, not Ctrl-C: it must not stop a
+    # print (and leave the heaters as they were).
+    micropython.kbd_intr(-1)
+    try:
+        printer.serve()
+    finally:
+        timer.deinit()
+        safety.all_off(printer)
+        micropython.kbd_intr(3)
+    if printer.leaving == "M997" and repl_flag:
+        with open(repl_flag, "w") as f:
+            f.write("M997\n")
+        machine.reset()
+    return printer
+
+
+def repl_boot(flag=REPL_FLAG):
+    """True once after M997: the flag is taken away and the firmware stays off."""
+    import os
+    try:
+        os.remove(flag)
+    except OSError:
+        return False
+    print("mixstep: not started (M997 asked for the REPL); reset to start it again")
+    return True
+
