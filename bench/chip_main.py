@@ -8,6 +8,8 @@
 #                          queue retired by hand as boards/sim/plan_only.py's retire_one
 #                          does; with STEP 1 the step path runs meanwhile (see
 #                          stepping_printer). Answers `bench:{json}`.
+#   profile FILE           plan FILE without stepping, then again with the planner's
+#                          functions timed (bench/chip_profile.py): `bench:{json}`.
 # Written against the firmware's API: assemble.build(files_root=None),
 # assemble.start_timer(printer, tick_us) (returns what has deinit()), printer.parser.parse,
 # printer.run_line, printer.planner (.idle, .queue, .synchronize), printer.mem with the
@@ -47,16 +49,17 @@ def stepper_steps(printer):
     return m[st.S_POS + st.X] + m[st.S_POS + st.Y] + abs(m[st.S_POS + st.E])
 
 
-def plan(path, stepping):
+def plan(path, stepping, profile=0):
+    """profile 1: also what a line allocates and what a collection costs; 2: the
+    planner's functions timed (chip_profile)."""
     gc.collect()
     stepper = stepping_printer() if stepping else None
     gc.collect()  # the second printer needs whole blocks the first one's garbage splits
     printer = assemble.build(files_root=None)
     planner = printer.planner
     planner.idle = retire_one(printer.mem, planner.queue)
-    parse = printer.parser.parse
     run_line = printer.run_line
-    run_line(parse(b"M302 P1", 7))
+    run_line(printer.parser.parse(b"M302 P1", 7))
     with open(path, "rb") as f:
         data = [raw.rstrip(b"\r\n") for raw in f]
     data = [raw for raw in data if raw[:4] not in SKIPPED]
@@ -67,6 +70,11 @@ def plan(path, stepping):
         timer = assemble.start_timer(stepper, stepper.settings["tick_us"])
         time.sleep_ms(300)  # past the move's acceleration, into its cruise
         steps0 = stepper_steps(stepper)
+    if profile == 2:
+        import chip_profile
+        from mixfw.gcode import command_key
+        timed = chip_profile.install(printer, command_key)
+    parse = printer.parser.parse
     gc.collect()
     free = gc.mem_free()
     errors = []
@@ -79,6 +87,21 @@ def plan(path, stepping):
                 errors.append("line %d: %r" % (number, e))
     planner.synchronize()
     us = time.ticks_diff(time.ticks_us(), t0)
+    if profile:
+        # What a line allocates (the collector held off for a few lines), and what one
+        # collection costs with the printer built.
+        gc.collect()
+        t = time.ticks_us()
+        gc.collect()
+        collect_us = time.ticks_diff(time.ticks_us(), t)
+        few = [raw for raw in data if raw[:3] == b"G1 "][:5]
+        gc.disable()
+        before = gc.mem_alloc()
+        for raw in few:
+            run_line(parse(raw, len(raw)))
+        allocated = gc.mem_alloc() - before
+        gc.enable()
+        planner.synchronize()
     out = {"lines": len(data), "move_lines": moves, "seconds": us / 1e6,
            "move_lines_per_s": moves * 1e6 / us, "errors": errors,
            "mem_free_before": free, "mem_free_after": gc.mem_free()}
@@ -86,6 +109,11 @@ def plan(path, stepping):
         out["stepper_steps_per_s"] = (stepper_steps(stepper) - steps0) * 1e6 / us
         out["stepper_still_moving"] = bool(stepper.planner.busy())
         timer.deinit()
+    if profile == 2:
+        out["functions"] = chip_profile.report(timed[0], timed[1], moves)
+    if profile:
+        out["bytes_allocated_per_line"] = allocated / len(few)
+        out["collect_us"] = collect_us
     return out
 
 
@@ -94,9 +122,14 @@ def serve():
         words = sys.stdin.readline().split()
         if not words:
             continue
-        if words[0] == "plan":
+        if words[0] in ("plan", "profile"):
             try:
-                res = plan(words[1], words[2] == "1")
+                if words[0] == "plan":
+                    res = plan(words[1], words[2] == "1")
+                else:
+                    res = plan(words[1], False, 1)
+                    gc.collect()
+                    res["timed"] = plan(words[1], False, 2)
             except Exception as e:  # said with its traceback and the heap left
                 trace = io.StringIO()
                 sys.print_exception(e, trace)

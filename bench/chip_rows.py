@@ -18,10 +18,12 @@ is slower. Three emulator sessions, one at a time:
             the underruns and the free heap.
 
     python bench/run.py --only chip
-    python bench/chip_rows.py [planner,stepping,cpu,print] [--board B] [--set K=V ...]
+    python bench/chip_rows.py [planner,stepping,cpu,print,profile] [--board B] [--set K=V ...]
                                                         (figures as JSON)
 
-`cpu` is the stepping part without its step-rate search. --board and --set run the
+`cpu` is the stepping part without its step-rate search. `profile` plans the planner
+part's lines with the planner's functions timed (bench/chip_profile.py): microseconds
+per G1 line in each, inclusive of what it calls and of the timing's own cost. --board and --set run the
 rows on another board or with settings laid over the board's (as `mixstep emu --set`),
 e.g. `--board pico --set step_backend=pio_dma` (pico_6drives' STEP/DIR pins are not
 one run of GPIOs, which the PIO backends need); the move is then mixed over the
@@ -184,26 +186,47 @@ def _compiled(out, modules):
     return files
 
 
-def chip_planner(res, work):
+def _planner_chip(work, requests):
+    """bench/chip_main.py's answers (JSON) to each request, on a chip of its own."""
     excerpt = work / "chip_plan.gcode"
     lines = paths.EXAMPLE_GCODE.read_text().splitlines()[PLAN_LINES[0] - 1:PLAN_LINES[1]]
     excerpt.write_text("\n".join(lines) + "\n")
     files = _compiled(work / "chip_flash", {
-        "chip_main": BENCH_DIR / "chip_main.py",
+        "chip_main": BENCH_DIR / "chip_main.py", "chip_profile": BENCH_DIR / "chip_profile.py",
         "plan_only": paths.BOARDS / "sim" / "plan_only.py"})
     files["plan.gcode"] = excerpt
-    with emu.Chip(BOARD, settings=OVERRIDES, files=files, max_emu_s=60,
+    got = []
+    with emu.Chip(BOARD, settings=OVERRIDES, files=files, max_emu_s=120,
                   max_wall_s=900) as chip:
-        got = {}
-        for stepping in (0, 1):
-            answer = chip.command("plan plan.gcode %d" % stepping, max_s=30)
+        for request in requests:
+            answer = chip.command(request, max_s=60)
             found = [t for t in answer if t.startswith("bench:")]
             if not found:
                 raise RuntimeError("chip_main.py answered %s" % answer)
             r = json.loads(found[0][len("bench:"):])
-            if r.get("failed") or r["errors"]:
+            if r.get("failed") or r["errors"] or r.get("timed", {}).get("errors"):
                 raise RuntimeError("planning on the chip: %s" % r)
-            got[stepping] = r
+            got.append(r)
+    return got
+
+
+def chip_profile(res, work):
+    """Where a G1 line's planning time goes on the chip, by function (inclusive)."""
+    r = _planner_chip(work, ["profile plan.gcode"])[0]
+    res["chip_profile_lines_per_s"] = r["move_lines_per_s"]
+    res["chip_profile_lines_per_s_timed"] = r["timed"]["move_lines_per_s"]
+    res["chip_profile_bytes_allocated_per_line"] = r["bytes_allocated_per_line"]
+    res["chip_profile_collect_us"] = r["collect_us"]
+    res["chip_profile_mem_free_bytes"] = r["mem_free_before"]
+    res["chip_profile_us_per_line"] = {
+        k: round(v["us_per_line"], 1) for k, v in sorted(
+            r["timed"]["functions"].items(), key=lambda kv: -kv[1]["us_per_line"])}
+    res["chip_profile_calls_per_line"] = {
+        k: round(v["calls_per_line"], 2) for k, v in r["timed"]["functions"].items()}
+
+
+def chip_planner(res, work):
+    got = dict(enumerate(_planner_chip(work, ["plan plan.gcode 0", "plan plan.gcode 1"])))
     r = got[1]
     if not r["stepper_still_moving"]:
         raise RuntimeError("the stepping printer's move ended before the planning did")
@@ -529,7 +552,7 @@ if __name__ == "__main__":
     args = ap.parse_args()
     configure(args.board, dict(emu._setting(t) for t in args.set))
     parts = args.parts.split(",")
-    for name, part in PARTS + (("cpu", chip_cpu),):
+    for name, part in PARTS + (("cpu", chip_cpu), ("profile", chip_profile)):
         if name in parts:
             part(out, work)
     if OVERRIDES or BOARD != "pico_6drives":

@@ -163,3 +163,34 @@ def test_the_schedule_is_the_same_integers_on_every_build_and_the_exact_trapezoi
         acc = case[4]
         assert abs(until - e_until) <= 1 and abs(after - e_after) <= 1, case
         assert abs(r_decel - e_decel) <= acc + 1, case
+
+
+# --- positions to steps without big ints (planner.scaled_round) --------------------
+
+SCALED_CASES = """
+import sys, json
+from mixfw.planner import scaled_round, steps_per_nm, div_round, spm_fixed, NM_PER_MM, SPM_SCALE
+out = []
+for spm, x in json.loads(sys.stdin.read()):
+    p, q = steps_per_nm(spm)
+    # Position to step (p/q) and step to position (q/p), against the product itself.
+    out.append([scaled_round(x, p, q), div_round(x * spm_fixed(spm), NM_PER_MM * SPM_SCALE),
+                scaled_round(x, q, p), div_round(x * NM_PER_MM * SPM_SCALE, spm_fixed(spm))])
+print(json.dumps(out))
+"""
+
+
+def test_positions_become_the_same_steps_as_by_the_full_product(mp):
+    """A position in nm to steps (and steps back to nm) by the reduced fraction, split so
+    the chips keep it in small ints, is the rounding of the full product, halves away
+    from zero included, for steps/mm the options allow and positions either side of 0."""
+    import random
+    rnd = random.Random(7)
+    cases = []
+    for spm in (80.0, 100.0, 400.0, 415.0, 93.42, 0.5, 2560.0, 837.123456, 3200.0):
+        for x in (0, 1, -1, 6250, -6250, 12500, 2 ** 29, -(2 ** 30), 10 ** 11):
+            cases.append([spm, x])
+        cases += [[spm, rnd.randint(-10 ** 12, 10 ** 12)] for _ in range(40)]
+    got = mp.json(SCALED_CASES, stdin=json.dumps(cases).encode())
+    for case, (a, b, c, d) in zip(cases, got):
+        assert a == b and c == d, case

@@ -1,7 +1,7 @@
 # Motion commands: G0/G1, G4, G28, G90/G91, G92, G20/G21, M82/M83, M400, M17/M18/M84.
 # Handlers parse and check; the planner does the work.
 from mixfw.gcode import GcodeError, letter_index
-from mixfw.planner import nm_from_mm, div_round, spm_fixed, NM_PER_MM, SPM_SCALE
+from mixfw.planner import nm_from_mm, scaled_round, steps_per_nm, NM_PER_MM
 from mixfw import stepper as st
 
 AXIS_LETTERS = "XYZE"
@@ -10,7 +10,6 @@ _AXIS_BITS = sum(1 << i for i in _AXIS_INDEX)  # in a parsed line's present mask
 _F_INDEX = letter_index("F")
 _E_INDEX = letter_index("E")
 _NM_DECIMALS = 6  # axis words are read as exact nanometres
-_NM_SPM_SCALE = NM_PER_MM * SPM_SCALE  # nm times fixed steps/mm -> steps
 # retract_policy: retractions follow the mix and run it exactly backwards, or pull every
 # drive equally (and push them back equally), or take back exactly the steps each drive
 # made in the latest extrusion (and push exactly those back).
@@ -32,7 +31,7 @@ class Motion:
         # print, and a chip's 32-bit floats would drift.
         self.pos_nm = [0, 0, 0]
         self.offset_nm = [0, 0, 0]
-        self._xyz_spm = [spm_fixed(s) for s in planner.steps_per_mm[:3]]
+        self._xyz_per_nm = [steps_per_nm(s) for s in planner.steps_per_mm[:3]]
         self._seen_nm = [None, None, None]  # see _steps
         self._seen_steps = [0, 0, 0]
         self.e_nm = 0  # logical E
@@ -70,7 +69,7 @@ class Motion:
         p.acceleration_mm_s2 = settings["acceleration_mm_s2"]
         p.retract_acceleration_mm_s2 = settings["retract_acceleration_mm_s2"]
         p.junction_deviation_mm = settings["junction_deviation_mm"]
-        self._xyz_spm = [spm_fixed(s) for s in p.steps_per_mm[:3]]
+        self._xyz_per_nm = [steps_per_nm(s) for s in p.steps_per_mm[:3]]
         self._seen_nm = [None, None, None]  # see _steps
         self._seen_steps = [0, 0, 0]
         p.set_position_steps(self.machine_steps())
@@ -106,7 +105,8 @@ class Motion:
         for i in range(3):
             # Back to the same steps when planned again: half a nanometre is far below
             # a step at any steps/mm the options allow.
-            self.pos_nm[i] = div_round(steps[i] * _NM_SPM_SCALE, self._xyz_spm[i]) \
+            p, q = self._xyz_per_nm[i]
+            self.pos_nm[i] = scaled_round(steps[i], q, p) \
                 - self.offset_nm[i]
 
     def machine_steps(self):
@@ -114,17 +114,17 @@ class Motion:
         return self._steps(self.pos_nm)
 
     def _steps(self, pos_nm):
-        spm = self._xyz_spm
+        per_nm = self._xyz_per_nm
         off = self.offset_nm
-        # The product is a big int on the chips, costlier than the rest of a move: an
-        # axis the move leaves where it was keeps the steps worked out last time.
+        # An axis the move leaves where it was keeps the steps worked out last time.
         seen_nm = self._seen_nm
         seen_steps = self._seen_steps
         steps = [0, 0, 0, self.planner.position_steps[3]]
         for i in range(3):
             nm = pos_nm[i] + off[i]
             if nm != seen_nm[i]:
-                seen_steps[i] = div_round(nm * spm[i], _NM_SPM_SCALE)
+                p, q = per_nm[i]
+                seen_steps[i] = scaled_round(nm, p, q)
                 seen_nm[i] = nm
             steps[i] = seen_steps[i]
         return steps

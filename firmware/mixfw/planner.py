@@ -104,6 +104,24 @@ def spm_fixed(steps_per_mm):
     return round_steps(steps_per_mm * SPM_SCALE)
 
 
+def steps_per_nm(steps_per_mm):
+    """Steps per nanometre as a reduced fraction (p, q) of the fixed steps/mm: 80
+    steps/mm is 1/12500. scaled_round(nm, p, q) is then a position's step."""
+    p = spm_fixed(steps_per_mm)
+    q = NM_PER_MM * SPM_SCALE
+    g = _gcd(q, p)
+    return p // g, q // g
+
+
+def scaled_round(x, p, q):
+    """div_round(x * p, q) (q > 0, p >= 0) without the product x * p, which is a big
+    int on the chips (31-bit small ints) for a position in nanometres: split as
+    x = h q + l, only l p (below q p) is multiplied. The same integer either way."""
+    a = x if x >= 0 else -x
+    r = (a // q) * p + (2 * (a % q) * p + q) // (2 * q)
+    return r if x >= 0 else -r
+
+
 def block_weights(counts):
     """Mixer weights that make the step loop give each drive exactly abs(counts[i])
     steps in a block (one whole period of the schedule); a block runs every drive the
@@ -279,13 +297,15 @@ class Planner:
 
     def _set_spm_fixed(self):
         self._spm_fixed = [spm_fixed(v) for v in self.drive_steps_per_mm]
+        self._per_nm = [steps_per_nm(v) for v in self.drive_steps_per_mm]
         # The longest extrusion that goes in one block (see add_move), worked out here
         # once: a big-int product per move costs the chips more than the rest of it.
         limit = NM_PER_MM * SPM_SCALE * (MAX_PERIOD - 2 * MAX_DRIVES)
         self._one_piece_nm = -(-limit // max(self._spm_fixed))
 
     def _nm_of_steps(self, i, steps):
-        return div_round(steps * (NM_PER_MM * SPM_SCALE), self._spm_fixed[i])
+        p, q = self._per_nm[i]
+        return scaled_round(steps, q, p)
 
     def _drive_pos_from_steps(self):
         self.drive_pos = ([self._nm_of_steps(i, self.drive_steps[i])
@@ -296,7 +316,7 @@ class Planner:
         e_nm nanometres shared by the weights."""
         w = weights or self.tool_mix
         total = sum(w)
-        spm = self._spm_fixed
+        per_nm = self._per_nm
         now = self.drive_pos
         now_nm, now_rem, now_total = now
         now_steps = self.drive_steps
@@ -308,7 +328,6 @@ class Planner:
         drive_rem = [0] * drives
         targets = [0] * drives
         counts = [0] * drives
-        unit = NM_PER_MM * SPM_SCALE * total
         for i in range(drives):
             rem = now_rem[i]
             if now_total != total and rem:
@@ -317,7 +336,13 @@ class Planner:
                 num = e_nm * w[i] + rem
                 nm = now_nm[i] + num // total
                 rem = num % total
-                target = div_round((nm * total + rem) * spm[i], unit)
+                p, q = per_nm[i]
+                # (nm + rem / total) * p / q, rounded: with no remainder (every
+                # one-drive tool) all in small ints.
+                if rem:
+                    target = scaled_round(nm * total + rem, p, q * total)
+                else:
+                    target = scaled_round(nm, p, q)
             else:
                 nm = now_nm[i]
                 target = known[i]
