@@ -3,6 +3,7 @@
 from mixfw.gcode import GcodeError, letter_index
 from mixfw.planner import nm_from_mm, scaled_round, steps_per_nm, NM_PER_MM
 from mixfw import stepper as st
+from mixfw.compat import micropython
 
 AXIS_LETTERS = "XYZE"
 _AXIS_INDEX = tuple(letter_index(ch) for ch in AXIS_LETTERS)
@@ -113,6 +114,7 @@ class Motion:
         """X Y Z as absolute steps from the logical position; E as planned (drive steps)."""
         return self._steps(self.pos_nm)
 
+    @micropython.native
     def _steps(self, pos_nm):
         per_nm = self._xyz_per_nm
         off = self.offset_nm
@@ -151,6 +153,8 @@ class Motion:
         self.enabled &= ~want
 
     # G0/G1 X Y Z E F: straight move. Example: G1 X10 Y5 E0.4 F1800
+    # Native code, as the planner's methods a line runs (see planner.py).
+    @micropython.native
     def g1(self, line):
         present = line.present
         if (present >> _F_INDEX) & 1:
@@ -193,6 +197,7 @@ class Motion:
         self.pos_nm = target
         return None
 
+    @micropython.native
     def _queue(self, steps, xyz, e_nm, feed_mm_s):
         """Queue a move of X Y Z (axes in xyz) to steps, with e_nm of filament."""
         if e_nm:
