@@ -12,6 +12,7 @@ from mixfw.ramp import mul_limbs, isqrt_limbs, ramp_into
 
 V2_SCALE = 64
 V2_MAX = const(0x1FFFFFFF)
+_GAIN_SCALE = 2.0 * V2_SCALE  # folded once: each float operation allocates on the chips
 
 # Words per slot in the planner's lk array.
 L_GAIN = const(0)  # the V2 a block gains over its length: 2 a mm
@@ -66,7 +67,7 @@ def v2(speed_mm_s):
 
 def v2_gain(accel_mm_s2, length_mm):
     """What a block of this length and acceleration adds to v**2 (2 a s), as V2."""
-    x = 2.0 * V2_SCALE * accel_mm_s2 * length_mm
+    x = _GAIN_SCALE * accel_mm_s2 * length_mm
     return V2_MAX if x >= V2_MAX else int(x + 0.5)
 
 

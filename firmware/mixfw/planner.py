@@ -508,7 +508,8 @@ class Planner:
             self.drive_pos = saved
         else:
             drive_pos, counts = self._plan_e(e_nm, mix[1] if mix else None)
-        e_mm = e_nm / NM_PER_MM  # for speeds only: steps come from the integers
+        # For speeds only: steps come from the integers.
+        e_mm = e_nm / NM_PER_MM if e_nm else 0.0
         e_steps = sum(counts)
         dx = target_steps[0] - pos[0]
         dy = target_steps[1] - pos[1]
@@ -534,18 +535,25 @@ class Planner:
             return False
         if n >= 0x3FFFFFFF:
             raise PlanError("move too long: %d steps" % n)
+        # Every float operation allocates on the chips: an axis the move leaves alone
+        # takes none, where its 0.0 would change no sum or product below.
         spm = self.steps_per_mm
-        x_mm = dx / spm[0]
-        y_mm = dy / spm[1]
-        z_mm = dz / spm[2]
+        x_mm = dx / spm[0] if dx else 0.0
+        y_mm = dy / spm[1] if dy else 0.0
+        z_mm = dz / spm[2] if dz else 0.0
         de_mm = e_steps / spm[3] if e_steps and not e_mm else e_mm
         d_mm = self._d_mm
         d_mm[0] = x_mm
         d_mm[1] = y_mm
         d_mm[2] = z_mm
         d_mm[3] = de_mm
-        xyz_mm = sqrt(x_mm * x_mm + y_mm * y_mm + z_mm * z_mm)
+        sq = x_mm * x_mm if dx else 0.0
+        if dy:
+            sq = sq + y_mm * y_mm if dx else y_mm * y_mm
+        if dz:
+            sq = sq + z_mm * z_mm if dx or dy else z_mm * z_mm
         along_xyz = dx or dy or dz
+        xyz_mm = sqrt(sq) if along_xyz else 0.0
         dist = xyz_mm if along_xyz else (de_mm if de_mm >= 0 else -de_mm)
         inv = 1.0 / dist
         speed = feed_mm_s
@@ -566,26 +574,38 @@ class Planner:
         v = self.max_step_rate * dist / n
         if v < speed:
             speed = v
-        len4 = sqrt(xyz_mm * xyz_mm + de_mm * de_mm)
+        if not de_mm:
+            len4 = sqrt(xyz_mm * xyz_mm)
+        elif along_xyz:
+            len4 = sqrt(xyz_mm * xyz_mm + de_mm * de_mm)
+        else:
+            len4 = sqrt(de_mm * de_mm)
         unit = self._units[0] if self.prev_unit is self._units[1] else self._units[1]
         inv = 1.0 / len4
-        unit[0] = x_mm * inv
-        unit[1] = y_mm * inv
-        unit[2] = z_mm * inv
-        unit[3] = de_mm * inv
+        unit[0] = x_mm * inv if dx else 0.0
+        unit[1] = y_mm * inv if dy else 0.0
+        unit[2] = z_mm * inv if dz else 0.0
+        unit[3] = de_mm * inv if de_mm else 0.0
 
         slot = self._new_slot()
         # Junction speed from the deviation model; a stop if the queue ran empty.
         max_entry = 0.0
         pu = self.prev_unit
         if pu is not None and not homing_axes:
-            cos_theta = -(pu[0] * unit[0] + pu[1] * unit[1] + pu[2] * unit[2] + pu[3] * unit[3])
-            if cos_theta < -0.999999:
+            # The cosine of the angle between the moves is -dot.
+            dot = pu[0] * unit[0] if dx else 0.0
+            if dy:
+                dot = dot + pu[1] * unit[1] if dx else pu[1] * unit[1]
+            if dz:
+                dot = dot + pu[2] * unit[2]
+            if de_mm:
+                dot = dot + pu[3] * unit[3]
+            if dot > 0.999999:
                 max_entry = _INF
-            elif cos_theta > 0.999999:
+            elif dot < -0.999999:
                 max_entry = 0.0
             else:
-                sin_half = sqrt(0.5 * (1.0 - cos_theta))
+                sin_half = sqrt(0.5 * (1.0 + dot))
                 max_entry = sqrt(accel * self.junction_deviation_mm * sin_half / (1.0 - sin_half))
             if speed < max_entry:
                 max_entry = speed
