@@ -178,9 +178,10 @@ def test_tmc_addresses():
 def test_settings_rules():
     assert_one(broken("esp32_devkit", settings={"step_backend": "pio"}), "pio", "rp2")
     assert broken("pico", settings={"step_backend": "pio"}) == []
-    # The sixth drive's pins (GPIO 21, 28) are not next to the others.
-    assert_one(broken("pico_6drives", settings={"step_backend": "pio"}), "pio",
-               "one run of GPIOs", "21, 28")
+    assert broken("pico_6drives", settings={"step_backend": "pio_dma"}) == []
+    # A sixth drive's DIR away from the other STEP/DIR pins.
+    assert_one(broken("pico_6drives", pins={"e5_dir": 28, "hotend_heater": 17},
+                      settings={"step_backend": "pio"}), "pio", "one run of GPIOs", "16, 28")
     assert_one(broken("pico", settings={"pin_writer": "fast"}), "pin_writer")
     assert_one(broken("pico", settings={"invert_dir": ("x", "e5")}), "invert_dir", "e5")
 
@@ -188,8 +189,14 @@ def test_settings_rules():
 def test_pico_6drives_trades_the_part_fan_for_a_sixth_drive():
     six, five = paths.load_board("pico_6drives"), paths.load_board("pico")
     assert six["SETTINGS"]["drives"] == 6 and "part_fan" not in six["PINS"]
-    assert (six["PINS"]["e5_step"], six["PINS"]["e5_dir"]) == (five["PINS"]["part_fan"], 28)
-    assert 28 not in five["PINS"].values()
+    # e5 next to e4, where pico has its ENABLE and hot end; those take the fan's GPIO
+    # and the spare 28. The rest is wired as on pico.
+    assert (six["PINS"]["e5_step"], six["PINS"]["e5_dir"]) == (16, 17)
+    assert six["PINS"]["x_enable"] == five["PINS"]["part_fan"]
+    assert six["PINS"]["hotend_heater"] == 28 and 28 not in five["PINS"].values()
+    moved = {"hotend_heater"} | {k for k in six["PINS"] if k.endswith("_enable")}
+    assert all(five["PINS"][k] == v for k, v in six["PINS"].items()
+               if k in five["PINS"] and k not in moved)
     # Every pin the Pico brings out is used.
     header = set(range(23)) | {26, 27, 28}
     assert set(six["PINS"].values()) == header

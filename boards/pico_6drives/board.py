@@ -9,12 +9,12 @@
 #   X/Y/Z min endstops      3
 #   hot end, bed            2
 #   thermistors (ADC0/1)    2   GPIO 26, 27
-# Every pin is used. The sixth drive takes the two pins that are left on boards/pico:
-# the part fan's GPIO 21 (STEP) and the spare GPIO 28 (DIR). With no fan output, M106
-# answers an error; run a part fan from the supply if the print needs cooling.
-# e5's pins are not next to the others, so the PIO backend (one run of GPIOs) is not
-# possible here; the hard timer with register writes is, as on boards/pico.
-# The heaters stay on two PWM slices (17: 0B, 19: 1B), both at 10 Hz.
+# Every pin is used. The sixth drive's STEP/DIR follow e4's on GPIO 16 and 17, so all
+# 18 STEP/DIR pins are one run of GPIOs (0-17), as the PIO backends need; the shared
+# ENABLE moves to the part fan's GPIO 21 and the hot end to the spare GPIO 28. With no
+# fan output, M106 answers an error; run a part fan from the supply if the print needs
+# cooling. Everything else is wired as on boards/pico.
+# The heaters are on two PWM slices (28: 6A, 19: 1B), both at 10 Hz.
 from mixfw import defaults
 
 NAME = "pico_6drives"
@@ -36,11 +36,11 @@ PINS = {
     "e2_step": 10, "e2_dir": 11,
     "e3_step": 12, "e3_dir": 13,
     "e4_step": 14, "e4_dir": 15,
-    "e5_step": 21, "e5_dir": 28,
+    "e5_step": 16, "e5_dir": 17,
     # One ENABLE for every driver: M18 X then releases all motors at once.
-    "x_enable": 16, "y_enable": 16, "z_enable": 16, "e0_enable": 16, "e1_enable": 16,
-    "e2_enable": 16, "e3_enable": 16, "e4_enable": 16, "e5_enable": 16,
-    "hotend_heater": 17,
+    "x_enable": 21, "y_enable": 21, "z_enable": 21, "e0_enable": 21, "e1_enable": 21,
+    "e2_enable": 21, "e3_enable": 21, "e4_enable": 21, "e5_enable": 21,
+    "hotend_heater": 28,
     "x_min": 18,
     "bed_heater": 19,
     "y_min": 20,
