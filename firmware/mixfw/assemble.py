@@ -63,13 +63,18 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     tick_us = settings["tick_us"]
     # Step-loop memory: one array for state, mixer, pin masks and the block ring; it
     # and the DMA ring (step_backend pio_dma) are the largest blocks, so they come first.
+    # The backend's module is imported before them: its code would split the free
+    # blocks they need.
     capture = settings.get("trace_records", 0)
+    piodma = None
+    if settings.get("step_backend") == "pio_dma":
+        from mixfw import piodma
+        import rp2  # noqa: F401 (Feed's; imported here for the same reason)
     gc.collect()
     mem = array("i", bytes(4 * st.mem_words(settings["queue_blocks"], capture)))
     st.init_capture(mem, settings["queue_blocks"], capture)
     feed = None
-    if settings.get("step_backend") == "pio_dma":
-        from mixfw import piodma
+    if piodma:
         feed = piodma.Feed(machine, mem, settings, pin_map)
     mem[st.S_PULSE_TICKS] = _ticks(settings["step_pulse_us"], tick_us)
     mem[st.S_DIR_TICKS] = _ticks(settings["dir_setup_us"], tick_us)
