@@ -12,7 +12,6 @@ from mixfw.ramp import mul_limbs, isqrt_limbs, ramp_into
 
 V2_SCALE = 64
 V2_MAX = const(0x1FFFFFFF)
-_GAIN_SCALE = 2.0 * V2_SCALE  # folded once: each float operation allocates on the chips
 
 # Words per slot in the planner's lk array.
 L_GAIN = const(0)  # the V2 a block gains over its length: 2 a mm
@@ -57,18 +56,6 @@ assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _S_QUEUE, _BLOCK_BASE, _B_WORDS, _B_N, _B_R
     st.S_HEAD, st.S_TAIL, st.S_ACTIVE, st.S_QUEUE, st.BLOCK_BASE, st.B_WORDS, st.B_N,
     st.B_RATE_INIT, st.B_RATE_NOM, st.B_RATE_FINAL, st.B_ACCEL, st.B_ACCEL_UNTIL,
     st.B_DECEL_AFTER, st.B_RATE_DECEL)
-
-
-def v2(speed_mm_s):
-    """A speed (float mm/s) as V2, within the range kept."""
-    x = speed_mm_s * speed_mm_s * V2_SCALE
-    return V2_MAX if x >= V2_MAX else int(x + 0.5)
-
-
-def v2_gain(accel_mm_s2, length_mm):
-    """What a block of this length and acceleration adds to v**2 (2 a s), as V2."""
-    x = _GAIN_SCALE * accel_mm_s2 * length_mm
-    return V2_MAX if x >= V2_MAX else int(x + 0.5)
 
 
 @micropython.viper

@@ -9,7 +9,6 @@ from array import array
 from math import frexp, ldexp, sqrt
 from mixfw.compat import const, micropython
 from mixfw import lookahead, ramp
-from mixfw.lookahead import v2 as v2_of, v2_gain
 from mixfw import stepper as st
 from mixfw.mixer import MAX_DRIVES, normalize
 from mixfw.stepper import schedule_counts
@@ -45,6 +44,10 @@ assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _BLOCK_BASE, _B_WORDS, _B_N, _B_STEPS, _B_D
     st.B_RATE_INIT, st.B_RATE_NOM, st.B_RATE_FINAL, st.B_ACCEL, st.B_ACCEL_UNTIL,
     st.B_DECEL_AFTER, st.B_RATE_DECEL)
 _ONE_F = float(st.ONE)
+_V2_SCALE = lookahead.V2_SCALE
+_V2_MAX = const(0x1FFFFFFF)
+_GAIN_SCALE = 2.0 * _V2_SCALE  # folded once: each float operation allocates on the chips
+assert _V2_MAX == lookahead.V2_MAX
 _L_WORDS = const(18)
 _L_GAIN = const(0)
 _L_MAX_ENTRY = const(1)
@@ -678,9 +681,14 @@ class Planner:
         if not n:
             lk[at + _L_DWELL] = 1
             return
-        lk[at + _L_GAIN] = v2_gain(accel, mm)
-        lk[at + _L_MAX_ENTRY] = v2_of(max_entry)
-        lk[at + _L_NOMINAL] = v2_of(nominal)
+        # Speeds as V2 within the range kept (lookahead.py); what the block adds to v**2
+        # over its length is 2 a s.
+        x = _GAIN_SCALE * accel * mm
+        lk[at + _L_GAIN] = _V2_MAX if x >= _V2_MAX else int(x + 0.5)
+        x = max_entry * max_entry * _V2_SCALE
+        lk[at + _L_MAX_ENTRY] = _V2_MAX if x >= _V2_MAX else int(x + 0.5)
+        x = nominal * nominal * _V2_SCALE
+        lk[at + _L_NOMINAL] = _V2_MAX if x >= _V2_MAX else int(x + 0.5)
         # mm/s -> the step loop's rate; mm/s**2 -> its rate change per tick.
         k = self._tick_one * n / mm
         acc = k * (accel * self.tick_s)
@@ -694,7 +702,7 @@ class Planner:
         lk[at + _L_RATE_NOM] = r_nom if r_nom > floor else floor
         # rate = k sqrt(V2 / V2_SCALE) = isqrt(V2 * K2) scaled by 2**K_SHIFT, with K2 in
         # [2**24, 2**26]: V2 * K2 stays below 2**55, and the root keeps 15 bits or more.
-        kk = k * k / lookahead.V2_SCALE
+        kk = k * k / _V2_SCALE
         e = frexp(kk)[1]
         shift = (e - 25) >> 1
         lk[at + _L_K2] = int(ldexp(kk, -2 * shift) + 0.5)
