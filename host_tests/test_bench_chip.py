@@ -100,3 +100,29 @@ def test_the_print_is_slicer_segments_of_about_0_2_mm_at_150_mm_s():
     assert len(lengths) > 3400
     assert 0.19 < float(np.median(lengths)) < 0.21 and max(lengths) < 0.31
     assert 9000 in feeds and sum(lengths) / 150 > 4.5  # seconds of printing at 150 mm/s
+
+
+def test_alloc_profile_counts_what_each_planner_function_allocates():
+    """bench/alloc_profile.py (bench/chip_profile.py's wrappers, counting the heap) on
+    the unix port: every G1 line goes through g1 and the planner once, and a function
+    allocates no more than the one that calls it."""
+    import json
+    import os
+    import subprocess
+    env = paths.micropython_env(chip_rows.BOARD)
+    env["MICROPYPATH"] += os.pathsep + str(paths.ROOT / "bench")
+    proc = subprocess.run(
+        [paths.micropython(), "-X", "heapsize=16M", str(paths.ROOT / "bench" / "alloc_profile.py"),
+         str(paths.EXAMPLE_GCODE), "3000", "3100"],
+        capture_output=True, env=env, timeout=600, text=True)
+    assert proc.returncode == 0, proc.stderr
+    got = json.loads(proc.stdout.strip().splitlines()[-1])
+    fns = got["functions"]
+    assert got["move_lines"] > 90 and got["bytes_per_line"] > 0
+    for name in ("g1", "planner._add_block", "planner._plan_e", "planner._set_plan"):
+        assert 0.9 <= fns[name]["calls_per_line"] <= 1.1, name
+    for inner, outer in (("planner._add_block", "planner.add_move"),
+                         ("planner._set_plan", "planner._add_block"),
+                         ("planner.add_move", "g1")):
+        assert fns[inner]["bytes_per_line"] <= fns[outer]["bytes_per_line"]
+    assert fns["g1"]["bytes_per_line"] <= got["bytes_per_line"]
