@@ -4,7 +4,6 @@
 # lines run, so the heap must hold them all (-X heapsize).
 #   MICROPYPATH=firmware:boards/sim:bench micropython -X heapsize=16M bench/alloc_profile.py FILE [FIRST LAST]
 import sys
-import gc
 import json
 import simmachine
 
@@ -30,14 +29,7 @@ def main(path, first, last):
     data = [raw for raw in data if raw[:4] not in SKIPPED]
     moves = sum(1 for raw in data if raw[:3] in (b"G1 ", b"G0 "))
     labels, totals = chip_profile.install(printer, command_key, heap=True)
-    parse = printer.parser.parse
-    gc.collect()
-    gc.disable()
-    before = gc.mem_alloc()
-    for raw in data:
-        run_line(parse(raw, len(raw)))
-    allocated = gc.mem_alloc() - before
-    gc.enable()
+    allocated = chip_profile.bytes_allocated(run_line, printer.parser.parse, data)
     functions = chip_profile.report(labels, totals, moves, "bytes")
     print(json.dumps({"move_lines": moves, "bytes_per_line": allocated / moves,
                       "functions": functions}))

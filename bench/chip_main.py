@@ -94,13 +94,9 @@ def plan(path, stepping, profile=0):
         t = time.ticks_us()
         gc.collect()
         collect_us = time.ticks_diff(time.ticks_us(), t)
+        import chip_profile
         few = [raw for raw in data if raw[:3] == b"G1 "][:5]
-        gc.disable()
-        before = gc.mem_alloc()
-        for raw in few:
-            run_line(parse(raw, len(raw)))
-        allocated = gc.mem_alloc() - before
-        gc.enable()
+        allocated = chip_profile.bytes_allocated(run_line, parse, few)
         planner.synchronize()
     out = {"lines": len(data), "move_lines": moves, "seconds": us / 1e6,
            "move_lines_per_s": moves * 1e6 / us, "errors": errors,

@@ -79,6 +79,19 @@ def install(printer, command_key, heap=False):
     return labels, totals
 
 
+def bytes_allocated(run_line, parse, lines):
+    """What running the lines allocates, the collector held off (the heap must hold it
+    all)."""
+    gc.collect()
+    gc.disable()
+    before = gc.mem_alloc()
+    for raw in lines:
+        run_line(parse(raw, len(raw)))
+    allocated = gc.mem_alloc() - before
+    gc.enable()
+    return allocated
+
+
 def report(labels, totals, lines, unit="us"):
     return {label: {unit + "_per_line": totals[i] / lines,
                     "calls_per_line": totals[i + 1] / lines}
