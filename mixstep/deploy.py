@@ -196,15 +196,25 @@ def send_m997(port):
     import serial  # pyserial, which mpremote needs too
     import time
     try:
-        with serial.Serial(port, 115200, timeout=0.2) as link:
-            link.write(b"\nM997\n")
-            link.flush()
-            deadline = time.monotonic() + 3.0
-            text = b""
-            while time.monotonic() < deadline and b"ok" not in text and b">>>" not in text:
-                text += link.read(256)
+        link = serial.Serial(port, 115200, timeout=0.2)
     except (serial.SerialException, OSError) as e:
         raise DeployError("could not open %s: %s" % (port, e))
+    try:
+        link.write(b"\nM997\n")
+        link.flush()
+    except (serial.SerialException, OSError) as e:
+        link.close()
+        raise DeployError("could not write to %s: %s" % (port, e))
+    text = b""
+    with link:
+        try:
+            deadline = time.monotonic() + 3.0
+            while time.monotonic() < deadline and b"ok" not in text and b">>>" not in text:
+                text += link.read(256)
+        except (serial.SerialException, OSError):
+            # The port went away after M997, before its ok was read: the board is
+            # resetting, which only mixstep does on M997 (a REPL answers an error).
+            return True
     return b"ok" in text
 
 
