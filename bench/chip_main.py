@@ -70,8 +70,9 @@ def plan(path, stepping, profile=0):
         timer = assemble.start_timer(stepper, stepper.settings["tick_us"])
         time.sleep_ms(300)  # past the move's acceleration, into its cruise
         steps0 = stepper_steps(stepper)
-    if profile == 2:
+    if profile:
         import chip_profile
+    if profile == 2:
         from mixfw.gcode import command_key
         timed = chip_profile.install(printer, command_key)
     parse = printer.parser.parse
@@ -94,7 +95,6 @@ def plan(path, stepping, profile=0):
         t = time.ticks_us()
         gc.collect()
         collect_us = time.ticks_diff(time.ticks_us(), t)
-        import chip_profile
         few = [raw for raw in data if raw[:3] == b"G1 "][:5]
         allocated = chip_profile.bytes_allocated(run_line, parse, few)
         planner.synchronize()

@@ -10,7 +10,7 @@
 # the time goes, and the unwrapped run beside them says how fast the lines really go.
 import gc
 import time
-from mixfw import planner as planner_mod, lookahead, ramp
+from mixfw import planner as planner_mod, lookahead
 
 # (label, owner, attribute): owner is a name looked up in `targets` below.
 TIMED = (
@@ -47,11 +47,10 @@ def _minus(a, b):
 
 
 def _targets(printer):
-    g1 = printer.commands
     motion = printer.motion
-    return {"parser": printer.parser, "commands": g1, "motion": motion,
+    return {"parser": printer.parser, "commands": printer.commands, "motion": motion,
             "before_extrude": motion.before_extrude, "planner": printer.planner,
-            "planner_mod": planner_mod, "lookahead": lookahead, "ramp": ramp}
+            "planner_mod": planner_mod, "lookahead": lookahead}
 
 
 def install(printer, command_key, heap=False):

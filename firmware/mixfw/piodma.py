@@ -86,20 +86,18 @@ def seg_words(batch_ticks):
     return (3 * batch_ticks) // 2 + 3 + st.BATCH_MIN_WORDS
 
 
-def batch_ticks(settings, batch_us=BATCH_US, pins=0):
+def batch_ticks(tick_us, batch_us, pins):
     """Ticks a batch runs: batch_us, or less where a word's hold, in the bits the pins
     leave, could not count that long (a hold lasts a batch and a tick at most)."""
-    tick_us = settings["tick_us"]
-    ticks = batch_us // tick_us
-    if pins:
-        ticks = min(ticks, ((1 << (32 - pins)) - 1) // (tick_us * CYCLES_PER_US) - 1)
+    ticks = min(batch_us // tick_us,
+                ((1 << (32 - pins)) - 1) // (tick_us * CYCLES_PER_US) - 1)
     return max(1, ticks)
 
 
-def make_ring(settings, batch_us=BATCH_US, pins=0):
-    """The ring, to be allocated early: a few kB in one block, which the heap may
-    not have in one piece once the firmware is built."""
-    return array("i", bytes(4 * SEGMENTS * seg_words(batch_ticks(settings, batch_us, pins))))
+def make_ring(ticks):
+    """The ring for batches of this many ticks, to be allocated early: a few kB in one
+    block, which the heap may not have in one piece once the firmware is built."""
+    return array("i", bytes(4 * SEGMENTS * seg_words(ticks)))
 
 
 @micropython.viper
@@ -158,15 +156,15 @@ class Feed:
         self.mem = mem
         self.settings = settings
         self.sm_id = sm_id
-        self.batch_us = batch_us
         self.names = ["x", "y", "z"] + ["e%d" % i for i in range(settings["drives"])]
         self.first, self.count = out_range(pin_map, self.names)
-        hold_cycles = (batch_ticks(settings, batch_us, self.count) + 1) \
-            * settings["tick_us"] * CYCLES_PER_US
+        self.ticks = batch_ticks(settings["tick_us"], batch_us, self.count)
+        hold_cycles = (self.ticks + 1) * settings["tick_us"] * CYCLES_PER_US
         if hold_cycles >> (32 - self.count):
-            raise ValueError("step_backend pio_dma: %d STEP/DIR pins leave %d bits for a "
-                             "tick of %d cycles" % (self.count, 32 - self.count, hold_cycles))
-        self.ring = make_ring(settings, batch_us, self.count)
+            raise ValueError("step_backend pio_dma: %d STEP/DIR pins leave %d bits, too "
+                             "few for a hold of %d cycles" % (self.count, 32 - self.count,
+                                                                hold_cycles))
+        self.ring = make_ring(self.ticks)
         self.dmas = [rp2.DMA(), rp2.DMA()]
         self.pins = None
         self.sm = None
@@ -178,7 +176,7 @@ class Feed:
         self.pins = pins
         self.out_base = self.machine.Pin(self.first)
         tick_us = settings["tick_us"]
-        ticks = batch_ticks(settings, self.batch_us, self.count)
+        ticks = self.ticks
         mem[st.S_PIO] = 2
         mem[st.S_PIO_SHIFT] = self.first
         mem[st.R_TC] = tick_us * CYCLES_PER_US

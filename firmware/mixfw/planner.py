@@ -577,6 +577,8 @@ class Planner:
         v = self.max_step_rate * dist / n
         if v < speed:
             speed = v
+        # Each case is the sum of squares with its zero terms left out (not xyz_mm or
+        # abs(de_mm) themselves), so every record stays the same to the bit.
         if not de_mm:
             len4 = sqrt(xyz_mm * xyz_mm)
         elif along_xyz:
