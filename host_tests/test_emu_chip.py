@@ -231,6 +231,24 @@ def test_m112_mid_move_stops_motion_at_once(chip, backend):
     assert len(rises(c.edges(), "x_step")) == len(x) + 80
 
 
+@pytest.mark.parametrize("backend", ["timer", "pio_dma"])
+def test_homing_stops_at_the_switch(chip, backend):
+    """G28 from 20 mm and 10 mm away. With pio_dma the step loop runs batches ahead of
+    the pins and sees the endstop late: the state machine made by rp2.asm_pio holds
+    the pins from the switch on (its jmp pin), and the steps the ring held are taken
+    back. By the trace the axes never pass the switch (the emulated endstop reads
+    triggered at 0 and below), and M114's Count is 0 there."""
+    c = chip(settings={"step_backend": backend})
+    for line in ("G91", "G1 X20 Y10 F6000", "G90", "G28 X Y", "G1 X1 F3000", "M400"):
+        assert c.command(line)[-1] == "ok", line
+    assert {a: n for a, n in count(c.command("M114")).items() if a in "xy"} == {"x": 80, "y": 0}
+    edges = c.edges()
+    for axis, end in (("x", 80), ("y", 0)):
+        _, pos = trace.positions_of(*edges, "pico", axis)
+        assert pos.min() == 0 and pos.max() == 20 * XY_SPM // (2 if axis == "y" else 1)
+        assert pos[-1] == end, axis
+
+
 def test_print_from_the_emulated_flash(chip, tmp_path):
     """A real slicer excerpt on the emulated flash next to the firmware, selected with
     M23 and started with M24: the printer reads it line by line between console

@@ -83,3 +83,22 @@ def test_m112_mid_move_leaves_the_count_where_the_pins_stopped(tmp_path):
     count = [t for t in p.send("M114") if " Count " in t][0]
     assert int(count.split(" Count ")[1].split()[0][2:]) == halted_x + 80
     assert p.finish()["steps"]["x"] == halted_x + 80
+
+
+@pytest.mark.parametrize("backend", ["timer", "pio_dma"])
+def test_homing_stops_the_pins_at_the_switch(tmp_path, backend):
+    """The step loop runs batches ahead of the pins with pio_dma, so it sees the
+    endstop late; the state machine holds the pins from the switch on (its jmp pin)
+    and the steps the ring still held are taken back. The axis never goes past the
+    switch (the simulated endstop reads triggered at 0 and below), and home is where
+    the switch is, as with the timer."""
+    p, edges, said = run(tmp_path, backend, {"step_backend": backend},
+                         ["G28", "G91", "G1 X30 Y20 Z2 F6000", "G90", "G28 X Y",
+                          "G28 Z", "G1 X1 F3000", "M400"])
+    count = [t for t in p.send("M114") if " Count " in t][0]
+    assert count.split(" Count ")[1].split()[:3] == ["X:80", "Y:0", "Z:0"]
+    assert p.finish()["steps"]["x"] == 80
+    t, g, v = trace.read_edges(edges)
+    for axis in "xyz":
+        _, pos = trace.positions_of(t, g, v, BOARD, axis)
+        assert pos.min() == 0 and pos[-1] == (80 if axis == "x" else 0), axis

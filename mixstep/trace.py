@@ -54,27 +54,33 @@ def net_steps(edges_path, board="sim"):
 def net_steps_of(times, gpios, levels, board="sim"):
     """net_steps() of edges already read (read_edges' arrays, or a part of them from
     the start)."""
+    pins = paths.load_board(board)["PINS"]
+    result = {}
+    for name in pins:
+        if name.endswith("_step"):
+            _, pos = positions_of(times, gpios, levels, board, name[:-5])
+            result[name[:-5]] = int(pos[-1]) if len(pos) else 0
+    return result
+
+
+def positions_of(times, gpios, levels, board, axis):
+    """The times of `axis`'s steps (rising STEP edges) and its position, in steps from
+    where the trace starts, after each."""
     spec = paths.load_board(board)
     pins = spec["PINS"]
-    inverted = spec["SETTINGS"].get("invert_dir", ())
-    result = {}
-    for name, gpio in pins.items():
-        if not name.endswith("_step"):
-            continue
-        axis = name[:-5]
-        dir_gpio = pins[axis + "_dir"]
-        sel = (gpios == gpio) | (gpios == dir_gpio)
-        g = gpios[sel]
-        lv = levels[sel]
-        t = times[sel]
-        is_dir = g == dir_gpio
-        # DIR level in force at each record (records are in time order).
-        dir_level = np.maximum.accumulate(np.where(is_dir, np.arange(len(g)), -1))
-        level_at = np.where(dir_level >= 0, lv[np.maximum(dir_level, 0)], 0)
-        rising = (~is_dir) & (lv == 1) & (t > 0)
-        forward = 0 if axis in inverted else 1
-        result[axis] = int(np.sum(np.where(level_at[rising] == forward, 1, -1)))
-    return result
+    gpio = pins[axis + "_step"]
+    dir_gpio = pins[axis + "_dir"]
+    sel = (gpios == gpio) | (gpios == dir_gpio)
+    g = gpios[sel]
+    lv = levels[sel]
+    t = times[sel]
+    is_dir = g == dir_gpio
+    # DIR level in force at each record (records are in time order).
+    dir_level = np.maximum.accumulate(np.where(is_dir, np.arange(len(g)), -1))
+    level_at = np.where(dir_level >= 0, lv[np.maximum(dir_level, 0)], 0)
+    rising = (~is_dir) & (lv == 1) & (t > 0)
+    forward = 0 if axis in spec["SETTINGS"].get("invert_dir", ()) else 1
+    return t[rising], np.cumsum(np.where(level_at[rising] == forward, 1, -1))
 
 
 def add_parser(sub):

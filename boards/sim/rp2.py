@@ -4,7 +4,9 @@
 #   out when the previous one has had its tick, or when it arrives if the FIFO ran empty;
 # - step_events (mixfw/piodma.py) takes words of levels (low bits, one per pin) and a
 #   count above them: the levels come out one cycle after the pull, the next pull is
-#   count + 4 cycles after this one.
+#   count + 4 cycles after this one;
+# - step_events_hold_high / _hold_low (homing) look at the jmp pin first: no word is
+#   pulled while it reads high / low, and each word takes a cycle more.
 # The DMA: channels whose registers are a RAM bank laid out as the RP2040's (the
 # firmware writes it with ptr32), reading words from one RAM array (address 0 is its
 # first byte), paced by the state machine's 8-word TX FIFO, with CHAIN_TO and an IRQ
@@ -34,9 +36,13 @@ def asm_pio(**options):
 
 
 class StateMachine:
-    def __init__(self, sm_id, program, freq, out_base):
-        if program["name"] == "step_events":
-            _engine.attach(out_base.gpio, len(program["out_init"]), freq)
+    def __init__(self, sm_id, program, freq, out_base, jmp_pin=None):
+        name = program["name"]
+        if name.startswith("step_events"):
+            hold = None
+            if name != "step_events":
+                hold = (jmp_pin, 1 if name == "step_events_hold_high" else 0)
+            _engine.attach(out_base.gpio, len(program["out_init"]), freq, hold)
             self.put = _engine.put
             self.active = _engine.active
             self.tx_fifo = _engine.tx_fifo
@@ -134,6 +140,8 @@ class _Engine:
         self.base = 0
         self.count = 0
         self.per_us = 8
+        self.hold = None
+        self.word_cycles = 4
         self.t = 0  # cycles: the time of the last thing done
         self.ready = 0  # cycle of the state machine's next pull
         self.pending = []  # (cycle, channel) of IRQs held back (set_irq_delay)
@@ -147,9 +155,11 @@ class _Engine:
         self.dmas[ch] = dma
         return ch
 
-    def attach(self, base, count, freq):
+    def attach(self, base, count, freq, hold=None):
         self.base = base
         self.count = count
+        self.hold = hold  # (jmp pin, level that holds the pins), or None
+        self.word_cycles = 4 if hold is None else 5
         self.per_us = freq // 1000000
         self.fifo = []
         self.on = False
@@ -261,10 +271,13 @@ class _Engine:
                     continue
             if not self.fifo or pull > until:
                 break
+            if self.hold and self.hold[0].value() == self.hold[1]:
+                self.t = until  # held at the jmp pin (nothing moves, so it stays)
+                return
             word = self.fifo.pop(0) & 0xFFFFFFFF
             self.t = pull
             self._output(word & ((1 << self.count) - 1), pull + 1)
-            self.ready = pull + 4 + (word >> self.count)
+            self.ready = pull + self.word_cycles + (word >> self.count)
         if self.t < until and not self.fifo:
             self.t = until  # stalled on an empty FIFO until then
 

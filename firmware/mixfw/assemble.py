@@ -96,6 +96,7 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     planner = Planner(mem, settings, printer.idle, machine.disable_irq, machine.enable_irq)
     planner.dir_invert_mask = pins.dir_invert_mask
     motion = cmd_motion.Motion(planner, pins, settings, printer.reply)
+    motion.feed = feed
     # A halt stops motion before anything is reported; steps the DMA ring still held
     # never reached the pins, so they are taken back before the queue is dropped.
     for stop in (printer.on_halt, printer.on_quick_stop):

@@ -27,6 +27,7 @@ class Motion:
         self.planner = planner
         self.queue = planner  # where moves go: the planner, or Transitions in front of it
         self.pins = pins
+        self.feed = None  # step_backend pio_dma's Feed (assemble sets it)
         # Logical X Y Z as G-code sees it, and their G92 offsets (machine = logical +
         # offset), in integers (nanometres) as E is: relative moves add up over a whole
         # print, and a chip's 32-bit floats would drift.
@@ -259,15 +260,25 @@ class Motion:
         axes = [i for i in range(3) if line.has(AXIS_LETTERS[i])] or [0, 1, 2]
         planner = self.planner
         mem = planner.mem
+        feed = self.feed
         for i in axes:
             planner.synchronize()
             self.enable_for(1 << i)
             target = list(planner.position_steps)
             reach_mm = 1.5 * self.travel_mm[i]
             target[i] -= int(reach_mm * planner.steps_per_mm[i] + 0.5)
-            planner.add_move(target, self.homing_feed_mm_s[i], homing_axes=1 << i,
-                             dir_masks=self.dir_masks)
-            planner.synchronize()
+            if feed:
+                feed.watch_endstop(self.pins.endstop_pins[i], self.pins.endstop_level)
+            try:
+                planner.add_move(target, self.homing_feed_mm_s[i], homing_axes=1 << i,
+                                 dir_masks=self.dir_masks)
+                if feed:
+                    self._home_on_feed(i)
+                else:
+                    planner.synchronize()
+            finally:
+                if feed:
+                    feed.watch_endstop(None)
             if not (mem[st.S_HOME_STOP] >> i) & 1:
                 raise GcodeError("homing %s failed: no endstop within %.0f mm"
                                  % (AXIS_LETTERS[i], reach_mm))
@@ -278,6 +289,25 @@ class Motion:
             self.pos_nm[i] = 0
             self.offset_nm[i] = 0
         return None
+
+    def _home_on_feed(self, axis):
+        """step_backend pio_dma: the step loop runs batches ahead of the pins, so it
+        sees the endstop late, but the state machine holds the pins from the word after
+        the switch (watch_endstop): once the endstop reads triggered, every step the
+        pins never got is taken back, as on a quick stop, and the axis is where the
+        switch is, as with the timer."""
+        planner = self.planner
+        bit = 1 << axis
+        endstops = self.pins.endstops
+        while planner.busy():
+            if endstops() & bit:
+                self.feed.stop_and_take_back()
+                planner.abort()
+                self.resync()
+                planner.mem[st.S_HOME_STOP] |= bit
+                self.feed.resume()
+                return
+            planner.idle()
 
     # G90 / G91: absolute / relative coordinates (E follows, as in Marlin).
     def g90(self, line):

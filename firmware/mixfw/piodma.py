@@ -169,6 +169,7 @@ class Feed:
         self.pins = None
         self.sm = None
         self.running = False
+        self.watch = None  # (endstop Pin, level it reads when triggered) while homing
 
     def _setup(self, pins):
         """The step loop's words for the ring, and the IRQ handlers."""
@@ -228,19 +229,22 @@ class Feed:
             refill(mem, io, 1)
 
         self.handlers = (irq0, irq1)
-        self.program = self._program()  # assembled once: it takes ms on the chip
+        # Assembled once: it takes ms on the chip. The homing ones first look at the
+        # endstop (the state machine's jmp pin) and hold every pin where it is from the
+        # word after it reads triggered: high, or low.
+        self.programs = {None: self._program(), 1: self._program(1), 0: self._program(0)}
 
-    def _program(self):
+    def _program(self, hold_while=None):
         rp2 = self.rp2
         pins_n = self.count
         hold_n = 32 - pins_n
+        options = dict(out_init=(rp2.PIO.OUT_LOW,) * self.count,
+                       out_shiftdir=rp2.PIO.SHIFT_RIGHT, fifo_join=rp2.PIO.JOIN_TX)
 
         # The assembler swaps the module's globals for its own names while it runs:
-        # the counts come in as closure variables.
-        @rp2.asm_pio(out_init=(rp2.PIO.OUT_LOW,) * self.count,
-                     out_shiftdir=rp2.PIO.SHIFT_RIGHT, fifo_join=rp2.PIO.JOIN_TX)
+        # the counts come in as closure variables. noqa: F821 below: its names.
+        @rp2.asm_pio(**options)
         def step_events():
-            # noqa: F821 below: the PIO assembler's names.
             wrap_target()  # noqa: F821
             pull(block)  # noqa: F821
             out(pins, pins_n)  # noqa: F821
@@ -249,7 +253,36 @@ class Feed:
             jmp(x_dec, "wait")  # noqa: F821
             wrap()  # noqa: F821
 
-        return step_events
+        # One cycle more per word than step_events (the simulated chip counts it too).
+        @rp2.asm_pio(**options)
+        def step_events_hold_high():
+            wrap_target()  # noqa: F821
+            label("top")  # noqa: F821
+            jmp(pin, "top")  # noqa: F821
+            pull(block)  # noqa: F821
+            out(pins, pins_n)  # noqa: F821
+            out(x, hold_n)  # noqa: F821
+            label("wait")  # noqa: F821
+            jmp(x_dec, "wait")  # noqa: F821
+            wrap()  # noqa: F821
+
+        @rp2.asm_pio(**options)
+        def step_events_hold_low():
+            wrap_target()  # noqa: F821
+            label("top")  # noqa: F821
+            jmp(pin, "go")  # noqa: F821
+            jmp("top")  # noqa: F821
+            label("go")  # noqa: F821
+            pull(block)  # noqa: F821
+            out(pins, pins_n)  # noqa: F821
+            out(x, hold_n)  # noqa: F821
+            label("wait")  # noqa: F821
+            jmp(x_dec, "wait")  # noqa: F821
+            wrap()  # noqa: F821
+
+        if hold_while is None:
+            return step_events
+        return step_events_hold_high if hold_while else step_events_hold_low
 
     def _fill(self, seg):
         mem = self.mem
@@ -265,8 +298,13 @@ class Feed:
             self._setup(pins)
         mem = self.mem
         rp2 = self.rp2
-        self.sm = rp2.StateMachine(self.sm_id, self.program, freq=PIO_HZ,
-                                   out_base=self.out_base)
+        if self.watch:
+            pin, level = self.watch
+            self.sm = rp2.StateMachine(self.sm_id, self.programs[level], freq=PIO_HZ,
+                                       out_base=self.out_base, jmp_pin=pin)
+        else:
+            self.sm = rp2.StateMachine(self.sm_id, self.programs[None], freq=PIO_HZ,
+                                       out_base=self.out_base)
         mem[st.R_LAST] = 0
         for seg in range(SEGMENTS):
             self._fill(seg)
@@ -370,6 +408,15 @@ class Feed:
         if not self.running:
             self.start()
 
+    def watch_endstop(self, pin=None, level=1):
+        """Homing: from now on the pins hold from the first word after `pin` reads
+        `level` (the endstop triggered), so no step the ring held past the switch gets
+        out; the homing code then takes them back (stop_and_take_back). None: stop
+        watching. Called with the queue run out (the ring holds no step)."""
+        self.stop_and_take_back()
+        self.watch = (pin, level) if pin is not None else None
+        self.start()
+
     def _take_back(self, order, seg, at):
         mem = self.mem
         ring = self.ring
@@ -382,6 +429,7 @@ class Feed:
             prev = ring[seg * words + at - 1] & level_mask
         sent = prev << shift
         started = False
+        taken = 0
         for s in order:
             if s == seg:
                 started = True
@@ -401,6 +449,7 @@ class Feed:
                         forward = bool(dirs & dmask) != bool(self.dir_invert_mask & dmask)
                         back = 1 if forward else -1
                         mem[pos] -= back
+                        taken += 1
                         if drive >= 0:
                             mem[drive] -= back
                 prev = lv
@@ -415,8 +464,10 @@ class Feed:
         mem[st.S_PULSE_LEFT] = 0
         mem[st.S_WAIT] = 0
         mem[st.R_PENDING] = 0
-        # The mixer's schedule went on past the steps taken back: start it afresh.
-        mem[st.MIX_BASE] = -1
+        # The mixer's schedule went on past the steps taken back: start it afresh. (A
+        # ring with no step left, as when homing changes program, leaves it as it is.)
+        if taken:
+            mem[st.MIX_BASE] = -1
 
     def deinit(self):
         if self.running:
