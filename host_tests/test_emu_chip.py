@@ -160,12 +160,14 @@ MOVE = st.tuples(st.integers(-80, 80), st.integers(-80, 80), st.integers(-6, 6),
                  st.integers(-3, 3), st.sampled_from([900, 1800, 3000, 6000]))
 
 
-def test_moves_queued_while_the_timer_runs_end_exactly(chip):
-    """Relative moves sent one per `ok` while the hard timer steps the ones before:
-    the planner runs in the main loop with the step loop interrupting it. Where each
+@pytest.mark.parametrize("backend", ["timer", "pio_dma"])
+def test_moves_queued_while_the_steps_run_end_exactly(chip, backend):
+    """Relative moves sent one per `ok` while the hard timer (or the DMA IRQ's batch
+    fill) steps the ones before: the planner runs in the main loop with the step loop
+    interrupting it. Where each
     sequence ends, by M114's Count and by the trace, is exact. Moves are whole steps
     of 0.05 mm (4 X/Y steps, 20 Z steps) and 0.2 mm of filament (83 e0 steps)."""
-    c = chip(max_emu_s=60)
+    c = chip(settings={"step_backend": backend}, max_emu_s=60)
     for line in ("M302 P1", "M211 S0", "G91"):  # M211 S0: anywhere, off the bed too
         assert c.command(line)[-1] == "ok"
     at = {"x": 0, "y": 0, "z": 0, "e0": 0}

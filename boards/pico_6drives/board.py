@@ -58,10 +58,12 @@ TMC_UART = None  # external drivers, set up by their own jumpers
 SETTINGS = dict(
     defaults.SETTINGS,
     chip="rp2040",
-    # A hard machine.Timer (MicroPython >= 1.26) at 20 kHz; `make board-check` shows
-    # what the chip really achieves and what one step-loop call costs.
+    # No step timer: the step loop fills 2 ms batches of timed edges that DMA feeds to
+    # a PIO state machine (mixfw/piodma.py), each step at its own time within its
+    # 50 us tick (up to 25,000 steps/s a motor). step_backend="timer" (a hard
+    # machine.Timer at 20 kHz, MicroPython >= 1.26) is the fallback.
     tick_us=50,
-    step_backend="timer",
+    step_backend="pio_dma",
     pin_writer="registers",  # SIO set/clear registers: one write per tick
     drives=6,
     enable_active_low=True,  # A4988/DRV8825/TMC2209 all enable on a low EN
