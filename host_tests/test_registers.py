@@ -37,40 +37,74 @@ def pin_path(tmp_path_factory):
 # GPIO 28/29, the ESP32 boards GPIO 32/33 through the second register pair.
 @pytest.mark.parametrize("board", ["pico", "pico2", "skr_pico", "esp32_devkit", "fysetc_e4"])
 def test_register_writes_give_the_same_trace_as_pin_writes(tmp_path, board):
-    p, pin_edges = run(tmp_path, "pin", {"pin_writer": "pin"}, board=board)
+    # The timer path, which pico takes when asked (its default is pio_dma).
+    p, pin_edges = run(tmp_path, "pin", {"pin_writer": "pin", "step_backend": "timer"},
+                       board=board)
     pin_steps = p.finish()["steps"]
-    p, reg_edges = run(tmp_path, "reg", {"pin_writer": "registers"}, board=board)
+    p, reg_edges = run(tmp_path, "reg", {"pin_writer": "registers", "step_backend": "timer"},
+                       board=board)
     steps = p.finish()["steps"]
     assert steps == pin_steps
     assert steps["e0"] > 0 and steps["x"] != 0
     assert reg_edges.read_bytes() == pin_edges.read_bytes()
 
 
-def test_trace_capture_records_every_step_loop_write(tmp_path, board):
-    p, edges = run(tmp_path, "capture", {"trace_records": 30000}, LINES[:40] + ["M7300 S1"])
+def _captured(board_name, tick_us, tmp_path):
+    """The example's lines 40-300 recorded with M7300, the host draining the capture
+    after every line while the print goes on. Returns the records, the edges file
+    and the board's STEP GPIOs."""
+    p, edges = run(tmp_path, "capture", {"trace_records": 30000}, LINES[:40] + ["M7300 S1"],
+                   board=board_name)
     records = []
-    # The host drains the ring after every line while the print goes on.
     for line in LINES[40:300] + ["M400", None]:
         if line:
             p.send(line)
         dump = p.send("M7301")
         head = dump[0].split()
-        assert head[0] == "trace:begin" and head[1] == "tick_us=20" and head[3] == "overrun=0"
+        assert head[0] == "trace:begin" and head[1] == "tick_us=%d" % tick_us
+        assert head[3] == "overrun=0"
         assert dump[-2:] == ["trace:end", "ok"] and len(dump) == int(head[2][8:]) + 3
         records += [tuple(int(v) for v in l[len("trace:"):].split(",")) for l in dump[1:-2]]
     assert p.send("M7300 S0")[-1] == "ok"
     p.finish()
+    pins = paths.load_board(board_name)["PINS"]
+    return records, edges, sorted(g for name, g in pins.items() if name.endswith("_step"))
+
+
+def _rises(records, step_bits, tick_us, mask=1):
+    return [(tick * tick_us, bit) for tick, s, c in records for bit in step_bits
+            if ((s, c)[mask] >> bit) & 1]
+
+
+def test_trace_capture_records_every_step_loop_write(tmp_path):
+    records, edges, step_bits = _captured("sim", 20, tmp_path)
     # Every STEP rise the chip made while recording is in the records, at the same
     # tick spacing: recording stopped after the last move, so the two end together.
-    step_bits = {gpio for name, gpio in board["PINS"].items() if name.endswith("_step")}
-    captured = [(tick * 20, bit) for tick, s, c in records for bit in sorted(step_bits)
-                if (s >> bit) & 1]
+    captured = _rises(records, step_bits, 20, 0)
     t, g, v = trace.read_edges(edges)
-    rising = (v == 1) & (t > 0) & np.isin(g, list(step_bits))
+    rising = (v == 1) & (t > 0) & np.isin(g, step_bits)
     chip = list(zip(t[rising].tolist(), g[rising].tolist()))[-len(captured):]
     assert len(captured) > 1000 and len(chip) == len(captured)
     assert [b for _, b in captured] == [b for _, b in chip]
     assert [w - captured[0][0] for w, _ in captured] == [w - chip[0][0] for w, _ in chip]
+
+
+def test_trace_capture_with_pio_dma_has_every_step_and_its_fall(tmp_path):
+    """pio_dma writes a step's fall into the ring with the step (no fall tick): the
+    capture records it a pulse's ticks later. The pins put each step inside its
+    tick, so the records (whole ticks) are each within a tick of the pins' time."""
+    records, edges, step_bits = _captured("pico", 50, tmp_path)
+    captured = _rises(records, step_bits, 50, 0)
+    falls = _rises(records, step_bits, 50, 1)
+    assert [b for _, b in falls] == [b for _, b in captured]
+    assert all(f - r == 50 for (f, _), (r, _) in zip(falls, captured))
+    t, g, v = trace.read_edges(edges)
+    rising = (v == 1) & (t > 0) & np.isin(g, step_bits)
+    chip = list(zip(t[rising].tolist(), g[rising].tolist()))[-len(captured):]
+    assert len(captured) > 1000 and len(chip) == len(captured)
+    assert [b for _, b in captured] == [b for _, b in chip]
+    offset = np.array([w for w, _ in chip]) - np.array([w for w, _ in captured])
+    assert offset.max() - offset.min() <= 50
 
 
 def test_trace_capture_without_a_ring_is_refused():

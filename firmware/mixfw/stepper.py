@@ -282,7 +282,10 @@ def tick(mem_buf, out, endstops) -> int:
         if left > 0:
             left -= 1
             mem[S_PULSE_LEFT] = left
-            if left == 0:
+            # The ring has the fall written with its step: its pulse only holds the
+            # next step back a tick longer (as the fall tick does here), and the tick
+            # goes the cheap way.
+            if left == 0 and ring == 0:
                 clr_mask = mem[S_PULSE_MASK]
         b = BLOCK_BASE + mem[S_TAIL] * B_WORDS
         run = 1
@@ -343,7 +346,7 @@ def tick(mem_buf, out, endstops) -> int:
                         return 0  # the most common tick while moving: no step due, no pin to write
                     # Cruise: straight on to the tick before the next step, or the
                     # batch's end; the ticks between only add the same rate.
-                    if left == 0 and rate > 0 and rate == mem[b + B_RATE_NOM] and \
+                    if rate > 0 and rate == mem[b + B_RATE_NOM] and \
                             ramp + 1 >= mem[b + B_ACCEL_UNTIL]:
                         skip = (ONE - 1 - phase) // rate
                         if skip > mem[b + B_DECEL_AFTER] - 1 - ramp:
@@ -356,6 +359,8 @@ def tick(mem_buf, out, endstops) -> int:
                             mem[S_TICKS] = (mem[S_TICKS] + skip) & 0x3FFFFFFF
                             ticks_left -= skip
                             t0 += skip * tc
+                            if left > 0:  # a pulse's hold ends within the skip
+                                mem[S_PULSE_LEFT] = left - skip if left > skip else 0
                     continue
                 run = 0
             else:
@@ -461,7 +466,7 @@ def tick(mem_buf, out, endstops) -> int:
             mem[S_ERR + E] = err
             if set_mask:
                 mem[S_PULSE_MASK] = set_mask
-                mem[S_PULSE_LEFT] = mem[S_PULSE_TICKS]
+                mem[S_PULSE_LEFT] = mem[S_PULSE_TICKS] + ring
             event = mem[S_EVENT] + 1
             mem[S_EVENT] = event
             if event >= n:
@@ -484,6 +489,20 @@ def tick(mem_buf, out, endstops) -> int:
                 mem[r + 1] = set_mask
                 mem[r + 2] = clr_mask
                 mem[S_CAP_HEAD] = nxt
+                if ring and stepped:
+                    # The ring's step has no fall tick: its fall, a pulse later.
+                    head = nxt
+                    nxt = head + 1
+                    if nxt >= mem[S_CAP_SIZE]:
+                        nxt = 0
+                    if nxt == mem[S_CAP_TAIL]:
+                        mem[S_CAP_LOST] += 1
+                    else:
+                        r = mem[S_CAP_BASE] + head * CAP_WORDS
+                        mem[r] = (mem[S_TICKS] + mem[S_PULSE_TICKS] - mem[S_CAP_T0]) & 0x3FFFFFFF
+                        mem[r + 1] = 0
+                        mem[r + 2] = set_mask
+                        mem[S_CAP_HEAD] = nxt
         if mem[S_PIO]:
             if ring:
                 # A step at the time the phase crossed ONE inside the tick (the rate
