@@ -259,8 +259,33 @@ def tick(mem_buf, out, endstops) -> int:
         w_first = mem[R_W]
         if mem[R_PENDING] > 0:
             mem[R_PENDING] -= 1
+    cruise = 0
+    b = 0
     while True:
         if ring:
+            if cruise:
+                # Cruise: straight on to the tick before the next step, or the
+                # batch's end; the ticks between only add the same rate.
+                cruise = 0
+                rate = mem[S_RATE]
+                ramp = mem[S_RAMP_TICKS]
+                if rate > 0 and rate == mem[b + B_RATE_NOM] and \
+                        ramp + 1 >= mem[b + B_ACCEL_UNTIL]:
+                    phase = mem[S_PHASE]
+                    skip = (ONE - 1 - phase) // rate
+                    if skip > mem[b + B_DECEL_AFTER] - 1 - ramp:
+                        skip = mem[b + B_DECEL_AFTER] - 1 - ramp
+                    if skip > ticks_left:
+                        skip = ticks_left
+                    if skip > 0:
+                        mem[S_PHASE] = phase + skip * rate
+                        mem[S_RAMP_TICKS] = ramp + skip
+                        mem[S_TICKS] = (mem[S_TICKS] + skip) & 0x3FFFFFFF
+                        ticks_left -= skip
+                        t0 += skip * tc
+                        left = mem[S_PULSE_LEFT]
+                        if left > 0:  # a pulse's hold ends within the skip
+                            mem[S_PULSE_LEFT] = left - skip if left > skip else 0
             if ticks_left <= 0:
                 break
             ticks_left -= 1
@@ -344,23 +369,7 @@ def tick(mem_buf, out, endstops) -> int:
                 if clr_mask == 0:
                     if ring == 0:
                         return 0  # the most common tick while moving: no step due, no pin to write
-                    # Cruise: straight on to the tick before the next step, or the
-                    # batch's end; the ticks between only add the same rate.
-                    if rate > 0 and rate == mem[b + B_RATE_NOM] and \
-                            ramp + 1 >= mem[b + B_ACCEL_UNTIL]:
-                        skip = (ONE - 1 - phase) // rate
-                        if skip > mem[b + B_DECEL_AFTER] - 1 - ramp:
-                            skip = mem[b + B_DECEL_AFTER] - 1 - ramp
-                        if skip > ticks_left:
-                            skip = ticks_left
-                        if skip > 0:
-                            mem[S_PHASE] = phase + skip * rate
-                            mem[S_RAMP_TICKS] = ramp + skip
-                            mem[S_TICKS] = (mem[S_TICKS] + skip) & 0x3FFFFFFF
-                            ticks_left -= skip
-                            t0 += skip * tc
-                            if left > 0:  # a pulse's hold ends within the skip
-                                mem[S_PULSE_LEFT] = left - skip if left > skip else 0
+                    cruise = 1
                     continue
                 run = 0
             else:
@@ -537,6 +546,7 @@ def tick(mem_buf, out, endstops) -> int:
                 mem[R_W] = w
                 mem[R_LAST] = last
                 mem[S_LEVELS] = lv
+                cruise = stepped & mem[S_ACTIVE]
                 continue
             if mem[S_PIO_LEFT] == 0:
                 # A burst starts: old levels until the latency is queued, so this
