@@ -25,9 +25,8 @@ is slower. Three emulator sessions, one at a time:
 part's lines with the planner's functions timed (bench/chip_profile.py): microseconds
 per G1 line in each, inclusive of what it calls and of the timing's own cost. --board and --set run the
 rows on another board or with settings laid over the board's (as `mixstep emu --set`),
-e.g. `--board pico --set step_backend=pio_dma` (pico_6drives' STEP/DIR pins are not
-one run of GPIOs, which the PIO backends need); the move is then mixed over the
-board's drives.
+e.g. `--set step_backend=timer` for the hard-timer path, or `--board pico`; the move
+is then mixed over the board's drives.
 """
 import json
 import subprocess
@@ -93,7 +92,8 @@ NOTES = {
         "excluded, from the harness's time per exception) during the cruise of one move "
         "at %d steps/s (X 100 mm/s, Y 75 mm/s, E 14.46 mm/s mixed over six drives), "
         "the firmware as deployed on %s, sent over USB; window %.2f-%.2f s after its ok. "
-        "chip_cpu_step_fraction: the step timer's interrupt; chip_cpu_left_steps_per_s: "
+        "chip_cpu_step_fraction: the step path's interrupts (the DMA IRQ's batch fill with "
+        "step_backend pio_dma, the board's default; the hard timer with timer); chip_cpu_left_steps_per_s: "
         "rising STEP edges per second in the window. " % ((CPU_RATE, BOARD) + CPU_WINDOW)),
     "chip_max_step_rate": (
         "Highest total steps/s (X, Y, E 4:3:3, E mixed over six drives; rates doubled from "

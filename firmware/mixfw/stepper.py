@@ -316,6 +316,10 @@ def tick(mem_buf, out, endstops) -> int:
         run = 1
         if mem[S_ACTIVE] == 0:
             if mem[S_TAIL] == mem[S_HEAD]:
+                # The axes have stopped (the planner ends the queue at rest): the next
+                # move's first step comes a whole step after its start, as the ideal
+                # trapezoid has it, not after what was left of the last move's step.
+                mem[S_PHASE] = 0
                 if clr_mask == 0:
                     if ring == 0:
                         return 0  # idle
