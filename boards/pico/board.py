@@ -61,8 +61,9 @@ SETTINGS = dict(
     chip="rp2040",
     # No step timer: the step loop fills 2 ms batches of timed edges that DMA feeds to
     # a PIO state machine (mixfw/piodma.py), each step at its own time within its
-    # 50 us tick (up to 25,000 steps/s a motor). step_backend="timer" (a hard
-    # machine.Timer at 20 kHz, MicroPython >= 1.26) is the fallback.
+    # tick. A motor steps at most every other tick: 10,000 steps/s at 50 us;
+    # tick_us=10 allows 50,000 but costs short moves' ramps five times the ticks.
+    # step_backend="timer" (a hard machine.Timer, MicroPython >= 1.26) is the fallback.
     tick_us=50,
     step_backend="pio_dma",
     pin_writer="registers",  # SIO set/clear registers: one write per tick
