@@ -346,7 +346,7 @@ def tick(mem_buf, out, endstops) -> int:
             elif flags & F_DWELL:  # a zero-length dwell
                 _finish(mem_buf)
                 run = 0
-        if run:
+        while run:
             # Velocity ramp, per tick so speed is linear in time.
             ramp = mem[S_RAMP_TICKS] + 1
             mem[S_RAMP_TICKS] = ramp
@@ -368,16 +368,29 @@ def tick(mem_buf, out, endstops) -> int:
                 rate = mem[b + B_RATE_NOM]
             mem[S_RATE] = rate
             # A step waits while a STEP pin is still high or has just fallen (its low time).
-            if phase < ONE or left != 0 or clr_mask != 0:
-                mem[S_PHASE] = phase
-                if clr_mask == 0:
-                    if ring == 0:
-                        return 0  # the most common tick while moving: no step due, no pin to write
-                    cruise = 1
-                    continue
-                run = 0
-            else:
+            if phase >= ONE and left == 0 and clr_mask == 0:
                 mem[S_PHASE] = phase - ONE
+                break
+            mem[S_PHASE] = phase
+            run = 0
+            if clr_mask == 0:
+                if ring == 0:
+                    return 0  # the most common tick while moving: no step due, no pin to write
+                if ticks_left <= 0 or (rate == mem[b + B_RATE_NOM] and
+                                       ramp + 1 >= mem[b + B_ACCEL_UNTIL]):
+                    cruise = 1  # the loop's top skips a cruise's ticks at once
+                    break
+                # A ramp: the next tick has nothing else to do (no pin, no block to
+                # start or end before a step), so it comes round here.
+                ticks_left -= 1
+                t0 += tc
+                mem[S_TICKS] = (mem[S_TICKS] + 1) & 0x3FFFFFFF
+                if left > 0:
+                    left -= 1
+                    mem[S_PULSE_LEFT] = left
+                run = 1
+        if cruise:
+            continue
         stopped = 0
         if run and (flags & F_HOMING):
             homing = (flags >> F_HOME_SHIFT) & 7
