@@ -503,32 +503,29 @@ def tick(mem_buf, out, endstops) -> int:
             continue
         # The writes: set_mask pins high, clr_mask pins low.
         if mem[S_CAP_ON]:
-            head = mem[S_CAP_HEAD]
-            nxt = head + 1
-            if nxt >= mem[S_CAP_SIZE]:
-                nxt = 0
-            if nxt == mem[S_CAP_TAIL]:
-                mem[S_CAP_LOST] += 1
-            else:
-                r = mem[S_CAP_BASE] + head * CAP_WORDS
-                mem[r] = (mem[S_TICKS] - mem[S_CAP_T0]) & 0x3FFFFFFF
-                mem[r + 1] = set_mask
-                mem[r + 2] = clr_mask
-                mem[S_CAP_HEAD] = nxt
-                if ring and stepped:
-                    # The ring's step has no fall tick: its fall, a pulse later.
-                    head = nxt
-                    nxt = head + 1
-                    if nxt >= mem[S_CAP_SIZE]:
-                        nxt = 0
-                    if nxt == mem[S_CAP_TAIL]:
-                        mem[S_CAP_LOST] += 1
-                    else:
-                        r = mem[S_CAP_BASE] + head * CAP_WORDS
-                        mem[r] = (mem[S_TICKS] + mem[S_PULSE_TICKS] - mem[S_CAP_T0]) & 0x3FFFFFFF
-                        mem[r + 1] = 0
-                        mem[r + 2] = set_mask
-                        mem[S_CAP_HEAD] = nxt
+            # One record of the writes; with the ring, a step's second: its fall, a
+            # pulse later (the ring has no fall tick).
+            cap_set = set_mask
+            cap_clr = clr_mask
+            cap_t = mem[S_TICKS]
+            records = 2 if ring and stepped else 1
+            while records > 0:
+                records -= 1
+                head = mem[S_CAP_HEAD]
+                nxt = head + 1
+                if nxt >= mem[S_CAP_SIZE]:
+                    nxt = 0
+                if nxt == mem[S_CAP_TAIL]:
+                    mem[S_CAP_LOST] += 1
+                else:
+                    r = mem[S_CAP_BASE] + head * CAP_WORDS
+                    mem[r] = (cap_t - mem[S_CAP_T0]) & 0x3FFFFFFF
+                    mem[r + 1] = cap_set
+                    mem[r + 2] = cap_clr
+                    mem[S_CAP_HEAD] = nxt
+                cap_clr = cap_set
+                cap_set = 0
+                cap_t += mem[S_PULSE_TICKS]
         if mem[S_PIO]:
             if ring:
                 # A step at the time the phase crossed ONE inside the tick (the rate
