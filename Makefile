@@ -6,7 +6,7 @@ GCODE ?= testdata/part_3tool_prusaslicer_rel.gcode
 TRACE ?= out/trace.vcd
 REPORT ?= out/report.json
 
-.PHONY: all setup test sim serve clean
+.PHONY: all setup test test-all sim serve clean
 
 all: setup
 
@@ -22,9 +22,28 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet pyserial==3.5
 	touch $(STAMP)
 
-# The tests run in parallel, one worker per core (pytest-xdist).
+# The tests run in parallel, one worker per core (pytest-xdist). `make test` is the
+# quick check of every feature (a few minutes); `make test-all` (what CI runs) adds the
+# tests marked slow (long fuzzing, whole prints on every board, the emulated chip's
+# longer runs, real host clients) and the firmware's tests on the 32-bit,
+# single-precision MicroPython when one is at hand (CHIP32=path, default
+# ../shared/chip32/micropython; no package registry has one).
+CHIP32 ?= ../shared/chip32/micropython
+CHIP32_TESTS := host_tests/test_mixer.py host_tests/test_planner.py \
+	host_tests/test_gradient.py host_tests/test_transition.py host_tests/test_tools.py \
+	host_tests/test_protocol.py host_tests/test_host_commands.py host_tests/test_safety.py
+
 test: setup
+	$(PY) -m pytest -q -n auto --dist loadscope -m "not slow"
+
+test-all: setup
 	$(PY) -m pytest -q -n auto
+	@if [ -x "$(CHIP32)" ]; then \
+		MIXSTEP_MICROPYTHON="$$(cd "$$(dirname "$(CHIP32)")" && pwd)/$$(basename "$(CHIP32)")" \
+			$(PY) -m pytest -q -n auto $(CHIP32_TESTS); \
+	else \
+		echo "no 32-bit MicroPython at $(CHIP32): its second pass is skipped"; \
+	fi
 
 sim: setup
 	@mkdir -p $(dir $(TRACE)) $(dir $(REPORT))

@@ -3,8 +3,12 @@ simulated printer. `test_advance.py` shows each moved change sits the purge amou
 printing extrusion before its old place (within 1e-4 mm); here the firmware must switch
 drives exactly where the advanced G-code says, so every drive's steps equal what the
 advanced file asks of it, to the step."""
+import pytest
 from mixstep import advance, paths, sim, tracecheck
 from gcode_model import expected_steps
+
+# make test-all only (a whole advanced print).
+pytestmark = pytest.mark.slow
 
 EXAMPLE = paths.ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
 

@@ -7,6 +7,9 @@ import pytest
 
 from mixstep import boards, cli, detool, paths, sim
 
+# make test-all only (whole prints on every board).
+pytestmark = pytest.mark.slow
+
 # Every board in boards/, so a new one prints without being listed here.
 BOARDS = [n for n in boards.board_names() if n != "sim"]
 

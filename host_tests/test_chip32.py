@@ -142,6 +142,7 @@ def synthetic_print(path, seed=12):
     return fed_mm
 
 
+@pytest.mark.slow
 def test_example_prints_heap_locked_on_chip32_with_the_exact_steps(monkeypatch):
     """The whole example, stepped by the viper step loop with the heap locked around
     every tick, on the 32-bit build: no allocation, and the exact step counts (those

@@ -665,6 +665,7 @@ SWEEPS = [(fat, start, True) for fat in (False, True) for start in ("old file", 
     for start in ("stale partial tmp", "stale complete tmp")]
 
 
+@pytest.mark.slow
 def test_save_interrupted_at_every_point_loads_old_or_new(mp):
     old = [("steps_per_mm_x", 100.0), ("drives", 3), ("hotend_kp", 0.07)]
     new = [("steps_per_mm_x", 90.0), ("soft_limits", False), ("tick_us", 25)]
@@ -685,6 +686,7 @@ print(json.dumps([sweep(%r, %r, fat, start, every) for fat, start, every in %r])
     assert total > 4 * 1400
 
 
+@pytest.mark.slow
 def test_random_configurations_survive_interrupted_saves(mp):
     options = schema(mp)
 

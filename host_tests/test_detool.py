@@ -80,6 +80,7 @@ def test_example_lines_unchanged_except_the_header(tmp_path, example):
     assert converted[:start] + converted[end:] == original
 
 
+@pytest.mark.slow
 def test_simulated_print_gives_each_drive_its_matrix_share(tmp_path, board):
     out = tmp_path / "mixed.gcode"
     detool.detool(EXAMPLE, out, detool.parse_matrix(MATRIX))

@@ -70,6 +70,7 @@ def _emulator_or_skip():
         pytest.skip("no emulator: %s" % e)
 
 
+@pytest.mark.slow
 def test_excerpt_prints_on_the_emulated_pico(tmp_path):
     _emulator_or_skip()
     vcd = tmp_path / "emu.vcd"

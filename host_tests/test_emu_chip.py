@@ -15,6 +15,9 @@ from hypothesis import given, settings, strategies as st
 from mixstep import emu, paths, trace, tracecheck
 from test_emu import EXCERPT, _emulator_or_skip
 
+# make test-all only (the emulated Pico).
+pytestmark = pytest.mark.slow
+
 BOARD = paths.load_board("pico")
 PINS = BOARD["PINS"]
 SETTINGS = BOARD["SETTINGS"]

@@ -1,5 +1,6 @@
 """Printing from flash (M20-M32) and uploading (M28/M29), on the unix port."""
 
+import pytest
 from mixstep.simprinter import SimPrinter
 from mixstep import paths
 from gcode_model import expected_steps
@@ -41,6 +42,7 @@ def test_upload_list_select_print_and_delete(tmp_path, board):
     assert (steps["x"], steps["y"], steps["e0"], steps["e1"]) == (1600, 800, 830, 415)
 
 
+@pytest.mark.slow
 def test_a_real_slicer_file_prints_from_flash_with_pause_and_resume(tmp_path, board):
     files = tmp_path / "flash"
     files.mkdir()

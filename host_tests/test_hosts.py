@@ -1,5 +1,6 @@
 """Real host software against the simulated printer: Printrun's printcore streams a
 real slicer file over the TCP console and over a pseudo-terminal."""
+import pytest
 import threading
 import time
 
@@ -66,6 +67,7 @@ def check_print(host, board):
     assert position.endswith("Count X:%d Y:%d Z:%d" % (want["x"], want["y"], want["z"]))
 
 
+@pytest.mark.slow
 def test_printcore_prints_a_real_file_over_tcp(board):
     address = "127.0.0.1:%d" % free_port()
     proc = serve.serve_tcp(address, realtime=0, announce=lambda s: None)
@@ -79,6 +81,7 @@ def test_printcore_prints_a_real_file_over_tcp(board):
         proc.wait()
 
 
+@pytest.mark.slow
 def test_printcore_prints_a_real_file_over_the_pty(board):
     bridge = serve.PtyBridge(realtime=0)
     thread = threading.Thread(target=bridge.run, daemon=True)

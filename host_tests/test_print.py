@@ -52,6 +52,7 @@ def test_each_drive_gets_the_e_of_its_tool_and_xyz_end_where_commanded(printed, 
     assert want["e0"] > 0 and want["e1"] > 0 and want["e2"] > 0
 
 
+@pytest.mark.slow
 def test_absolute_e_file_gives_the_same_drive_totals(board, tmp_path):
     gcode = SAMPLES / "part_3tool_prusaslicer_abs.gcode"
     report = sim.run(gcode)

@@ -35,7 +35,8 @@ def pin_path(tmp_path_factory):
 
 # Each chip's register layout, through real boards' pin maps: the SKR Pico drives
 # GPIO 28/29, the ESP32 boards GPIO 32/33 through the second register pair.
-@pytest.mark.parametrize("board", ["pico", "pico2", "skr_pico", "esp32_devkit", "fysetc_e4"])
+@pytest.mark.parametrize("board", ["pico"] + [pytest.param(b, marks=pytest.mark.slow) for b in (
+    "pico2", "skr_pico", "esp32_devkit", "fysetc_e4")])
 def test_register_writes_give_the_same_trace_as_pin_writes(tmp_path, board):
     # The timer path, which pico takes when asked (its default is pio_dma).
     p, pin_edges = run(tmp_path, "pin", {"pin_writer": "pin", "step_backend": "timer"},
@@ -160,6 +161,7 @@ print(json.dumps(res))
     assert out[2:] == ["ok", "ok", "ok"]
 
 
+@pytest.mark.slow
 def test_pio_output_is_the_register_trace_a_fixed_latency_later(tmp_path):
     """On the Pico the step loop feeds a (simulated) PIO state machine one word of pin
     levels per tick; every edge comes out exactly LATENCY_TICKS (4 ticks of 50 us)
@@ -189,6 +191,7 @@ def _step_path_edges(edges, board):
     return t[keep].astype(np.int64), g[keep], v[keep]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("board", ["pico", "pico2"])
 def test_pio_keeps_interrupt_jitter_off_the_pins_within_a_burst(tmp_path, board):
     """The step timer fires each callback up to 3 ticks late (seeded, in order). With

@@ -222,7 +222,9 @@ def test_only_signals_the_gcode_never_moves_may_be_left_out(snippet, tmp_path):
 
 # --- every real slicer file, and every mixing feature -----------------------------------
 
-@pytest.mark.parametrize("name", SLICER_FILES)
+# make test checks the shortest file; make test-all every one.
+@pytest.mark.parametrize("name", [n if n.startswith("short_") else pytest.param(
+    n, marks=pytest.mark.slow) for n in SLICER_FILES])
 def test_the_trace_of_every_real_slicer_file_passes(traces, name):
     gcode, vcd_path, report = traces(name)
     result = tracecheck.check(vcd_path, gcode)
@@ -773,6 +775,7 @@ def _rises(vcd_path, name):
     return t[1:][(v[1:] == 1) & (v[:-1] == 0)]
 
 
+@pytest.mark.slow
 def test_pull_turns_a_dump_into_a_vcd_with_the_same_steps(snippet, tmp_path, board):
     gcode, vcd_path, edges, _ = snippet
     log = tmp_path / "console.log"

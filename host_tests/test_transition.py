@@ -1,6 +1,7 @@
 """Transitions in firmware: with L1/L2 set, a tool change applies L0 = L1 + L2/2 of
 printing extrusion before the G-code places it, splitting the move that crosses that
 point; the simulated trace shows the drive switch there."""
+import pytest
 import numpy as np
 
 from mixstep import advance, paths, trace, tracecheck
@@ -84,6 +85,7 @@ def test_too_little_extrusion_before_a_change_is_reported(tmp_path):
     assert (steps["e0"], steps["e1"]) == (0, 5 * E_SPM)
 
 
+@pytest.mark.slow
 def test_the_example_print_with_firmware_transitions_keeps_every_step(tmp_path, board):
     cfg = configured(tmp_path, 1.0, 3.0)
     gcode = paths.ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
@@ -101,6 +103,7 @@ def test_the_example_print_with_firmware_transitions_keeps_every_step(tmp_path, 
     assert steps["e0"] != plain["e0"]
 
 
+@pytest.mark.slow
 def test_firmware_transitions_put_every_boundary_where_advance_does(tmp_path, board):
     """The plain example printed with L1 = 1, L2 = 2.5 in firmware switches drives at
     the same steps as the G-code `mixstep advance --l1-mm 1 --l2-mm 2.5` writes: its
