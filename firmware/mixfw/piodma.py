@@ -69,6 +69,7 @@ _R_SEG_WORDS = const(96)
 _R_W = const(92)
 _R_SM = const(107)
 _S_LEVELS = const(45)
+_TAIL_WORDS = const(9)  # FIFO_WORDS + 1
 assert (_R_BATCHES, _R_BUSY_BIT, _R_CH, _R_CHAIN_SHIFT, _R_CH_SEG, _R_CTRL, _R_FIRED,
         _R_LATE, _R_READY, _R_RING_ADDR, _R_SEG_LV, _R_SEG_N, _R_SEG_SEQ, _R_SEG_WORDS,
         _R_W, _R_SM, _S_LEVELS) == (
@@ -133,6 +134,15 @@ def refill(mem_buf, io, done: int):
     mem[_R_CH_SEG + done] = seg
     mem[_R_FIRED] += 1
     base = freed * mem[_R_SEG_WORDS]
+    # The FIFO may still hold the freed segment's last words (up to its 8): kept, with
+    # the word before them, for a stop to take back what they never put on the pins.
+    ring = ptr32(io[2])
+    tail = ptr32(io[4])
+    i = 0
+    k = base + mem[_R_SEG_N + freed] - _TAIL_WORDS
+    while i < _TAIL_WORDS:
+        tail[i] = ring[k + i]
+        i += 1
     mem[_R_W] = base
     mem[_R_SEG_LV + freed] = mem[_S_LEVELS]
     w = int(tick(mem_buf, io[2], io[3]))
@@ -165,6 +175,9 @@ class Feed:
                              "few for a hold of %d cycles" % (self.count, 32 - self.count,
                                                                 hold_cycles))
         self.ring = make_ring(self.ticks)
+        # The last words of the segment refilled last (see refill): the FIFO may still
+        # hold them when the ring no longer does.
+        self.tail = array("i", bytes(4 * (FIFO_WORDS + 1)))
         self.dmas = [rp2.DMA(), rp2.DMA()]
         self.pins = None
         self.sm = None
@@ -219,7 +232,7 @@ class Feed:
         for i, dma in enumerate(self.dmas):
             mem[st.R_CH + i] = dma.channel
         mem[st.R_SM] = sm_id
-        io = (self.regs, self.pio_regs, self.ring, pins.endstops)
+        io = (self.regs, self.pio_regs, self.ring, pins.endstops, self.tail)
 
         # Bound once: the interrupt does no lookups and allocates nothing.
         def irq0(_dma):
@@ -232,9 +245,9 @@ class Feed:
         # Assembled once: it takes ms on the chip. The homing ones first look at the
         # endstop (the state machine's jmp pin) and hold every pin where it is from the
         # word after it reads triggered: high, or low.
-        self.programs = {None: self._program(), 1: self._program(1), 0: self._program(0)}
+        self.programs = self._programs()
 
-    def _program(self, hold_while=None):
+    def _programs(self):
         rp2 = self.rp2
         pins_n = self.count
         hold_n = 32 - pins_n
@@ -242,15 +255,20 @@ class Feed:
                        out_shiftdir=rp2.PIO.SHIFT_RIGHT, fifo_join=rp2.PIO.JOIN_TX)
 
         # The assembler swaps the module's globals for its own names while it runs:
-        # the counts come in as closure variables. noqa: F821 below: its names.
-        @rp2.asm_pio(**options)
-        def step_events():
-            wrap_target()  # noqa: F821
+        # the counts and the shared part come in as closure variables (that part
+        # reads the same swapped globals). noqa: F821 below: the assembler's names.
+        def word():
+            # A word: its levels to the pins, then its count of cycles down.
             pull(block)  # noqa: F821
             out(pins, pins_n)  # noqa: F821
             out(x, hold_n)  # noqa: F821
             label("wait")  # noqa: F821
             jmp(x_dec, "wait")  # noqa: F821
+
+        @rp2.asm_pio(**options)
+        def step_events():
+            wrap_target()  # noqa: F821
+            word()
             wrap()  # noqa: F821
 
         # One cycle more per word than step_events (the simulated chip counts it too).
@@ -259,11 +277,7 @@ class Feed:
             wrap_target()  # noqa: F821
             label("top")  # noqa: F821
             jmp(pin, "top")  # noqa: F821
-            pull(block)  # noqa: F821
-            out(pins, pins_n)  # noqa: F821
-            out(x, hold_n)  # noqa: F821
-            label("wait")  # noqa: F821
-            jmp(x_dec, "wait")  # noqa: F821
+            word()
             wrap()  # noqa: F821
 
         @rp2.asm_pio(**options)
@@ -273,16 +287,10 @@ class Feed:
             jmp(pin, "go")  # noqa: F821
             jmp("top")  # noqa: F821
             label("go")  # noqa: F821
-            pull(block)  # noqa: F821
-            out(pins, pins_n)  # noqa: F821
-            out(x, hold_n)  # noqa: F821
-            label("wait")  # noqa: F821
-            jmp(x_dec, "wait")  # noqa: F821
+            word()
             wrap()  # noqa: F821
 
-        if hold_while is None:
-            return step_events
-        return step_events_hold_high if hold_while else step_events_hold_low
+        return {None: step_events, 1: step_events_hold_high, 0: step_events_hold_low}
 
     def _fill(self, seg):
         mem = self.mem
@@ -384,7 +392,9 @@ class Feed:
         for s in order:
             n = mem[st.R_SEG_N + s]
             if unsent < n:
-                return order, s, max(0, unsent)
+                # Negative: that many words the FIFO holds of the segment refilled
+                # before order[0] (its tail).
+                return order, s, unsent
             unsent -= n
         return order, order[-1], mem[st.R_SEG_N + order[-1]]
 
@@ -422,25 +432,31 @@ class Feed:
         ring = self.ring
         words = mem[st.R_SEG_WORDS]
         shift = self.first
-        # Levels on the pins: the last word sent's, or those the segment starts from.
         level_mask = (1 << self.count) - 1
-        prev = mem[st.R_SEG_LV + seg] >> shift
-        if at > 0:
-            prev = ring[seg * words + at - 1] & level_mask
-        sent = prev << shift
+        # The words the pins never got, in stream order: (array, first, end).
+        spans = []
+        if at < 0:
+            # The FIFO still held -at words of the segment refilled last: its tail.
+            tail = self.tail
+            prev = tail[_TAIL_WORDS - 1 + at] & level_mask
+            spans.append((tail, _TAIL_WORDS + at, _TAIL_WORDS))
+            at = 0
+        else:
+            # Levels on the pins: the last word sent's, or those the segment starts from.
+            prev = mem[st.R_SEG_LV + seg] >> shift
+            if at > 0:
+                prev = ring[seg * words + at - 1] & level_mask
         started = False
-        taken = 0
         for s in order:
-            if s == seg:
-                started = True
-                k = at
-            elif not started:
-                continue
-            else:
-                k = 0
-            n = mem[st.R_SEG_N + s]
-            while k < n:
-                lv = ring[s * words + k] & level_mask
+            started = started or s == seg
+            if started:
+                spans.append((ring, s * words + (at if s == seg else 0),
+                              s * words + mem[st.R_SEG_N + s]))
+        sent = prev << shift
+        taken = 0
+        for words_of, k, end in spans:
+            while k < end:
+                lv = words_of[k] & level_mask
                 rising = (lv & ~prev) << shift
                 dirs = lv << shift
                 for step, dmask, pos, drive in self.motors:
