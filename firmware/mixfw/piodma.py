@@ -69,7 +69,7 @@ _R_SEG_WORDS = const(96)
 _R_W = const(92)
 _R_SM = const(107)
 _S_LEVELS = const(45)
-_TAIL_WORDS = const(9)  # FIFO_WORDS + 1
+_TAIL_WORDS = const(9)  # the FIFO's words and the one before them
 assert (_R_BATCHES, _R_BUSY_BIT, _R_CH, _R_CHAIN_SHIFT, _R_CH_SEG, _R_CTRL, _R_FIRED,
         _R_LATE, _R_READY, _R_RING_ADDR, _R_SEG_LV, _R_SEG_N, _R_SEG_SEQ, _R_SEG_WORDS,
         _R_W, _R_SM, _S_LEVELS) == (
@@ -177,7 +177,7 @@ class Feed:
         self.ring = make_ring(self.ticks)
         # The last words of the segment refilled last (see refill): the FIFO may still
         # hold them when the ring no longer does.
-        self.tail = array("i", bytes(4 * (FIFO_WORDS + 1)))
+        self.tail = array("i", bytes(4 * _TAIL_WORDS))
         self.dmas = [rp2.DMA(), rp2.DMA()]
         self.pins = None
         self.sm = None
