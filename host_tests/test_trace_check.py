@@ -459,12 +459,23 @@ def test_mixes_are_the_specified_integer_weights():
         tracemodel.mix_weights([0, 0], 3)
 
 
-def test_the_check_imports_nothing_from_the_firmware():
-    code = ("import sys; import mixstep.tracecheck, mixstep.tracemodel; "
-            "print([m for m in sys.modules if m == 'mixfw' or m.startswith('mixfw.')])")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True).stdout
-    assert out.strip() == "[]"
+def test_the_check_imports_nothing_from_the_firmware(snippet):
+    """The check must not share code with the firmware it checks, not even by the way
+    it reads a board. So, in a fresh Python with firmware/ first on sys.path (where an
+    import of mixfw would succeed), read two boards' settings and check a real trace,
+    then look for any mixfw module loaded along the way."""
+    gcode, vcd, _, _ = snippet
+    code = ("import sys; sys.path.insert(0, %r)\n"
+            "from mixstep import tracecheck\n"
+            "for board in ('sim', 'pico'):\n"
+            "    assert tracecheck.board_settings(board, {'retract_policy': '1'})['drives']\n"
+            "report = tracecheck.check(%r, %r)\n"
+            "assert report['ok'], [c for c in report['checks'] if c['ok'] is False]\n"
+            "print([m for m in sys.modules if m == 'mixfw' or m.startswith('mixfw.')])"
+            % (str(paths.FIRMWARE), str(vcd), str(gcode)))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"
 
 
 _EQUAL_BEFORE_CHANGE = ("M83\nM302 P1\nT0\nG1 X20 Y5 E4 F1200\nG10\nG1 X40 F6000\n"
