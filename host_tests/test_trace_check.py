@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from mixstep import cli, paths, serve, sim, trace, tracecheck, tracemodel, tracepull
+from mixstep.simprinter import SimPrinter
 from sigrok import need_sigrok
 
 SAMPLES = paths.ROOT / "testdata"
@@ -308,6 +309,46 @@ def test_a_print_with_every_mixing_feature_passes(tmp_path, run, capsys):
     # Without them (the board's retract_policy 0, no transitions), where the settings
     # change the steps, the same trace is not what the G-code asks.
     assert tracecheck.check(vcd_path, gcode)["ok"] is False
+
+
+# Tool pairs with lengths of their own, from:to:l1_mm:l2_mm as M926 sets them, around
+# the default L1 1.0, L2 1.5 (L0 1.75 mm): T0 -> T4 shorter (L0 0.75), T4 -> T5 at once
+# (L0 0), T5 -> T6 longer (L0 2.5, so moves wait for a pair's length). The mixing print
+# changes tool in that order; its last change, T6 -> T1, reaches back only over
+# gradient moves, which keep their own mixes, so no pair length would show there.
+_PAIRS = ((0, 4, 0.5, 0.5), (4, 5, 0.0, 0.0), (5, 6, 2.0, 1.0))
+_PAIR_SETTINGS = {"retract_policy": 2, "transition_l1_mm": 1.0, "transition_l2_mm": 1.5,
+                  "transition_pairs": _PAIRS}
+
+
+def test_a_print_with_per_pair_transitions_passes(tmp_path):
+    """transition_pairs given to the firmware the way the README says (M926, M500, a
+    restart) and to the check as a setting: the trace passes, and the same trace
+    checked without any one of the pairs (that change at the default lengths) fails,
+    so each pair counts. Not by `--set`: its VALUE is numbers or text split at commas
+    (boards/sim/sim_main.py _value, mixstep.boards.setting_value), which has no way to
+    spell a tuple of from:to:l1_mm:l2_mm tuples, and the firmware will not start on
+    any spelling of it."""
+    cfg = tmp_path / "mixstep.cfg"
+    printer = SimPrinter(config_path=cfg)
+    for key in ("retract_policy", "transition_l1_mm", "transition_l2_mm"):
+        assert printer.send("M926 I%s V%s" % (key, _PAIR_SETTINGS[key]))[-1] == "ok"
+    for k, pair in enumerate(_PAIRS):
+        line = "M926 Itransition_pairs_%d V%d:%d:%s:%s" % ((k,) + pair)
+        assert printer.send(line)[-1] == "ok", line
+    assert printer.send("M500")[-1] == "ok"
+    printer.finish()
+    gcode = tmp_path / "mixing.gcode"
+    gcode.write_text(mixing_gcode())
+    vcd_path = tmp_path / "mixing.vcd"
+    report = sim.run(gcode, trace_path=vcd_path, config_path=cfg)
+    assert len(report["errors"]) == 7, report["errors"]  # the lines the print has refused
+    result = tracecheck.check(vcd_path, gcode, settings=_PAIR_SETTINGS)
+    assert _failed(result) == [], [c for c in result["checks"] if c["ok"] is False]
+    assert result["unmodelled"] == {}
+    for k, pair in enumerate(_PAIRS):
+        fewer = dict(_PAIR_SETTINGS, transition_pairs=_PAIRS[:k] + _PAIRS[k + 1:])
+        assert "moves" in _failed(tracecheck.check(vcd_path, gcode, settings=fewer)), pair
 
 
 def _numbered(n, text):
