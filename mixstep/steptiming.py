@@ -1,5 +1,17 @@
-"""Step timing error: every step the simulated printer took against the ideal time of
-that step in the trapezoid planned for its block (`make bench`, and the tests).
+"""Step timing error: every step the simulated printer took against the time the
+physics of its block's motion gives that step (`make bench`, and the tests).
+
+The reference
+    A step's ideal time comes from the motion's physics alone: the block's entry speed
+    v0, its acceleration a, its cruise speed vn, its exit speed v1 and its n lead
+    steps, moved at constant acceleration (v^2 = v0^2 + 2 a s, v = v0 + a t) up to
+    the cruise speed, cruising, and braking at a to v1 by the end. It is not worked
+    out from the step loop's tick-by-tick rate schedule (the firmware's
+    planner.ramp_ticks and ramp.ramp_into), so a mistake there shows up here as
+    timing error instead of being copied into the reference. analyse() uses
+    ideal_times_us, that physics in closed form; physics_times_us works the same
+    times out a second way, with the pieces of the motion found by bisection, and
+    the tests (host_tests/test_step_timing.py) hold the closed form to it.
 
 Method
     1. boards/sim/step_times_sim.py runs a G-code file on the simulated printer (the
@@ -10,18 +22,18 @@ Method
        RATE_SHIFT 28) and the block's origin: one tick before its velocity ramp
        starts (after the DIR setup ticks when DIR changed), where the lead axis stands
        at the phase carried over from the block before (a fraction of a step).
-    2. The planned trapezoid of a block, in steps and microseconds: entry speed
-       v0 = RATE_INIT, nominal vn = RATE_NOM, exit v1 = RATE_FINAL (steps per tick /
+    2. The block's motion, in steps and microseconds, from its record: entry speed
+       v0 = RATE_INIT, cruise vn = RATE_NOM, exit v1 = RATE_FINAL (steps per tick /
        tick_us), acceleration a = ACCEL (steps per tick per tick / tick_us^2);
        accelerate from v0 to vn, cruise, decelerate to v1 at step n. When the ramps
        meet before vn, the peak is where they meet. The lead-axis position is
        s(t) = phase + distance(t), so the k-th lead step's ideal time t(k) solves
-       s(t) = k: under constant acceleration t = (sqrt(v0^2 + 2 a d) - v0) / a for a
-       distance d into the ramp, d / vn while cruising, and the mirror of the first
-       form while decelerating. physics_times_us works the same times out from the
-       motion itself (the fastest v(s) that v^2 = v0^2 + 2 a s, the cruise speed and
-       the braking to v1 allow, its pieces found by bisection); the tests hold the
-       closed form to it.
+       s(t) = k. ideal_times_us solves it in closed form: under constant acceleration
+       t = (sqrt(v0^2 + 2 a d) - v0) / a for a distance d into the ramp, d / vn while
+       cruising, and the mirror of the first form while decelerating.
+       physics_times_us takes the fastest v(s) that v^2 = v0^2 + 2 a s, the cruise
+       speed and the braking to v1 allow, finds its pieces by bisection and adds up
+       the time of each; the tests hold the closed form to it.
     3. The edges are split into blocks by the block origins. In each block, the k-th
        rising STEP edge of the lead axis (for E: of any mixing drive) is the k-th
        lead step; its error is its edge time minus origin + t(k). Every other axis is
