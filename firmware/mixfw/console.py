@@ -1,5 +1,8 @@
 # Consoles: where G-code lines come from and replies go to.
 import select
+from mixfw.compat import micropython
+
+_READY = select.POLLIN | select.POLLHUP | select.POLLERR
 
 
 class StreamConsole:
@@ -21,25 +24,31 @@ class StreamConsole:
         self.poller = select.poll()
         self.poller.register(rx, select.POLLIN)
 
+    @micropython.native
     def readinto(self, mv, block=False):
         """Bytes read into mv, 0 if none are waiting, -1 at end of stream. block: wait
         for the first byte."""
+        # A byte at a time, each after a poll: a stream's readinto (the rp2's USB stdin
+        # among them) blocks until it has filled the whole buffer.
         n = 0
         limit = len(mv)
         one = self.one_mv
+        byte = self.one
+        ipoll = self.poller.ipoll
+        read = self.rx.readinto
         while n < limit:
-            if not (block and n == 0):
-                ready = False
-                for _obj, ev in self.poller.ipoll(0):
-                    ready = ev & (select.POLLIN | select.POLLHUP | select.POLLERR)
+            if n or not block:
+                ready = 0
+                for _obj, ev in ipoll(0):
+                    ready = ev & _READY
                 if not ready:
                     break
-            got = self.rx.readinto(one)
-            if not got:
+            if not read(one):
                 return n if n else -1
-            mv[n] = self.one[0]
+            c = byte[0]
+            mv[n] = c
             n += 1
-            if self.one[0] == 10:
+            if c == 10:
                 break
         return n
 

@@ -17,7 +17,6 @@ BUSY_EVERY_MS = 2000
 REPORT_EVERY_MS = 1000  # temperatures while a heating wait runs, as Marlin
 BACKGROUND_EVERY_MS = 10  # background tasks at least this often, however busy
 _ANY_TOOL = command_key("T", -1)  # the handler of every T<n>
-RX_BYTES = 256
 
 
 class Halted(Exception):
@@ -81,20 +80,16 @@ class Channel:
     def __init__(self, console, line_bytes):
         self.console = console
         self.intake = Intake(line_bytes)
-        self.rx = bytearray(RX_BYTES)
         self.chunk = bytearray(64)
         self.chunk_mv = memoryview(self.chunk)
-        self.head = 0
-        self.count = 0
         self.last_n = 0  # last line number accepted
         self.open = True
         self.lockstep = getattr(console, "blocking", False)
-        self.scan = bytearray(16)  # start of the line being received, for M112
-        self.scan_n = 0
 
     def pump(self, printer, block=False):
         """Move waiting bytes into the ring. Returns the count read."""
-        free = RX_BYTES - self.count
+        intake = self.intake
+        free = intake.room()
         if free <= 0 or not self.open:
             return 0
         mv = self.chunk_mv if free >= 64 else self.chunk_mv[:free]
@@ -102,32 +97,18 @@ class Channel:
         if n < 0:
             self.open = False
             return 0
-        rx = self.rx
-        for i in range(n):
-            c = self.chunk[i]
-            rx[(self.head + self.count) % RX_BYTES] = c
-            self.count += 1
-            if c == 10:
-                number = _emergency(self.scan, self.scan_n)
+        at = 0
+        while at < n:
+            at = intake.put(self.chunk, at, n)
+            if self.chunk[at - 1] == 10:
+                number = _emergency(intake.scan, intake.end_scan())
                 if number:
                     printer.emergency(number)
-                self.scan_n = 0
-            elif self.scan_n < 16:
-                self.scan[self.scan_n] = c
-                self.scan_n += 1
         return n
 
     def next_line(self):
         """Feed ring bytes to the intake until a line ends: its status, or 0."""
-        feed = self.intake.feed
-        while self.count:
-            c = self.rx[self.head]
-            self.head = (self.head + 1) % RX_BYTES
-            self.count -= 1
-            status = feed(c)
-            if status:
-                return status
-        return 0
+        return self.intake.next_line()
 
     def write(self, text):
         self.console.write(text)
@@ -490,7 +471,7 @@ class Printer:
                 self.run_job_line()
                 self._background_if_due()
                 continue
-            closed = [ch for ch in self.channels if not ch.open and not ch.count]
+            closed = [ch for ch in self.channels if not ch.open and not ch.intake.waiting]
             for ch in closed:
                 if ch.intake.n or ch.intake.fault:  # a last line with no newline
                     self.answer(ch, LINE_CUT)
