@@ -91,6 +91,7 @@ def steps_from_mm(mm, steps_per_mm):
     return round_steps(mm * steps_per_mm)
 
 
+@micropython.native
 def div_round(a, b):
     """a / b for integers (b > 0), rounded as round_steps does: half away from zero."""
     q = (2 * (a if a >= 0 else -a) + b) // (2 * b)
@@ -116,6 +117,7 @@ def steps_per_nm(steps_per_mm):
     return p // g, q // g
 
 
+@micropython.native
 def scaled_round(x, p, q):
     """div_round(x * p, q) (q > 0, p >= 0) without the product x * p, which is a big
     int on the chips (31-bit small ints) for a position in nanometres: split as
@@ -222,7 +224,7 @@ class Planner:
         self._delta = [0] * 4
         self._abs_steps = [0] * 4
         self._d_mm = [0.0] * 4
-        self.prev_nominal = 0.0
+        self.prev_nominal2 = 0.0
         self.mix_id = 0
         self.tool_mix = (1,) + (0,) * (MAX_DRIVES - 1)  # the active tool's weights
         self._block_mix_id = 0
@@ -265,7 +267,7 @@ class Planner:
         while self.busy():
             self.idle()
         self.prev_unit = None
-        self.prev_nominal = 0.0
+        self.prev_nominal2 = 0.0
 
     def abort(self):
         """Drop every queued block at once (M112, faults). The step loop's counters
@@ -280,7 +282,7 @@ class Planner:
             self.drive_steps[i] = m[st.S_DRIVE_POS + i]
         self._drive_pos_from_steps()
         self.prev_unit = None
-        self.prev_nominal = 0.0
+        self.prev_nominal2 = 0.0
         self.extruded = []
         self.retracted = []
 
@@ -451,7 +453,7 @@ class Planner:
             if self.prev_unit is not None:
                 self.underruns += 1
             self.prev_unit = None
-            self.prev_nominal = 0.0
+            self.prev_nominal2 = 0.0
         return m[_S_HEAD]
 
     def _commit(self, slot):
@@ -467,10 +469,10 @@ class Planner:
             m[b + i] = 0
         m[b + st.B_FLAGS] = st.F_DWELL
         m[b + st.B_DWELL] = ticks
-        self._set_plan(slot, 0.0, 0.0, 0.0, 0.0)
+        self._set_plan(slot, 0.0, 0.0, 0.0, 0.0, 0.0)
         self._commit(slot)
         self.prev_unit = None
-        self.prev_nominal = 0.0
+        self.prev_nominal2 = 0.0
 
     @micropython.native
     def add_move(self, target_steps, feed_mm_s, homing_axes=0, dir_masks=None, e_nm=0,
@@ -558,15 +560,23 @@ class Planner:
         along_xyz = dx or dy or dz
         xyz_mm = sqrt(sq) if along_xyz else 0.0
         dist = xyz_mm if along_xyz else (de_mm if de_mm >= 0 else -de_mm)
-        inv = 1.0 / dist
         speed = feed_mm_s
         accel = self.acceleration_mm_s2 if xyz_mm > 0 and along_xyz \
             else self.retract_acceleration_mm_s2
         max_feed = self.max_feed_mm_s
         max_accel = self.max_accel_mm_s2
+        inv = 0.0
         for i in range(4):
             if steps[i]:
                 d = d_mm[i]
+                # An axis's share of the path is at most 1 (always on X Y Z), so its
+                # limits bind only when the move asks more than the limits themselves:
+                # most moves skip the arithmetic (each float operation allocates).
+                if speed <= max_feed[i] and accel <= max_accel[i] and (
+                        i < 3 or (d if d >= 0 else -d) <= dist):
+                    continue
+                if not inv:
+                    inv = 1.0 / dist
                 share = (d if d >= 0 else -d) * inv
                 v = max_feed[i] / share
                 if v < speed:
@@ -577,14 +587,13 @@ class Planner:
         v = self.max_step_rate * dist / n
         if v < speed:
             speed = v
-        # Each case is the sum of squares with its zero terms left out (not xyz_mm or
-        # abs(de_mm) themselves), so every record stays the same to the bit.
+        # sqrt(x * x) is abs(x) exactly in binary floating point.
         if not de_mm:
-            len4 = sqrt(xyz_mm * xyz_mm)
+            len4 = xyz_mm
         elif along_xyz:
-            len4 = sqrt(xyz_mm * xyz_mm + de_mm * de_mm)
+            len4 = sqrt(sq + de_mm * de_mm)
         else:
-            len4 = sqrt(de_mm * de_mm)
+            len4 = dist
         unit = self._units[0] if self.prev_unit is self._units[1] else self._units[1]
         inv = 1.0 / len4
         unit[0] = x_mm * inv if dx else 0.0
@@ -593,8 +602,10 @@ class Planner:
         unit[3] = de_mm * inv if de_mm else 0.0
 
         slot = self._new_slot()
-        # Junction speed from the deviation model; a stop if the queue ran empty.
-        max_entry = 0.0
+        # Junction speed from the deviation model; a stop if the queue ran empty. In
+        # squares, as the look-ahead takes them: no square root to undo.
+        nominal2 = speed * speed
+        max_entry2 = 0.0
         pu = self.prev_unit
         if pu is not None and not homing_axes:
             # The cosine of the angle between the moves is -dot.
@@ -606,16 +617,16 @@ class Planner:
             if de_mm:
                 dot = dot + pu[3] * unit[3]
             if dot > 0.999999:
-                max_entry = _INF
+                max_entry2 = _INF
             elif dot < -0.999999:
-                max_entry = 0.0
+                max_entry2 = 0.0
             else:
                 sin_half = sqrt(0.5 * (1.0 + dot))
-                max_entry = sqrt(accel * self.junction_deviation_mm * sin_half / (1.0 - sin_half))
-            if speed < max_entry:
-                max_entry = speed
-            if self.prev_nominal < max_entry:
-                max_entry = self.prev_nominal
+                max_entry2 = accel * self.junction_deviation_mm * sin_half / (1.0 - sin_half)
+            if nominal2 < max_entry2:
+                max_entry2 = nominal2
+            if self.prev_nominal2 < max_entry2:
+                max_entry2 = self.prev_nominal2
 
         m = self.mem
         b = _BLOCK_BASE + slot * _B_WORDS
@@ -655,7 +666,7 @@ class Planner:
             last = len(weights) - 1
             for i in range(MAX_DRIVES):
                 m[w + 1 + i] = weights[i] if i <= last else 0
-        self._set_plan(slot, dist, accel, speed, max_entry, n)
+        self._set_plan(slot, dist, accel, speed, nominal2, max_entry2, n)
         self._recalculate(slot)
         self._commit(slot)
         self.position_steps = [target_steps[0], target_steps[1], target_steps[2], pos[3] + e_steps]
@@ -665,16 +676,17 @@ class Planner:
             drive_steps[i] += given[i]
         if homing_axes:
             self.prev_unit = None
-            self.prev_nominal = 0.0
+            self.prev_nominal2 = 0.0
         else:
             self.prev_unit = unit
-            self.prev_nominal = speed
+            self.prev_nominal2 = nominal2
         return True
 
     @micropython.native
-    def _set_plan(self, slot, mm, accel, nominal, max_entry, n=0):
-        """A new block's planning data; n: its lead-axis steps (0 for a dwell). The
-        floats end here: the look-ahead works on integers."""
+    def _set_plan(self, slot, mm, accel, nominal, nominal2, max_entry2, n=0):
+        """A new block's planning data; n: its lead-axis steps (0 for a dwell). Speeds
+        in mm/s, nominal2 and max_entry2 their squares. The floats end here: the
+        look-ahead works on integers."""
         lk = self.lk
         at = slot * _L_WORDS
         for i in range(_L_WORDS):
@@ -687,9 +699,9 @@ class Planner:
         # over its length is 2 a s.
         x = _GAIN_SCALE * accel * mm
         lk[at + _L_GAIN] = _V2_MAX if x >= _V2_MAX else int(x + 0.5)
-        x = max_entry * max_entry * _V2_SCALE
+        x = max_entry2 * _V2_SCALE
         lk[at + _L_MAX_ENTRY] = _V2_MAX if x >= _V2_MAX else int(x + 0.5)
-        x = nominal * nominal * _V2_SCALE
+        x = nominal2 * _V2_SCALE
         lk[at + _L_NOMINAL] = _V2_MAX if x >= _V2_MAX else int(x + 0.5)
         # mm/s -> the step loop's rate; mm/s**2 -> its rate change per tick.
         k = self._tick_one * n / mm
