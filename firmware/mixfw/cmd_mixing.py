@@ -82,14 +82,15 @@ class Mixing:
         else:
             self.reply("echo:T%d mix set; M500 keeps it after a restart" % tool)
 
-    def before_extrude(self, z_mm, e_nm):
+    def before_extrude(self, z2_nm, e_nm):
         """Called by motion before each move that extrudes: a gradient sets the mix the
-        move prints with, taken at the middle of the move."""
+        move prints with, taken at the middle of the move. z2_nm: twice the middle's Z
+        (an integer: the millimetres are worked out only for a Z gradient)."""
         g = self.gradient
         if g is None or not self.gradient_on or (g.alias >= 0 and g.alias != self.active):
             return
         if g.along == ALONG_Z:
-            pos = z_mm
+            pos = z2_nm / (2 * NM_PER_MM)
         else:
             pos = (self.extruded_nm + max(e_nm, 0) // 2) / NM_PER_MM
             if e_nm > 0:

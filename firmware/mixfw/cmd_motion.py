@@ -56,7 +56,8 @@ class Motion:
         # Called before a move that extrudes; each raises GcodeError to refuse it
         # (cold extrusion, ...).
         self.extrusion_guards = []
-        # Called as fn(z_mm, e_mm) before a move that extrudes (gradients set the mix).
+        # Called as fn(z2_nm, e_nm) before a move that extrudes (gradients set the mix):
+        # twice the middle Z of the move, and its filament.
         self.before_extrude = []
 
     def apply(self, settings):
@@ -192,7 +193,7 @@ class Motion:
         if xyz or e_nm:
             if e_nm:
                 for fn in self.before_extrude:
-                    fn((pos[2] + target[2]) / (2 * NM_PER_MM), e_nm)
+                    fn(pos[2] + target[2], e_nm)
             self._queue(steps, xyz, e_nm, self.feed_mm_s)
         self.e_nm = target_e_nm
         self.pos_nm = target

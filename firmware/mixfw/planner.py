@@ -697,16 +697,17 @@ class Planner:
             return
         # Speeds as V2 within the range kept (lookahead.py); what the block adds to v**2
         # over its length is 2 a s.
+        # round(), not int(x + 0.5): the sum would be one more float to allocate.
         x = _GAIN_SCALE * accel * mm
-        lk[at + _L_GAIN] = _V2_MAX if x >= _V2_MAX else int(x + 0.5)
+        lk[at + _L_GAIN] = _V2_MAX if x >= _V2_MAX else round(x)
         x = max_entry2 * _V2_SCALE
-        lk[at + _L_MAX_ENTRY] = _V2_MAX if x >= _V2_MAX else int(x + 0.5)
+        lk[at + _L_MAX_ENTRY] = _V2_MAX if x >= _V2_MAX else round(x)
         x = nominal2 * _V2_SCALE
-        lk[at + _L_NOMINAL] = _V2_MAX if x >= _V2_MAX else int(x + 0.5)
+        lk[at + _L_NOMINAL] = _V2_MAX if x >= _V2_MAX else round(x)
         # mm/s -> the step loop's rate; mm/s**2 -> its rate change per tick.
         k = self._tick_one * n / mm
         acc = k * (accel * self.tick_s)
-        acc_i = int(acc + 0.5)
+        acc_i = round(acc)
         lk[at + _L_ACC] = acc_i if acc_i > 1 else 1
         # The slowest rate a block may fall to: reached from rest within half a step,
         # so a block that ends at a stop still finishes.
@@ -719,7 +720,7 @@ class Planner:
         kk = k * k / _V2_SCALE
         e = frexp(kk)[1]
         shift = (e - 25) >> 1
-        lk[at + _L_K2] = int(ldexp(kk, -2 * shift) + 0.5)
+        lk[at + _L_K2] = round(ldexp(kk, -2 * shift))
         lk[at + _L_K_SHIFT] = shift
 
     # --- look-ahead ---
