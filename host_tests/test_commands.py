@@ -144,6 +144,9 @@ def test_m17_m18_drive_the_enable_pins(session, board):
 
 
 def test_look_ahead_keeps_speed_through_collinear_segments(session, board):
+    # The look-ahead alone: M205 B0 turns off Marlin's SLOWDOWN, which would slow the
+    # moves planned while the queue fills (test_planner.py has it).
+    session.send("M205 B0")
     session.send(*["G1 X%d F6000" % i for i in range(1, 11)])
     session.finish()
     t, v = session.edges_of(board["PINS"]["x_step"])

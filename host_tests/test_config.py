@@ -222,6 +222,7 @@ print(json.dumps({"names": [o.name for o in c.options],
             "travel_mm": "xyz", "homing_feed_mm_s": "xyz"}
     expected = [k + "_" + a for k, ax in axes.items() for a in ax] + [
         "acceleration_mm_s2", "retract_acceleration_mm_s2", "junction_deviation_mm",
+        "min_segment_time_us",
         "default_feed_mm_s", "soft_limits", "max_extrude_mm", "retract_policy", "retract_mm", "trace_records",
         "watchdog_ms", "step_stall_ms",
         "retract_feed_mm_s", "unretract_feed_mm_s", "transition_l1_mm", "transition_l2_mm",
@@ -429,7 +430,7 @@ def test_marlin_aliases_set_options_and_apply_at_once(mp, tmp_path):
     assert s.of(14) == ["echo:M204 P1200.0 R2500.0"]
     assert s.of(16) == ["echo:M204 P900.0 R2500.0"]
     assert s.of(17) == ["echo:M205 ignored X: mixstep uses junction deviation J"]
-    assert s.of(18) == ["echo:M205 J0.02"]
+    assert s.of(18) == ["echo:M205 J0.02 B20000"]
     assert s.of(20) == ["echo:takes effect after a restart (M500 saves it): tick_us"]
     assert s.of(22) == []
     # M92, M201, M203, M204 (twice), M205 and two M930 each applied once.

@@ -26,6 +26,21 @@ class Host:
         while not self.core.online:
             assert time.time() < deadline, "printer never came online"
             time.sleep(0.05)
+        # printcore sends M105 until the printer answers: on a slow start it sent more
+        # than one, and their late oks would answer the test's first question. Replies
+        # come in order, so once this marker's ok is in, they all are.
+        start = len(self.lines)
+        self.core.send_now("M118 host ready")
+        while not any(l.startswith("ok") for l in self._after_marker(start)):
+            assert time.time() < deadline, "no answer to M118"
+            time.sleep(0.02)
+
+    def _after_marker(self, start):
+        lines = self.lines[start:]
+        for i, line in enumerate(lines):
+            if line.endswith("host ready"):
+                return lines[i + 1:]
+        return []
 
     def print_file(self, path, timeout_s=600):
         with open(path) as f:

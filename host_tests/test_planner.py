@@ -194,3 +194,64 @@ def test_positions_become_the_same_steps_as_by_the_full_product(mp):
     got = mp.json(SCALED_CASES, stdin=json.dumps(cases).encode())
     for case, (a, b, c, d) in zip(cases, got):
         assert a == b and c == d, case
+
+
+# --- Marlin's SLOWDOWN (min_segment_time_us, M205 B) ------------------------------
+
+SLOWDOWN = """
+import sys, json
+import simmachine
+sys.modules["machine"] = simmachine
+import board
+from mixfw import assemble, lookahead
+from mixfw import stepper as st
+
+simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(6)])
+printer = assemble.build(files_root=None)
+pl = printer.planner
+mem = printer.mem
+run = printer.run_line
+parse = printer.parser.parse
+plans = []
+
+def take_one():
+    # The step loop takes a block only when the planner waits for room: so the queue
+    # fills up from empty, one more block waiting with each line.
+    t = mem[st.S_TAIL]
+    if t != mem[st.S_HEAD]:
+        mem[st.S_TAIL] = t + 1 if t + 1 < pl.queue else 0
+    mem[st.S_ACTIVE] = 0
+
+pl.idle = take_one
+for text in json.loads(sys.stdin.read()):
+    waiting = pl._waiting()
+    head = mem[st.S_HEAD]
+    run(parse(text.encode(), len(text)))
+    if mem[st.S_HEAD] != head:
+        plans.append([waiting, pl.lk[head * lookahead.L_WORDS + lookahead.L_NOMINAL]])
+print(json.dumps(plans))
+"""
+
+
+def test_short_moves_slow_down_while_the_queue_is_under_half_full(mp):
+    """As Marlin's SLOWDOWN: with 2 to 7 of the 16 blocks waiting, a move shorter than
+    min_segment_time_us (20 ms) takes t + 2 (20 ms - t) / waiting; fewer or more
+    waiting, or a longer move, keep the asked speed; M205 B0 turns it off."""
+    feed = 150.0  # mm/s: 0.3 mm takes 2 ms
+    moves = ["G1 X%.1f F9000" % (10 + 0.3 * (i + 1)) for i in range(12)]
+    lines = ["M302 P1", "G92 X0 Y0 Z0", "G90", "G1 X10 F9000", "M400"] + moves + [
+        "M400", "G1 X14 F9000", "G1 X14.3", "G1 X100", "M400", "M205 B0"] + [
+        "G1 X%.1f F9000" % (100 + 0.3 * (i + 1)) for i in range(12)]
+    got = mp.json(SLOWDOWN, stdin=json.dumps(lines).encode())
+    nominal = round(feed * feed * 64)
+    short = got[1:13]  # after the first move
+    assert [w for w, _ in short] == list(range(12))
+    for waiting, v2 in short:
+        if 2 <= waiting < 8:
+            t = 0.3 / feed
+            slowed = 0.3 / (t + 2 * (0.02 - t) / waiting)
+            assert abs(v2 - slowed * slowed * 64) <= 2, (waiting, v2)
+        else:
+            assert v2 == nominal, (waiting, v2)
+    assert got[15] == [2, nominal]  # 86 mm: far longer than 20 ms
+    assert [v2 for _, v2 in got[16:]] == [nominal] * 12  # M205 B0

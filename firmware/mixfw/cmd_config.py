@@ -7,7 +7,7 @@ from mixfw.gcode import GcodeError
 # Option names are text, so the parser hands these commands their arguments raw.
 RAW_COMMANDS = (("M", 925), ("M", 926))
 
-_JERK_LETTERS = "XYZEBST"
+_JERK_LETTERS = "XYZEST"
 
 
 def _words(text, letters):
@@ -116,16 +116,20 @@ class ConfigCommands:
             self.config.format("acceleration_mm_s2"),
             self.config.format("retract_acceleration_mm_s2")))
 
-    # M205 [J<mm>]: junction deviation. Marlin's jerk words (X Y Z E B S T) have no
-    # meaning here; they are reported as ignored. No words: report. Example: M205 J0.05
+    # M205 [J<mm>] [B<us>]: junction deviation, and the shortest time a move takes
+    # while the queue is under half full (Marlin's SLOWDOWN; 0: off). Marlin's jerk
+    # and minimum-feed words (X Y Z E S T) have no meaning here; they are reported as
+    # ignored. No words: report. Example: M205 J0.05 B20000
     def m205(self, line):
         ignored = [ch for ch in _JERK_LETTERS if line.has(ch)]
         if ignored:
             self.printer.reply("echo:M205 ignored %s: mixstep uses junction deviation J"
                                % " ".join(ignored))
-        j = line.float("J")
-        self._set_or_report([("junction_deviation_mm", j)] if j is not None else [],
-                            "M205 J" + self.config.format("junction_deviation_mm"))
+        pairs = [(name, v) for name, v in (("junction_deviation_mm", line.float("J")),
+                 ("min_segment_time_us", line.int("B"))) if v is not None]
+        self._set_or_report(pairs, "M205 J%s B%s" % (
+            self.config.format("junction_deviation_mm"),
+            self.config.format("min_segment_time_us")))
 
 
 
@@ -142,5 +146,5 @@ def register(printer, config):
     printer.register("M201", c.m201, "maximum acceleration mm/s^2: X Y Z E")
     printer.register("M203", c.m203, "maximum speed mm/s: X Y Z E")
     printer.register("M204", c.m204, "acceleration mm/s^2: P print, R retract")
-    printer.register("M205", c.m205, "junction deviation: J<mm>")
+    printer.register("M205", c.m205, "junction deviation J<mm>, min move time B<us>")
     return c

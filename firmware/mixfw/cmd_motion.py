@@ -72,6 +72,7 @@ class Motion:
         p.acceleration_mm_s2 = settings["acceleration_mm_s2"]
         p.retract_acceleration_mm_s2 = settings["retract_acceleration_mm_s2"]
         p.junction_deviation_mm = settings["junction_deviation_mm"]
+        p.set_min_segment_time(settings["min_segment_time_us"])
         self._xyz_per_nm = [steps_per_nm(s) for s in p.steps_per_mm[:3]]
         self._seen_nm = [None, None, None]  # see _steps
         self._seen_steps = [0, 0, 0]

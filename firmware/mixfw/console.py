@@ -34,16 +34,14 @@ class StreamConsole:
         limit = len(mv)
         one = self.one_mv
         byte = self.one
-        ipoll = self.poller.ipoll
-        read = self.rx.readinto
         while n < limit:
             if n or not block:
                 ready = 0
-                for _obj, ev in ipoll(0):
+                for _obj, ev in self.poller.ipoll(0):
                     ready = ev & _READY
                 if not ready:
                     break
-            if not read(one):
+            if not self.rx.readinto(one):
                 return n if n else -1
             c = byte[0]
             mv[n] = c

@@ -35,13 +35,15 @@ FIRMWARE_DEFAULTS = {
     "watchdog_ms": 4000,
     # The step loop counts as stopped after this long without a tick.
     "step_stall_ms": 250,
+    # Marlin's SLOWDOWN and its DEFAULT_MINSEGMENTTIME (M205 B).
+    "min_segment_time_us": 20000,
 }
 
 
 # The rows spell out the values of the names above (type "float" for FLOAT, restart
 # True for RESTART, False for LIVE): a tuple of literals is one constant, which a
 # frozen firmware keeps in flash, while a row naming FLOAT or LIVE is built in RAM at
-# import (these 71 rows: 11 KB of heap on a 64-bit port).
+# import (these 74 rows: 11 KB of heap on a 64-bit port).
 SCHEMA = (
     # setting                      axes    type     min      max          restart
     ("steps_per_mm",               "xyze", "float", 0.001,   100000.0,    False,
@@ -56,6 +58,8 @@ SCHEMA = (
      "acceleration of E-only moves"),
     ("junction_deviation_mm",      "",     "float", 0.001,   10.0,        False,
      "cornering: larger is faster through corners"),
+    ("min_segment_time_us",        "",     "int",   0,       1000000,     False,
+     "while the queue is under half full, short moves slow toward this; 0: off"),
     ("default_feed_mm_s",          "",     "float", 0.01,    10000.0,     False,
      "feed rate before the first F"),
     ("travel_mm",                  "xyz",  "float", 1.0,     100000.0,    False,

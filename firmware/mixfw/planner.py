@@ -209,6 +209,7 @@ class Planner:
         self.acceleration_mm_s2 = settings["acceleration_mm_s2"]
         self.retract_acceleration_mm_s2 = settings["retract_acceleration_mm_s2"]
         self.junction_deviation_mm = settings["junction_deviation_mm"]
+        self.set_min_segment_time(settings["min_segment_time_us"])
         tick_us = settings["tick_us"]
         self.tick_s = tick_us * 1e-6
         pulse_ticks = mem[st.S_PULSE_TICKS]
@@ -285,6 +286,21 @@ class Planner:
         self.prev_nominal2 = 0.0
         self.extruded = []
         self.retracted = []
+
+    def set_min_segment_time(self, us):
+        """Marlin's SLOWDOWN: while fewer than half the queue's blocks wait, a move
+        shorter than this (in time) is slowed toward it, the more the fewer wait, so
+        that the step path does not run dry between lines a host or the planner is
+        slow to bring (a stop and a blob on every short curve segment). 0: off."""
+        self.min_segment_s = us * 1e-6
+
+    def _waiting(self):
+        """Blocks queued that the step loop has not started."""
+        m = self.mem
+        count = m[_S_HEAD] - m[_S_TAIL]
+        if count < 0:
+            count += self.queue
+        return count - 1 if count and m[_S_ACTIVE] else count
 
     def set_mix(self, mix_id, weights, tool=-1):
         """The mix for E moves queued from now on (already normalised weights). The
@@ -602,6 +618,14 @@ class Planner:
         unit[3] = de_mm * inv if de_mm else 0.0
 
         slot = self._new_slot()
+        min_s = self.min_segment_s
+        if min_s and speed * min_s > dist:
+            # Marlin's SLOWDOWN (set_min_segment_time), with its bounds: 2 to half the
+            # queue's blocks waiting, and 2 (min_s - t) / waiting added to the time t.
+            waiting = self._waiting()
+            if 2 <= waiting < self.queue // 2:
+                t = dist / speed
+                speed = dist / (t + 2 * (min_s - t) / waiting)
         # Junction speed from the deviation model; a stop if the queue ran empty. In
         # squares, as the look-ahead takes them: no square root to undo.
         nominal2 = speed * speed

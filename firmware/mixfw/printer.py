@@ -469,12 +469,21 @@ class Printer:
                 self.run_job_line()
                 self._background_if_due()
                 continue
-            closed = [ch for ch in self.channels if not ch.open and not ch.intake.waiting]
-            for ch in closed:
-                if ch.intake.n or ch.intake.fault:  # a last line with no newline
-                    self.answer(ch, LINE_CUT)
-                self.channels.remove(ch)
-            if self.channels and not self.listeners and all(ch.lockstep for ch in self.channels):
+            # Plain loops, no list or generator to allocate: this runs on every idle
+            # turn.
+            lockstep = True
+            closed = None
+            for ch in self.channels:
+                if not ch.open and not ch.intake.waiting:
+                    closed = ch
+                    break
+                lockstep = lockstep and ch.lockstep
+            if closed is not None:
+                if closed.intake.n or closed.intake.fault:  # a last line with no newline
+                    self.answer(closed, LINE_CUT)
+                self.channels.remove(closed)
+                continue
+            if self.channels and not self.listeners and lockstep:
                 # Simulation in lockstep: time only passes when the firmware waits.
                 self.channels[0].pump(self, block=True)
                 continue
