@@ -127,7 +127,11 @@ NOTES = {
         "%s: streamed over USB one line per ok, then from the emulated flash (M23/M24); "
         "the sum of both. Each is cut after %g emulated s (then the count is a lower "
         "bound: _usb_lines and _flash_bytes say how far it got). M122 every %g "
-        "emulated s. " % (BOARD, PRINT_LIMIT_S, DIAG_EVERY_S)),
+        "emulated s. The firmware's min_segment_time_us (Marlin's SLOWDOWN, 20 ms) "
+        "slows short moves while the queue is under half full: the print then runs "
+        "slower than the file asks, at about the lines/s the planner keeps "
+        "(_usb_lines_per_s, _flash_lines_per_s), rather than stop between moves. "
+        % (BOARD, PRINT_LIMIT_S, DIAG_EVERY_S)),
     "chip_heap_free_min_bytes": (
         "Lowest gc.mem_free() after a collection (M122's mem_free_collected) sampled "
         "every %g emulated s during both prints of chip_underruns; _uncollected: M122's "
@@ -503,6 +507,11 @@ def chip_print(res, work):
     res["chip_underruns_flash_emulated_s"] = round(flash_s, 3)
     res["chip_underruns_flash_bytes"] = (progress[0][len("SD printing byte "):]
                                          if progress else None)
+    if progress:
+        # The lines the file printed from flash ran, per emulated second.
+        upto = int(res["chip_underruns_flash_bytes"].split("/")[0])
+        res["chip_underruns_flash_lines_per_s"] = round(
+            CIRCLES.read_bytes()[:upto].count(b"\n") / flash_s, 1)
     res["chip_heap_free_min_bytes"] = min(s["mem_free_collected"] for s in samples)
     res["chip_heap_free_min_uncollected_bytes"] = min(s["mem_free"] for s in samples)
     res["chip_heap_samples"] = len(samples)
