@@ -73,6 +73,11 @@ RATE_TOLERANCE = 0.01
 # slower than the file asks, so it is cut there; the count is then a lower bound).
 PRINT_LIMIT_S = 7.0
 DIAG_EVERY_S = 1.0  # M122 (underruns, free heap) this often during the print
+# The planner part builds two printers, and at ticks under 50 us the second one's
+# pio_dma ring finds no whole block left in the heap: that part steps at 50 us ticks
+# (a --set tick_us overrides it). The CPU share a step path leaves at 20,000 steps/s
+# is the same at both ticks (chip_cpu_left_while_stepping, README).
+PLANNER_TICK_US = 50
 
 NOTES = {
     "chip_planner_lines_per_s": (
@@ -86,7 +91,8 @@ NOTES = {
         "what is planned never waits for the pins (bench/chip_main.py). "
         "chip_planner_lines_per_s_no_stepping: the same with no step path running; "
         "chip_planner_stepper_steps_per_s: the steps the stepping printer made meanwhile. "
-        % ((BOARD,) + PLAN_LINES)),
+        "Both printers at %d us ticks: two pio_dma rings for shorter ticks do not fit "
+        "in the heap beside each other. " % ((BOARD,) + PLAN_LINES + (PLANNER_TICK_US,))),
     "chip_cpu_left_while_stepping": (
         "Share of the emulated CPU time in thread mode (the main loop; interrupts "
         "excluded, from the harness's time per exception) during the cruise of one move "
@@ -200,7 +206,8 @@ def _planner_chip(work, requests):
         "plan_only": paths.BOARDS / "sim" / "plan_only.py"})
     files["plan.gcode"] = excerpt
     got = []
-    with emu.Chip(BOARD, settings=OVERRIDES, files=files, max_emu_s=120,
+    settings = dict({"tick_us": PLANNER_TICK_US}, **OVERRIDES)
+    with emu.Chip(BOARD, settings=settings, files=files, max_emu_s=120,
                   max_wall_s=900) as chip:
         for request in requests:
             answer = chip.command(request, max_s=60)

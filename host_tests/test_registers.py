@@ -54,8 +54,8 @@ def _captured(board_name, tick_us, tmp_path):
     """The example's lines 40-300 recorded with M7300, the host draining the capture
     after every line while the print goes on. Returns the records, the edges file
     and the board's STEP GPIOs."""
-    p, edges = run(tmp_path, "capture", {"trace_records": 30000}, LINES[:40] + ["M7300 S1"],
-                   board=board_name)
+    p, edges = run(tmp_path, "capture", {"trace_records": 30000, "tick_us": tick_us},
+                   LINES[:40] + ["M7300 S1"], board=board_name)
     records = []
     for line in LINES[40:300] + ["M400", None]:
         if line:
@@ -166,9 +166,10 @@ def test_pio_output_is_the_register_trace_a_fixed_latency_later(tmp_path):
     """On the Pico the step loop feeds a (simulated) PIO state machine one word of pin
     levels per tick; every edge comes out exactly LATENCY_TICKS (4 ticks of 50 us)
     after the register path would have written it, and nothing else changes."""
-    p, reg = run(tmp_path, "reg", {"step_backend": "timer"}, board="pico")
+    # At 50 us ticks, as a timer-driven step path runs on the Pico (board.py).
+    p, reg = run(tmp_path, "reg", {"step_backend": "timer", "tick_us": 50}, board="pico")
     reg_steps = p.finish()["steps"]
-    p, pio = run(tmp_path, "pio", {"step_backend": "pio"}, board="pico")
+    p, pio = run(tmp_path, "pio", {"step_backend": "pio", "tick_us": 50}, board="pico")
     assert p.finish()["steps"] == reg_steps
     pins = paths.load_board("pico")["PINS"]
     step_path = [g for name, g in pins.items() if name.endswith(("_step", "_dir"))]

@@ -60,10 +60,12 @@ SETTINGS = dict(
     chip="rp2040",
     # No step timer: the step loop fills 2 ms batches of timed edges that DMA feeds to
     # a PIO state machine (mixfw/piodma.py), each step at its own time within its
-    # tick. A motor steps at most every other tick: 10,000 steps/s at 50 us;
-    # tick_us=10 allows 50,000 but costs short moves' ramps five times the ticks.
-    # step_backend="timer" (a hard machine.Timer, MicroPython >= 1.26) is the fallback.
-    tick_us=50,
+    # tick. A motor steps at most every other tick: 50,000 steps/s at 10 us (a
+    # 100 mm/s move on an 80 steps/mm axis is 8,000). Ramps run tick by tick, so 50 us
+    # ticks would cost them a fifth of the CPU, but hold a motor to 10,000 steps/s.
+    # step_backend="timer" (a hard machine.Timer, MicroPython >= 1.26) is the fallback,
+    # with tick_us=50: a timer callback costs about 15 us.
+    tick_us=10,
     step_backend="pio_dma",
     pin_writer="registers",  # SIO set/clear registers: one write per tick
     drives=6,
