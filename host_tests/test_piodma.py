@@ -17,6 +17,7 @@ PINS = paths.load_board(BOARD)["PINS"]
 GCODE = paths.ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
 LINES = [l.rstrip("\n") for l in itertools.islice(open(GCODE), 500)]
 PIO_DMA = {"step_backend": "pio_dma"}
+TIMER = {"step_backend": "timer", "tick_us": 50}  # the Pico's timer runs at 50 us ticks
 
 
 def run(tmp_path, name, settings, lines=LINES, before=()):
@@ -32,7 +33,7 @@ def run(tmp_path, name, settings, lines=LINES, before=()):
 
 @pytest.fixture(scope="module")
 def timer_steps(tmp_path_factory):
-    p, _, _ = run(tmp_path_factory.mktemp("timer"), "timer", {"step_backend": "timer"})
+    p, _, _ = run(tmp_path_factory.mktemp("timer"), "timer", TIMER)
     return p.finish()["steps"]
 
 
@@ -96,7 +97,7 @@ def test_homing_stops_the_pins_at_the_switch(tmp_path, backend):
     and the steps the ring still held are taken back. The axis never goes past the
     switch (the simulated endstop reads triggered at 0 and below), and home is where
     the switch is, as with the timer."""
-    p, edges, said = run(tmp_path, backend, {"step_backend": backend},
+    p, edges, said = run(tmp_path, backend, TIMER if backend == "timer" else PIO_DMA,
                          ["G28", "G91", "G1 X30 Y20 Z2 F6000", "G90", "G28 X Y",
                           "G28 Z", "G1 X1 F3000", "M400"])
     count = [t for t in p.send("M114") if " Count " in t][0]
