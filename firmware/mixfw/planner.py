@@ -294,13 +294,16 @@ class Planner:
         slow to bring (a stop and a blob on every short curve segment). 0: off."""
         self.min_segment_s = us * 1e-6
 
-    def _waiting(self):
-        """Blocks queued that the step loop has not started."""
+    def _queued(self):
+        """Blocks in the ring, the one the step loop runs included."""
         m = self.mem
         count = m[_S_HEAD] - m[_S_TAIL]
-        if count < 0:
-            count += self.queue
-        return count - 1 if count and m[_S_ACTIVE] else count
+        return count + self.queue if count < 0 else count
+
+    def _waiting(self):
+        """Blocks queued that the step loop has not started."""
+        count = self._queued()
+        return count - 1 if count and self.mem[_S_ACTIVE] else count
 
     def set_mix(self, mix_id, weights, tool=-1):
         """The mix for E moves queued from now on (already normalised weights). The
@@ -457,13 +460,7 @@ class Planner:
         """The slot for the next block, once the ring has room (one slot stays free, so
         a full ring is not taken for an empty one)."""
         m = self.mem
-        q = self.queue
-        while True:
-            count = m[_S_HEAD] - m[_S_TAIL]
-            if count < 0:
-                count += q
-            if count < q - 1:
-                break
+        while self._queued() >= self.queue - 1:
             self.idle()
         if not self.busy():
             if self.prev_unit is not None:
