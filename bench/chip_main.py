@@ -3,14 +3,15 @@
 # firmware's main.py; the firmware's modules are the board's mixfw/*.mpy.
 # It answers requests on the USB console, one line each, then `ok`:
 #   M115                   ok (the harness asks it once it has booted)
-#   plan FILE STEP         parse and plan FILE's lines (read into RAM first) through
+#   plan FILE STEP         parse and plan FILE's lines (in RAM: see Lines) through
 #                          the firmware's parser, command table and planner, with the
 #                          queue retired by hand as boards/sim/plan_only.py's retire_one
 #                          does; with STEP 1 the step path runs meanwhile (see
 #                          stepping_printer). Answers `bench:{json}`.
 #   profile FILE           plan FILE without stepping, then again with the planner's
 #                          functions timed (bench/chip_profile.py): `bench:{json}`.
-# Written against the firmware's API: assemble.build(files_root=None),
+# Written against the firmware's API: heap.reserve/release/step_loop_bytes (one more
+# reserve, for the second printer), assemble.build(files_root=None),
 # assemble.start_timer(printer, tick_us) (returns what has deinit()), printer.parser.parse,
 # printer.run_line, printer.planner (.idle, .queue, .synchronize), printer.mem with the
 # stepper's S_HEAD/S_TAIL/S_ACTIVE/S_POS words (plan_only.retire_one).
@@ -18,12 +19,84 @@ import sys
 import gc
 import io
 import json
+import os
 import time
-from mixfw import assemble
-from mixfw import stepper as st
-from plan_only import retire_one
+import micropython
+from array import array
 
 SKIPPED = (b"M109", b"M190", b"M116")
+PLAN_FILE = "plan.gcode"
+LINE_MAX = 256
+
+
+@micropython.viper
+def _copy(dst, src, start: int, n: int):
+    d = ptr8(dst)
+    s = ptr8(src)
+    for i in range(n):
+        d[i] = s[start + i]
+
+
+class Lines:
+    """A G-code file in RAM as one block and its lines' bounds, read before the
+    firmware's modules load: the modules' code leaves the heap in pieces too small for a
+    list of lines, and the printers' arrays need the whole blocks left. Each line is
+    copied into one buffer, as the firmware receives a line, and parsed from there."""
+
+    def __init__(self, path):
+        size = os.stat(path)[6]
+        self.blob = bytearray(size)
+        with open(path, "rb") as f:
+            f.readinto(self.blob)
+        blob = self.blob
+        bounds = []
+        self.moves = 0
+        at = 0
+        while at < size:
+            end = blob.find(b"\n", at)
+            end = size if end < 0 else end
+            stop = end
+            while stop > at and blob[stop - 1] in (10, 13):
+                stop -= 1
+            head = bytes(blob[at:at + 4])
+            if head not in SKIPPED:
+                bounds.append(at)
+                bounds.append(stop)
+                self.moves += head[:3] in (b"G1 ", b"G0 ")
+            at = end + 1
+        self.bounds = array("i", bounds)
+        self.count = len(bounds) // 2
+        self.buf = bytearray(LINE_MAX)
+
+    def line(self, i):
+        """Line i in the buffer; returns its length."""
+        a = self.bounds[2 * i]
+        n = self.bounds[2 * i + 1] - a
+        _copy(self.buf, self.blob, a, n)
+        return n
+
+    def first(self, prefix, k):
+        """The first k lines that start with prefix, as bytes."""
+        out = []
+        for i in range(self.count):
+            n = self.line(i)
+            if bytes(self.buf[:len(prefix)]) == prefix:
+                out.append(bytes(self.buf[:n]))
+                if len(out) == k:
+                    break
+        return out
+
+
+LINES = {PLAN_FILE: Lines(PLAN_FILE)}
+# The firmware reserves the heap its printer's arrays take while its modules load
+# (mixfw/heap.py), and the stepping printer, built second, gets a reserve too. Each
+# printer is built once and kept: a request's garbage would split a later one's heap.
+import board  # noqa: E402
+from mixfw import heap  # noqa: E402
+heap.reserve(heap.step_loop_bytes(board.SETTINGS))
+from mixfw import assemble  # noqa: E402
+from mixfw import stepper as st  # noqa: E402
+from plan_only import retire_one  # noqa: E402
 
 # The step path's move while planning: X 100 mm/s, Y 75 mm/s and E 14.46 mm/s of
 # filament mixed over all six drives, i.e. 8,000 + 6,000 + 6,000 steps/s at the
@@ -38,10 +111,26 @@ def stepping_printer():
     the step path busy with one long six-drive mixed move, as while printing. The
     planner measured is another printer whose queue is retired by hand, so what it
     plans never reaches the pins and never waits for them; both share the CPU."""
-    printer = assemble.build(files_root=None)
-    for line in STEP_SETUP + (STEP_MOVE,):
-        printer.run_line(printer.parser.parse(line, len(line)))
-    return printer
+    if not PRINTERS.get("stepper"):
+        printer = assemble.build(files_root=None)
+        for line in STEP_SETUP + (STEP_MOVE,):
+            printer.run_line(printer.parser.parse(line, len(line)))
+        PRINTERS["stepper"] = printer
+    return PRINTERS["stepper"]
+
+
+def planned_printer():
+    """The printer whose planning is measured, its queue retired by hand."""
+    if not PRINTERS.get("planned"):
+        gc.collect()
+        printer = assemble.build(files_root=None)
+        printer.planner.idle = retire_one(printer.mem, printer.planner.queue)
+        printer.run_line(printer.parser.parse(b"M302 P1", 7))
+        PRINTERS["planned"] = printer
+    return PRINTERS["planned"]
+
+
+PRINTERS = {}
 
 
 def stepper_steps(printer):
@@ -52,18 +141,16 @@ def stepper_steps(printer):
 def plan(path, stepping, profile=0):
     """profile 1: also what a line allocates and what a collection costs; 2: the
     planner's functions timed (chip_profile)."""
-    gc.collect()
-    stepper = stepping_printer() if stepping else None
-    gc.collect()  # the second printer needs whole blocks the first one's garbage splits
-    printer = assemble.build(files_root=None)
+    printer = planned_printer()
+    if stepping:
+        stepper = stepping_printer()
+    else:
+        stepper = None
+        heap.release()  # the stepping printer's reserve: heap as a board has it
     planner = printer.planner
-    planner.idle = retire_one(printer.mem, planner.queue)
     run_line = printer.run_line
-    run_line(printer.parser.parse(b"M302 P1", 7))
-    with open(path, "rb") as f:
-        data = [raw.rstrip(b"\r\n") for raw in f]
-    data = [raw for raw in data if raw[:4] not in SKIPPED]
-    moves = sum(1 for raw in data if raw[:3] in (b"G1 ", b"G0 "))
+    data = LINES.get(path) or Lines(path)
+    moves = data.moves
     timer = None
     steps0 = 0
     if stepper:
@@ -80,9 +167,11 @@ def plan(path, stepping, profile=0):
     free = gc.mem_free()
     errors = []
     t0 = time.ticks_us()
-    for number, raw in enumerate(data, 1):
+    buf = data.buf
+    line = data.line
+    for number in range(1, data.count + 1):
         try:
-            run_line(parse(raw, len(raw)))
+            run_line(parse(buf, line(number - 1)))
         except Exception as e:  # the firmware would answer Error: and go on
             if len(errors) < 5:
                 errors.append("line %d: %r" % (number, e))
@@ -95,10 +184,10 @@ def plan(path, stepping, profile=0):
         t = time.ticks_us()
         gc.collect()
         collect_us = time.ticks_diff(time.ticks_us(), t)
-        few = [raw for raw in data if raw[:3] == b"G1 "][:5]
+        few = data.first(b"G1 ", 5)
         allocated = chip_profile.bytes_allocated(run_line, parse, few)
         planner.synchronize()
-    out = {"lines": len(data), "move_lines": moves, "seconds": us / 1e6,
+    out = {"lines": data.count, "move_lines": moves, "seconds": us / 1e6,
            "move_lines_per_s": moves * 1e6 / us, "errors": errors,
            "mem_free_before": free, "mem_free_after": gc.mem_free()}
     if stepper:

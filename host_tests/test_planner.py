@@ -165,6 +165,99 @@ def test_the_schedule_is_the_same_integers_on_every_build_and_the_exact_trapezoi
         assert abs(r_decel - e_decel) <= acc + 1, case
 
 
+# --- a block's planning words from its floats, in integers (lookahead.plan_words) ---
+
+PLAN_WORDS = """
+import sys, json
+from array import array
+from mixfw import lookahead as la
+lk = array("i", bytes(4 * la.L_WORDS))
+w = array("i", bytes(4 * la.W_WORDS))
+out = []
+for bits, n in json.loads(sys.stdin.read()):
+    f = array("f", bytes(array("I", bits)))
+    la.plan_words(lk, 0, f, n, w)
+    out.append(list(lk))
+print(json.dumps(out))
+"""
+
+
+def _f32(x):
+    import struct
+    return struct.unpack("<f", struct.pack("<f", x))[0]
+
+
+def _plan_word_cases():
+    """Blocks over the ranges the options allow (the planner's floats as float32, the
+    chips' floats), with the extremes: a nanometre move, a metre, the slowest and the
+    fastest tick, a junction that is a stop or no limit at all."""
+    import random
+    import struct
+    rnd = random.Random(7)
+    cases = []
+    while len(cases) < 1500:
+        mm = rnd.choice([1e-6, 0.001, 0.05, 0.2, 1.0, 30.0, 1000.0]) * rnd.uniform(0.5, 2)
+        accel = rnd.choice([0.1, 10.0, 500.0, 3000.0, 1e6]) * rnd.uniform(0.5, 1)
+        nominal = rnd.choice([0.01, 1.0, 25.0, 150.0, 10000.0]) * rnd.uniform(0.5, 1)
+        entry2 = rnd.choice([0.0, 1e30, nominal * nominal * rnd.random()])
+        tick_s = rnd.choice([5, 10, 20, 50, 1000]) * 1e-6
+        n = rnd.choice([1, 3, 16, 800, 10 ** 5, (1 << 30) - 2])
+        floats = [mm, accel, nominal, nominal * nominal, entry2, tick_s * (1 << 28), tick_s]
+        bits = [struct.unpack("<I", struct.pack("<f", x))[0] for x in floats]
+        cases.append((bits, n))
+    return cases
+
+
+def _exact_plan_words(bits, n):
+    """The words from their definitions (planner.py, lookahead.py), in exact fractions of
+    the float32 values: GAIN, MAX_ENTRY, NOMINAL, ACC rounded, RATE_NOM and FLOOR
+    truncated, each within the range kept; K2 and K_SHIFT as the exact k**2 / 64."""
+    import struct
+    from fractions import Fraction as F
+    from math import isqrt
+    cap, v2_max = (1 << 30) - 1, (1 << 29) - 1
+    mm, accel, nominal, nominal2, entry2, tick_one, tick_s = (
+        F(struct.unpack("<f", struct.pack("<I", b))[0]) for b in bits)
+    k = tick_one * n / mm
+    acc = k * accel * tick_s
+    floor = min(cap, isqrt(int(acc * (1 << 28))))
+    return {"gain": min(v2_max, round(128 * accel * mm)),
+            "max_entry": min(v2_max, round(64 * entry2)),
+            "nominal": min(v2_max, round(64 * nominal2)),
+            "acc": max(1, min(cap, round(acc))), "floor": floor,
+            "rate_nom": max(floor, min(cap, int(nominal * k))), "k2_64": k * k / 64}
+
+
+def test_a_blocks_words_are_the_same_integers_on_every_build_and_the_exact_ones(mp):
+    """plan_words reads the planner's floats as float32 bits and works in integers: the
+    same words on CPython, the unix port and (CI's second pass) the 32-bit build. Against
+    the exact values: the V2 words within one, the rates within a part in 2**22 (the
+    float32 inputs have 24 bits), and K2 * 4**K_SHIFT, the rate's scale, likewise."""
+    from array import array
+    from mixfw import lookahead as la
+    cases = _plan_word_cases()
+    lk = array("i", bytes(4 * la.L_WORDS))
+    w = array("i", bytes(4 * la.W_WORDS))
+    on_host = []
+    for bits, n in cases:
+        la.plan_words(lk, 0, array("f", bytes(array("I", bits))), n, w)
+        on_host.append(list(lk))
+    assert mp.json(PLAN_WORDS, stdin=json.dumps(cases).encode()) == on_host
+    for (bits, n), got in zip(cases, on_host):
+        want = _exact_plan_words(bits, n)
+        assert abs(got[la.L_GAIN] - want["gain"]) <= 1, (bits, n)
+        assert abs(got[la.L_MAX_ENTRY] - want["max_entry"]) <= 1, (bits, n)
+        assert abs(got[la.L_NOMINAL] - want["nominal"]) <= 1, (bits, n)
+        for word, key in ((la.L_ACC, "acc"), (la.L_FLOOR, "floor"),
+                          (la.L_RATE_NOM, "rate_nom")):
+            assert abs(got[word] - want[key]) <= 1 + want[key] / 2 ** 22, (key, bits, n)
+        shift = got[la.L_K_SHIFT] - la.SHIFT_BIAS
+        scale = got[la.L_K2] * (4 ** shift if shift >= 0 else 1 / 4 ** -shift)
+        assert abs(scale / want["k2_64"] - 1) < 2 ** -21, (bits, n)
+        assert 1 << 24 <= got[la.L_K2] < 1 << 26
+        assert got[la.L_RN] == -1 and got[la.L_DWELL] == 0
+
+
 # --- positions to steps without big ints (planner.scaled_round) --------------------
 
 SCALED_CASES = """

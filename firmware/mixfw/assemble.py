@@ -7,17 +7,24 @@ import sys
 import machine
 import micropython
 import board
-from mixfw import stepper as st, mixer
-from mixfw.pins import Pins
-from mixfw.planner import Planner
-from mixfw.printer import Printer
-from mixfw.console import StreamConsole
-from mixfw.config import Config
-from mixfw.files import Files
-from mixfw.thermal import Thermal
-from mixfw.transition import Transitions, l0_mm
-from mixfw import cmd_motion, cmd_mixing, cmd_thermal, cmd_report, cmd_config, cmd_files, cmd_trace
-from mixfw import safety
+from mixfw import heap
+if board.SETTINGS.get("step_backend") == "pio_dma":
+    import rp2  # noqa: F401 (Feed's: loaded before the reserve, which it would split)
+# The modules from here on load beside a reserve that build() takes its arrays from
+# (heap.py): their code would leave the heap in pieces too small for the arrays.
+heap.reserve(heap.step_loop_bytes(board.SETTINGS))
+from mixfw import stepper as st, mixer  # noqa: E402
+from mixfw.pins import Pins  # noqa: E402
+from mixfw.planner import Planner, lk_words  # noqa: E402
+from mixfw.printer import Printer  # noqa: E402
+from mixfw.console import StreamConsole  # noqa: E402
+from mixfw.config import Config  # noqa: E402
+from mixfw.files import Files  # noqa: E402
+from mixfw.thermal import Thermal  # noqa: E402
+from mixfw.transition import Transitions, l0_mm  # noqa: E402
+from mixfw import (cmd_motion, cmd_mixing, cmd_thermal, cmd_report,  # noqa: E402
+                   cmd_config, cmd_files, cmd_trace)
+from mixfw import safety  # noqa: E402
 
 # Commands whose arguments are text, not numbers.
 RAW_COMMANDS = (cmd_config.RAW_COMMANDS + cmd_files.RAW_COMMANDS + cmd_mixing.RAW_COMMANDS
@@ -69,9 +76,9 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     piodma = None
     if settings.get("step_backend") == "pio_dma":
         from mixfw import piodma
-        import rp2  # noqa: F401 (Feed's; imported here for the same reason)
-    gc.collect()
-    mem = array("i", bytes(4 * st.mem_words(settings["queue_blocks"], capture)))
+    heap.release()
+    mem = heap.zeros(st.mem_words(settings["queue_blocks"], capture))
+    lk = heap.zeros(lk_words(settings["queue_blocks"]))
     st.init_capture(mem, settings["queue_blocks"], capture)
     feed = None
     if piodma:
@@ -93,7 +100,8 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
         for i, word in enumerate(offsets):
             mem[st.S_REG_SET + i] = word
     printer = Printer(settings["line_buffer_bytes"], machine.idle, RAW_COMMANDS)
-    planner = Planner(mem, settings, printer.idle, machine.disable_irq, machine.enable_irq)
+    planner = Planner(mem, settings, printer.idle, machine.disable_irq, machine.enable_irq,
+                      lk)
     planner.dir_invert_mask = pins.dir_invert_mask
     motion = cmd_motion.Motion(planner, pins, settings, printer.reply)
     motion.feed = feed

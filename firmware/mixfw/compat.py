@@ -23,6 +23,9 @@ except ImportError:
 
     # Viper's pointer casts: on CPython the buffer itself indexes the same way.
     def ptr32(buf):
+        # An array('f') is read as its bits, as viper reads it.
+        if getattr(buf, "typecode", None) == "f":
+            return memoryview(buf).cast("B").cast("I")
         return buf
 
     ptr8 = ptr16 = ptr32

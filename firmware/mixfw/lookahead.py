@@ -7,8 +7,9 @@
 # three stays below 2**31, and the 32-bit chips and the 64-bit unix port give the same
 # integers. A record's rates come from V2 by an exact integer square root.
 from mixfw.compat import const, micropython, ptr32
+from mixfw import ramp
 from mixfw import stepper as st
-from mixfw.ramp import mul_limbs, isqrt_limbs, ramp_into
+from mixfw.ramp import isqrt_limbs, product, ramp_into
 
 V2_SCALE = 64
 V2_MAX = const(0x1FFFFFFF)
@@ -21,8 +22,8 @@ L_BACK = const(3)  # the fastest entry that can still stop by the end of the que
 L_ENTRY = const(4)
 L_EXIT = const(5)  # the exit baked into the slot's record
 L_K2 = const(6)  # rate = isqrt(V2 * K2) << K_SHIFT (>> -K_SHIFT)
-L_K_SHIFT = const(7)
-L_RATE_NOM = const(8)  # the nominal speed's rate, worked out in floats once
+L_K_SHIFT = const(7)  # plus _SHIFT_BIAS: a 64-bit build's viper reads words unsigned
+L_RATE_NOM = const(8)  # the nominal speed's rate
 L_FLOOR = const(9)  # the slowest rate: reached from rest within half a step
 L_ACC = const(10)
 L_R0 = const(11)  # the rates of the record's schedule (R_NOM -1: none yet)
@@ -33,6 +34,8 @@ L_AFTER = const(15)
 L_RATE_DECEL = const(16)
 L_DWELL = const(17)
 L_WORDS = const(18)
+SHIFT_BIAS = const(64)
+_SHIFT_BIAS = const(SHIFT_BIAS)
 
 # The step loop's words (checked against stepper.py below: viper folds only this
 # module's constants).
@@ -58,6 +61,113 @@ assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _S_QUEUE, _BLOCK_BASE, _B_WORDS, _B_N, _B_R
     st.B_DECEL_AFTER, st.B_RATE_DECEL)
 
 
+# A block's planning data comes in as float32 in an array('f'), whose bits viper reads
+# as integers (mantissa, exponent): no float operation, so nothing allocated.
+F_MM = const(0)  # its length
+F_ACCEL = const(1)  # mm/s**2
+F_NOMINAL = const(2)  # mm/s
+F_NOMINAL2 = const(3)  # its square
+F_MAX_ENTRY2 = const(4)  # the junction's limit, squared
+F_TICK_ONE = const(5)  # the step loop's tick in s, times ONE (its rate of a step a tick)
+F_TICK_S = const(6)
+F_WORDS = const(7)
+# Scratch words of the planning io array, after the limbs ramp.py uses.
+_W_M = const(11)  # F_WORDS mantissas (with the hidden bit; 0 for 0)
+_W_E = const(18)  # and their exponent fields: x = m * 2**(field - _BIAS)
+_BIAS = const(150)  # float32's exponent bias and its 23 fraction bits
+W_WORDS = const(25)
+_CAP = const(0x3FFFFFFF)
+_HI = const(8)
+_LO = const(9)
+_P_LIMBS = const(0)
+_P_TRUNC = const(1)
+_P_ROUND = const(2)
+_P_TOP = const(3)
+assert (_HI, _LO, _W_M, _CAP, _P_LIMBS, _P_TRUNC, _P_ROUND, _P_TOP) == (
+    ramp.IO_HI, ramp.IO_LO, ramp.IO_WORDS, ramp.CAP, ramp.P_LIMBS, ramp.P_TRUNC,
+    ramp.P_ROUND, ramp.P_TOP)
+
+
+@micropython.viper
+def plan_words(lk_buf, at: int, f_buf, n: int, w_buf):
+    """A new block's words in lk (slot at word `at`) from its floats (F_*) and n, its
+    lead-axis steps (0 for a dwell). Speeds become V2 within the range kept; what the
+    block adds to v**2 over its length is 2 a s; mm/s becomes the step loop's rate with
+    k = TICK_ONE n / mm, and mm/s**2 its rate change per tick, k a TICK_S."""
+    lk = ptr32(lk_buf)
+    w = ptr32(w_buf)
+    f = ptr32(f_buf)
+    for i in range(L_WORDS):
+        lk[at + i] = 0
+    lk[at + L_RN] = -1  # no schedule worked out yet
+    if n <= 0:
+        lk[at + L_DWELL] = 1
+        return
+    for i in range(F_WORDS):
+        bits = f[i]
+        ex = (bits >> 23) & 0xFF
+        if ex:
+            w[_W_M + i] = (bits & 0x7FFFFF) | 0x800000
+        else:
+            w[_W_M + i] = 0
+        w[_W_E + i] = ex
+    m_mm = w[_W_M + F_MM]
+    e_mm = w[_W_E + F_MM] - _BIAS
+    m_a = w[_W_M + F_ACCEL]
+    e_a = w[_W_E + F_ACCEL] - _BIAS
+    # GAIN = 2 V2_SCALE a mm (V2_SCALE = 2**6)
+    x = int(product(w_buf, m_a, m_mm, 1, e_a + e_mm + 7, _P_ROUND))
+    lk[at + L_GAIN] = x if x < V2_MAX else V2_MAX
+    x = int(product(w_buf, w[_W_M + F_MAX_ENTRY2], 1, 1,
+                    w[_W_E + F_MAX_ENTRY2] - _BIAS + 6, _P_ROUND))
+    lk[at + L_MAX_ENTRY] = x if x < V2_MAX else V2_MAX
+    x = int(product(w_buf, w[_W_M + F_NOMINAL2], 1, 1,
+                    w[_W_E + F_NOMINAL2] - _BIAS + 6, _P_ROUND))
+    lk[at + L_NOMINAL] = x if x < V2_MAX else V2_MAX
+    # k = TICK_ONE n / mm as km 2**ke, km of 26 bits: n taken to 29 bits and TICK_ONE's
+    # mantissa to 30 first, so the quotient has 33 bits or more.
+    ns = 0
+    while (n << ns) < 0x10000000:
+        ns += 1
+    ke = int(product(w_buf, w[_W_M + F_TICK_ONE] << 6, n << ns, m_mm, 26, _P_TOP))
+    ke += w[_W_E + F_TICK_ONE] - _BIAS - 6 - ns - e_mm
+    km = w[_LO]
+    # RATE_NOM = nominal k, truncated.
+    r_nom = int(product(w_buf, w[_W_M + F_NOMINAL], km, 1,
+                        w[_W_E + F_NOMINAL] - _BIAS + ke, _P_TRUNC))
+    # acc = k a TICK_S, the rate change per tick, as am * m_ts 2**s: ACC rounded, at
+    # least 1.
+    s = int(product(w_buf, km, m_a, 1, 26, _P_TOP)) + ke + e_a
+    am = w[_LO]
+    m_ts = w[_W_M + F_TICK_S]
+    s += w[_W_E + F_TICK_S] - _BIAS
+    acc = int(product(w_buf, am, m_ts, 1, s, _P_ROUND))
+    lk[at + L_ACC] = acc if acc > 1 else 1
+    # FLOOR, the slowest rate a block may fall to: reached from rest within half a
+    # step, so a block that ends at a stop still finishes. sqrt(acc ONE), ONE = 2**28:
+    # the root of acc taken to 54 bits, or 55 for an even exponent, truncated.
+    t = int(product(w_buf, am, m_ts, 1, 54, _P_TOP)) + s + 28
+    if t & 1:
+        hi = w[_HI]
+        lo = w[_LO]
+        w[_HI] = (hi << 1) | (lo >> 29)
+        w[_LO] = (lo << 1) & _CAP
+        t -= 1
+    floor = int(isqrt_limbs(w_buf))
+    t = t >> 1
+    if t >= 0:
+        floor = _CAP if t > 30 or floor > (_CAP >> t) else floor << t
+    else:
+        floor = floor >> (0 - t) if t > -31 else 0
+    lk[at + L_FLOOR] = floor
+    lk[at + L_RATE_NOM] = r_nom if r_nom > floor else floor
+    # rate = k sqrt(V2 / V2_SCALE) = isqrt(V2 * K2) scaled by 2**K_SHIFT, with K2 in
+    # [2**24, 2**26): V2 * K2 stays below 2**55, and the root keeps 15 bits or more.
+    # k**2 / 2**6 = km**2 2**(2 ke - 6) = K2 4**K_SHIFT with K2 = km**2 >> 26.
+    lk[at + L_K2] = int(product(w_buf, km, km, 1, -26, _P_TRUNC))
+    lk[at + L_K_SHIFT] = ke + 10 + _SHIFT_BIAS
+
+
 @micropython.viper
 def _rate(lk_buf, at: int, x2: int, io_buf) -> int:
     """The step loop's rate for V2 x2 in the slot at word `at`, within its floor and
@@ -65,9 +175,9 @@ def _rate(lk_buf, at: int, x2: int, io_buf) -> int:
     lk = ptr32(lk_buf)
     if x2 >= lk[at + L_NOMINAL]:
         return lk[at + L_RATE_NOM]
-    mul_limbs(io_buf, x2, lk[at + L_K2])
+    product(io_buf, x2, lk[at + L_K2], 1, 0, _P_LIMBS)
     r = int(isqrt_limbs(io_buf))
-    s = lk[at + L_K_SHIFT]
+    s = lk[at + L_K_SHIFT] - _SHIFT_BIAS
     if s >= 0:
         r = r << s
     else:

@@ -27,7 +27,7 @@
 # nothing: M122, which collects, ran during the emulated prints with no late refill.
 from array import array
 from mixfw.compat import micropython, const, ptr32
-from mixfw import stepper as st
+from mixfw import heap, stepper as st
 from mixfw.stepper import tick
 from mixfw.pio import out_range
 
@@ -95,10 +95,15 @@ def batch_ticks(tick_us, batch_us, pins):
     return max(1, ticks)
 
 
+def ring_words(tick_us, batch_us=BATCH_US):
+    """The ring's words at most, whatever the pins."""
+    return SEGMENTS * seg_words(max(1, batch_us // tick_us))
+
+
 def make_ring(ticks):
     """The ring for batches of this many ticks, to be allocated early: a few kB in one
     block, which the heap may not have in one piece once the firmware is built."""
-    return array("i", bytes(4 * SEGMENTS * seg_words(ticks)))
+    return heap.zeros(SEGMENTS * seg_words(ticks))
 
 
 @micropython.viper

@@ -6,9 +6,9 @@
 # Pure logic: the hooks that touch the chip (waiting, masking the interrupt) are
 # passed in by assemble.py, so host tools can plan on CPython too.
 from array import array
-from math import frexp, ldexp, sqrt
+from math import sqrt
 from mixfw.compat import const, micropython
-from mixfw import lookahead, ramp
+from mixfw import heap, lookahead, ramp
 from mixfw import stepper as st
 from mixfw.mixer import MAX_DRIVES, normalize
 from mixfw.stepper import schedule_counts
@@ -43,27 +43,16 @@ assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _BLOCK_BASE, _B_WORDS, _B_N, _B_STEPS, _B_D
     st.B_DIR_SET, st.B_DIR_CLR, st.B_FLAGS, st.B_DWELL, st.B_MIX, st.F_NEG, st.F_DWELL,
     st.B_RATE_INIT, st.B_RATE_NOM, st.B_RATE_FINAL, st.B_ACCEL, st.B_ACCEL_UNTIL,
     st.B_DECEL_AFTER, st.B_RATE_DECEL)
-_ONE_F = float(st.ONE)
-_V2_SCALE = lookahead.V2_SCALE
-_V2_MAX = const(0x1FFFFFFF)
-_GAIN_SCALE = 2.0 * _V2_SCALE  # folded once: each float operation allocates on the chips
-assert _V2_MAX == lookahead.V2_MAX
+_F_MM = const(0)
+_F_ACCEL = const(1)
+_F_NOMINAL = const(2)
+_F_NOMINAL2 = const(3)
+_F_MAX_ENTRY2 = const(4)
+assert (_F_MM, _F_ACCEL, _F_NOMINAL, _F_NOMINAL2, _F_MAX_ENTRY2) == (
+    lookahead.F_MM, lookahead.F_ACCEL, lookahead.F_NOMINAL, lookahead.F_NOMINAL2,
+    lookahead.F_MAX_ENTRY2)
 _L_WORDS = const(18)
-_L_GAIN = const(0)
-_L_MAX_ENTRY = const(1)
-_L_NOMINAL = const(2)
-_L_K2 = const(6)
-_L_K_SHIFT = const(7)
-_L_RATE_NOM = const(8)
-_L_FLOOR = const(9)
-_L_ACC = const(10)
-_L_RN = const(12)
-_L_DWELL = const(17)
-assert (_L_WORDS, _L_GAIN, _L_MAX_ENTRY, _L_NOMINAL, _L_K2, _L_K_SHIFT, _L_RATE_NOM, _L_FLOOR,
-        _L_ACC, _L_RN, _L_DWELL) == (
-    lookahead.L_WORDS, lookahead.L_GAIN, lookahead.L_MAX_ENTRY, lookahead.L_NOMINAL,
-    lookahead.L_K2, lookahead.L_K_SHIFT, lookahead.L_RATE_NOM, lookahead.L_FLOOR,
-    lookahead.L_ACC, lookahead.L_RN, lookahead.L_DWELL)
+assert _L_WORDS == lookahead.L_WORDS
 
 # Largest schedule period the step loop's mixer takes: its products stay below 2**30.
 MAX_PERIOD = 20000
@@ -186,6 +175,8 @@ def ramp_ticks(n, r0, r_nom, r1, acc, out=None, at=0):
 _RAMP_IO = array("i", bytes(4 * ramp.IO_WORDS))
 _ramp_into = ramp.ramp_into
 _recalculate = lookahead.recalculate
+_plan_words = lookahead.plan_words
+_PLAN_W = array("i", bytes(4 * lookahead.W_WORDS))
 assert (ramp.IO_N, ramp.IO_R0, ramp.IO_RNOM, ramp.IO_R1, ramp.IO_ACC, ramp.IO_ACCEL_UNTIL,
         ramp.IO_DECEL_AFTER, ramp.IO_RATE_DECEL) == tuple(range(8))  # as lookahead._write has them
 
@@ -194,8 +185,13 @@ class PlanError(ValueError):
     pass
 
 
+def lk_words(queue_blocks):
+    """The look-ahead's array for a queue: build() takes it early, as the step loop's."""
+    return lookahead.L_WORDS * queue_blocks
+
+
 class Planner:
-    def __init__(self, mem, settings, idle, irq_off, irq_on):
+    def __init__(self, mem, settings, idle, irq_off, irq_on, lk=None):
         self.mem = mem
         self.idle = idle
         self._irq_off = irq_off
@@ -217,8 +213,11 @@ class Planner:
         self.max_step_rate = 1.0 / (2 * pulse_ticks * self.tick_s)
         self.position_steps = [0, 0, 0, 0]
         # Per-slot planning data in integers, for the look-ahead (see lookahead.py).
-        self._tick_one = self.tick_s * st.ONE
-        self.lk = array("i", bytes(4 * lookahead.L_WORDS * q))
+        # A block's floats for lookahead.plan_words, with the tick's two.
+        self._plan_f = array("f", bytes(4 * lookahead.F_WORDS))
+        self._plan_f[lookahead.F_TICK_ONE] = self.tick_s * st.ONE
+        self._plan_f[lookahead.F_TICK_S] = self.tick_s
+        self.lk = lk or heap.zeros(lk_words(q))
         self._hooks = (irq_off, irq_on, _RAMP_IO)
         self.prev_unit = None  # one of _units, or None after a stop
         self._units = ([0.0] * 4, [0.0] * 4)
@@ -703,46 +702,17 @@ class Planner:
             self.prev_nominal2 = nominal2
         return True
 
-    @micropython.native
     def _set_plan(self, slot, mm, accel, nominal, nominal2, max_entry2, n=0):
         """A new block's planning data; n: its lead-axis steps (0 for a dwell). Speeds
         in mm/s, nominal2 and max_entry2 their squares. The floats end here: the
-        look-ahead works on integers."""
-        lk = self.lk
-        at = slot * _L_WORDS
-        for i in range(_L_WORDS):
-            lk[at + i] = 0
-        lk[at + _L_RN] = -1  # no schedule worked out yet
-        if not n:
-            lk[at + _L_DWELL] = 1
-            return
-        # Speeds as V2 within the range kept (lookahead.py); what the block adds to v**2
-        # over its length is 2 a s.
-        # round(), not int(x + 0.5): the sum would be one more float to allocate.
-        x = _GAIN_SCALE * accel * mm
-        lk[at + _L_GAIN] = _V2_MAX if x >= _V2_MAX else round(x)
-        x = max_entry2 * _V2_SCALE
-        lk[at + _L_MAX_ENTRY] = _V2_MAX if x >= _V2_MAX else round(x)
-        x = nominal2 * _V2_SCALE
-        lk[at + _L_NOMINAL] = _V2_MAX if x >= _V2_MAX else round(x)
-        # mm/s -> the step loop's rate; mm/s**2 -> its rate change per tick.
-        k = self._tick_one * n / mm
-        acc = k * (accel * self.tick_s)
-        acc_i = round(acc)
-        lk[at + _L_ACC] = acc_i if acc_i > 1 else 1
-        # The slowest rate a block may fall to: reached from rest within half a step,
-        # so a block that ends at a stop still finishes.
-        floor = int(sqrt(acc * _ONE_F))
-        lk[at + _L_FLOOR] = floor
-        r_nom = int(nominal * k)
-        lk[at + _L_RATE_NOM] = r_nom if r_nom > floor else floor
-        # rate = k sqrt(V2 / V2_SCALE) = isqrt(V2 * K2) scaled by 2**K_SHIFT, with K2 in
-        # [2**24, 2**26]: V2 * K2 stays below 2**55, and the root keeps 15 bits or more.
-        kk = k * k / _V2_SCALE
-        e = frexp(kk)[1]
-        shift = (e - 25) >> 1
-        lk[at + _L_K2] = round(ldexp(kk, -2 * shift))
-        lk[at + _L_K_SHIFT] = shift
+        look-ahead works on integers (lookahead.plan_words)."""
+        f = self._plan_f
+        f[_F_MM] = mm
+        f[_F_ACCEL] = accel
+        f[_F_NOMINAL] = nominal
+        f[_F_NOMINAL2] = nominal2
+        f[_F_MAX_ENTRY2] = max_entry2
+        _plan_words(self.lk, slot * _L_WORDS, f, n, _PLAN_W)
 
     # --- look-ahead ---
     def _recalculate(self, newest):

@@ -26,28 +26,16 @@ IO_ACC = const(4)
 IO_ACCEL_UNTIL = const(5)
 IO_DECEL_AFTER = const(6)
 IO_RATE_DECEL = const(7)
-_HI = const(8)
-_LO = const(9)
+IO_HI = const(8)  # (hi, lo): two 30-bit limbs, for the helpers below
+IO_LO = const(9)
+_HI = const(IO_HI)
+_LO = const(IO_LO)
 _REM = const(10)
 IO_WORDS = const(11)
 
 
 @micropython.viper
-def mul_limbs(w_buf, a: int, b: int):
-    """(hi, lo) = a * b, for 0 <= a, b < 2**30."""
-    w = ptr32(w_buf)
-    a1 = a >> 15
-    a0 = a & 0x7FFF
-    b1 = b >> 15
-    b0 = b & 0x7FFF
-    mid = a1 * b0 + a0 * b1
-    lo = ((mid & 0x7FFF) << 15) + a0 * b0
-    w[_HI] = a1 * b1 + (mid >> 15) + (lo >> 30)
-    w[_LO] = lo & _M30
-
-
-@micropython.viper
-def _div(w_buf, c: int):
+def div_limbs(w_buf, c: int):
     """(hi, lo) //= c and REM = the remainder, for 0 < c < 2**29: long division in
     digits of lo as wide as keep the partial remainder below 2**30, so each takes one
     machine division (the RP2040's divider) where bit by bit took 60 loop turns."""
@@ -113,6 +101,97 @@ def isqrt_limbs(w_buf) -> int:
     return res
 
 
+# What product() does with a * b // c.
+P_LIMBS = const(0)  # leaves it in (hi, lo), and the division's remainder in REM
+P_TRUNC = const(1)  # returns int(x * 2**s), at most CAP
+P_ROUND = const(2)  # returns round(x * 2**s), at most CAP
+P_TOP = const(3)  # leaves x to s bits in (hi, lo), truncated; returns t: x = (hi, lo) 2**t
+CAP = const(0x3FFFFFFF)
+
+
+@micropython.viper
+def product(w_buf, a: int, b: int, c: int, s: int, how: int) -> int:
+    """x = a * b // c, for 0 <= a, b < 2**30 and 0 < c < 2**29, in two limbs, then as
+    `how` says (P_*). One call where a call each for the product, its scaling and its
+    bit length cost the chip about 6 us apiece."""
+    w = ptr32(w_buf)
+    a1 = a >> 15
+    a0 = a & 0x7FFF
+    b1 = b >> 15
+    b0 = b & 0x7FFF
+    mid = a1 * b0 + a0 * b1
+    lo = ((mid & 0x7FFF) << 15) + a0 * b0
+    hi = a1 * b1 + (mid >> 15) + (lo >> 30)
+    lo = lo & _M30
+    if c > 1:
+        w[_HI] = hi
+        w[_LO] = lo
+        div_limbs(w_buf, c)
+        hi = w[_HI]
+        lo = w[_LO]
+    else:
+        w[_REM] = 0
+    if how == P_LIMBS:
+        w[_HI] = hi
+        w[_LO] = lo
+        return 0
+    # n: the bit length
+    x = hi
+    n = 30
+    if not x:
+        x = lo
+        n = 0
+    if x >= 0x10000:
+        x = x >> 16
+        n += 16
+    if x >= 0x100:
+        x = x >> 8
+        n += 8
+    while x:
+        x = x >> 1
+        n += 1
+    if how == P_TOP:
+        u = s - n
+    else:
+        if how == P_ROUND:
+            s += 1
+        if not n:
+            return 0
+        if n + s > 31:
+            return CAP
+        u = s
+    # (hi, lo) <<= u, or >>= -u, truncating (a left shift stays below 2**60)
+    if u >= 30:
+        hi = lo << (u - 30)
+        lo = 0
+    elif u > 0:
+        hi = (hi << u) | (lo >> (30 - u))
+        lo = (lo << u) & _M30
+    elif u <= -60:
+        hi = 0
+        lo = 0
+    elif u <= -30:
+        lo = hi >> (-30 - u)
+        hi = 0
+    elif u < 0:
+        r = 0 - u
+        lo = ((hi & ((1 << r) - 1)) << (30 - r)) | (lo >> r)
+        hi = hi >> r
+    if how == P_TOP:
+        w[_HI] = hi
+        w[_LO] = lo
+        return 0 - u
+    x = lo
+    if how == P_ROUND:
+        # below 2**31 before the halving: hi is at most 1
+        x = (hi << 29) + (x >> 1) + (x & 1)
+    elif hi:
+        return CAP
+    if x > CAP:
+        return CAP
+    return x
+
+
 @micropython.viper
 def ramp_into(io_buf):
     """The schedule (ACCEL_UNTIL, DECEL_AFTER, RATE_DECEL) of io's record (N, R0, RNOM,
@@ -131,15 +210,13 @@ def ramp_into(io_buf):
     sa_hi = 0
     sa_lo = 0
     if vn > r0:
-        mul_limbs(io_buf, vn - r0, vn + r0)
-        _div(io_buf, 2 * acc)
+        product(io_buf, vn - r0, vn + r0, 2 * acc, 0, P_LIMBS)
         sa_hi = io[_HI]
         sa_lo = io[_LO]
     sd_hi = 0
     sd_lo = 0
     if vn > r1:
-        mul_limbs(io_buf, vn - r1, vn + r1)
-        _div(io_buf, 2 * acc)
+        product(io_buf, vn - r1, vn + r1, 2 * acc, 0, P_LIMBS)
         sd_hi = io[_HI]
         sd_lo = io[_LO]
     s_lo = sa_lo + sd_lo
@@ -151,10 +228,10 @@ def ramp_into(io_buf):
         # The ramps meet below vn: peak^2 = acc n ONE + (r0^2 + r1^2) / 2, with no
         # cruise. Then peak < vn < 2**28, so acc * n < 2**26 here.
         p = acc * n
-        mul_limbs(io_buf, r0, r0)
+        product(io_buf, r0, r0, 1, 0, P_LIMBS)
         h0 = io[_HI]
         l0 = io[_LO]
-        mul_limbs(io_buf, r1, r1)
+        product(io_buf, r1, r1, 1, 0, P_LIMBS)
         h1 = io[_HI]
         l1 = io[_LO]
         # 2 acc n ONE = p << 29
@@ -182,21 +259,19 @@ def ramp_into(io_buf):
     # Acceleration time in ticks: (vn - r0) / acc, with FRAC fraction bits.
     a_int = (vn - r0) // acc
     a_rem = (vn - r0) - a_int * acc
-    mul_limbs(io_buf, a_rem, _ONE_FRAC)
-    _div(io_buf, acc)
+    product(io_buf, a_rem, _ONE_FRAC, acc, 0, P_LIMBS)
     frac = io[_LO]
     # Cruise time: its steps / vn.
     c_int = 0
     if c_hi or c_lo:
         io[_HI] = c_hi
         io[_LO] = c_lo
-        _div(io_buf, vn)
+        div_limbs(io_buf, vn)
         if io[_HI]:
             c_int = MAX_TICK
         else:
             c_int = io[_LO]
-            mul_limbs(io_buf, io[_REM], _ONE_FRAC)
-            _div(io_buf, vn)
+            product(io_buf, io[_REM], _ONE_FRAC, vn, 0, P_LIMBS)
             frac += io[_LO]
     decel = a_int + c_int
     if frac >= _ONE_FRAC:
@@ -213,7 +288,7 @@ def ramp_into(io_buf):
     late = (decel_after - decel) * _ONE_FRAC - frac + _HALF
     r_decel = r1
     if decel_after < MAX_TICK:
-        mul_limbs(io_buf, acc, late)
+        product(io_buf, acc, late, 1, 0, P_LIMBS)
         lo = io[_LO] + _HALF
         fall = (io[_HI] << 14) + (lo >> _FRAC)
         r_decel = vn - fall
