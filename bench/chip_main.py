@@ -177,7 +177,7 @@ def plan(path, stepping, profile=0):
                 errors.append("line %d: %r" % (number, e))
     planner.synchronize()
     us = time.ticks_diff(time.ticks_us(), t0)
-    if profile:
+    if profile == 1:
         # What a line allocates (the collector held off for a few lines), and what one
         # collection costs with the printer built.
         gc.collect()
@@ -196,7 +196,7 @@ def plan(path, stepping, profile=0):
         timer.deinit()
     if profile == 2:
         out["functions"] = chip_profile.report(timed[0], timed[1], moves)
-    if profile:
+    if profile == 1:
         out["bytes_allocated_per_line"] = allocated / len(few)
         out["collect_us"] = collect_us
     return out
@@ -219,7 +219,10 @@ def serve():
                 trace = io.StringIO()
                 sys.print_exception(e, trace)
                 res = {"failed": trace.getvalue(), "mem_free": gc.mem_free()}
-            print("bench:" + json.dumps(res))
+            gc.collect()
+            print("bench:", end="")  # one line, with no copy of the answer made for it
+            json.dump(res, sys.stdout)
+            print()
         print("ok")
 
 
