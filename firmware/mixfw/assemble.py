@@ -1,7 +1,6 @@
 # Assembles the printer from the board's settings, as APrinter does in one place:
 # each part gets its pins, timer and parameters passed in, in dependency order. main.py
 # runs it at boot; the simulation calls run() with its own consoles.
-from array import array
 import gc
 import sys
 import machine
