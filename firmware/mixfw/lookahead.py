@@ -175,6 +175,8 @@ def _rate(lk_buf, at: int, x2: int, io_buf) -> int:
     lk = ptr32(lk_buf)
     if x2 >= lk[at + L_NOMINAL]:
         return lk[at + L_RATE_NOM]
+    if x2 <= 0:
+        return lk[at + L_FLOOR]  # a stop: the root below would take 30 turns to say 0
     product(io_buf, x2, lk[at + L_K2], 1, 0, _P_LIMBS)
     r = int(isqrt_limbs(io_buf))
     s = lk[at + L_K_SHIFT] - _SHIFT_BIAS
