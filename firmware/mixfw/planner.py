@@ -172,11 +172,11 @@ def ramp_ticks(n, r0, r_nom, r1, acc, out=None, at=0):
     out[at + 2] = io[ramp.IO_RATE_DECEL]
 
 
-_RAMP_IO = array("i", bytes(4 * ramp.IO_WORDS))
+# The limbs' scratch words: ramp.py's io, and lookahead.plan_words' words after them.
+_RAMP_IO = array("i", bytes(4 * lookahead.W_WORDS))
 _ramp_into = ramp.ramp_into
 _recalculate = lookahead.recalculate
 _plan_words = lookahead.plan_words
-_PLAN_W = array("i", bytes(4 * lookahead.W_WORDS))
 assert (ramp.IO_N, ramp.IO_R0, ramp.IO_RNOM, ramp.IO_R1, ramp.IO_ACC, ramp.IO_ACCEL_UNTIL,
         ramp.IO_DECEL_AFTER, ramp.IO_RATE_DECEL) == tuple(range(8))  # as lookahead._write has them
 
@@ -712,7 +712,7 @@ class Planner:
         f[_F_NOMINAL] = nominal
         f[_F_NOMINAL2] = nominal2
         f[_F_MAX_ENTRY2] = max_entry2
-        _plan_words(self.lk, slot * _L_WORDS, f, n, _PLAN_W)
+        _plan_words(self.lk, slot * _L_WORDS, f, n, _RAMP_IO)
 
     # --- look-ahead ---
     def _recalculate(self, newest):
