@@ -781,6 +781,11 @@ def _safe_for_full_firmware(line):
         return True
     if (ln.letter, ln.number) not in _SAFE:
         return False
+    # M118 sends its text back: a mutated line whose text reads as a reply of the
+    # protocol ("M118ok") would be one to the host as well, as _text_line says.
+    if (ln.letter, ln.number) == ("M", 118) and any(
+            w in ln.args_text.lower() for w in ("ok", "error", "resend", "busy")):
+        return False
     # Moves and G92: bounded feed and distances so no move takes minutes of virtual
     # time (E has no soft limits; M211 S0 is left out for the same reason).
     if ln.letter == "G" and ln.number in (0, 1, 92):
