@@ -769,6 +769,11 @@ def _safe_for_full_firmware(line):
     from mixfw.gcode import Parser, GcodeError  # pure logic: imports on CPython
     if intake_verdict(line):
         return True
+    # M118 sends its text back: a mutated line whose text reads as a reply of the
+    # protocol ("M118ok") would be one to the host as well, as _text_line says.
+    low = line.lower()
+    if b"m118" in low and any(w in low for w in (b"ok", b"error", b"resend", b"busy")):
+        return False
     text = line.split(b";")[0].replace(b"\r", b"")
     buf = bytearray(text.split(b"*")[0])
     try:
@@ -780,11 +785,6 @@ def _safe_for_full_firmware(line):
     if ln.letter == "T":
         return True
     if (ln.letter, ln.number) not in _SAFE:
-        return False
-    # M118 sends its text back: a mutated line whose text reads as a reply of the
-    # protocol ("M118ok") would be one to the host as well, as _text_line says.
-    if (ln.letter, ln.number) == ("M", 118) and any(
-            w in ln.args_text.lower() for w in ("ok", "error", "resend", "busy")):
         return False
     # Moves and G92: bounded feed and distances so no move takes minutes of virtual
     # time (E has no soft limits; M211 S0 is left out for the same reason).
