@@ -32,10 +32,12 @@ class Motion:
         # offset), in integers (nanometres) as E is: relative moves add up over a whole
         # print, and a chip's 32-bit floats would drift.
         self.pos_nm = [0, 0, 0]
+        self._spare_nm = [0, 0, 0]  # g1's target, then pos_nm: see g1
         self.offset_nm = [0, 0, 0]
         self._xyz_per_nm = [steps_per_nm(s) for s in planner.steps_per_mm[:3]]
         self._seen_nm = [None, None, None]  # see _steps
         self._seen_steps = [0, 0, 0]
+        self._steps_out = [0, 0, 0, 0]
         self.e_nm = 0  # logical E
         self.e_offset_nm = 0  # filament = logical E + offset (G92 E, G10/G11)
         self.absolute = True
@@ -76,6 +78,7 @@ class Motion:
         self._xyz_per_nm = [steps_per_nm(s) for s in p.steps_per_mm[:3]]
         self._seen_nm = [None, None, None]  # see _steps
         self._seen_steps = [0, 0, 0]
+        self._steps_out = [0, 0, 0, 0]
         p.set_position_steps(self.machine_steps())
         self._travel(settings["travel_mm"])
         self.homing_feed_mm_s = settings["homing_feed_mm_s"]
@@ -119,12 +122,15 @@ class Motion:
 
     @micropython.native
     def _steps(self, pos_nm):
+        """Absolute steps of X Y Z at pos_nm, and the planner's E, in a list made once:
+        valid until the next call (the planner and Transitions copy what they keep)."""
         per_nm = self._xyz_per_nm
         off = self.offset_nm
         # An axis the move leaves where it was keeps the steps worked out last time.
         seen_nm = self._seen_nm
         seen_steps = self._seen_steps
-        steps = [0, 0, 0, self.planner.position_steps[3]]
+        steps = self._steps_out
+        steps[3] = self.planner.position_steps[3]
         for i in range(3):
             nm = pos_nm[i] + off[i]
             if nm != seen_nm[i]:
@@ -167,8 +173,14 @@ class Motion:
             self.feed_mm_s = f / 60.0
         if not present & _AXIS_BITS:
             return None
+        # The target goes in a list made once, which then becomes pos_nm, and pos_nm
+        # the spare: a list a line is garbage on the chips. pos_nm stays as it was
+        # when the line is refused.
         pos = self.pos_nm
-        target = list(pos)
+        target = self._spare_nm
+        target[0] = pos[0]
+        target[1] = pos[1]
+        target[2] = pos[2]
         moved = 0
         for i in range(3):
             k = _AXIS_INDEX[i]
@@ -198,6 +210,7 @@ class Motion:
             self._queue(steps, xyz, e_nm, self.feed_mm_s)
         self.e_nm = target_e_nm
         self.pos_nm = target
+        self._spare_nm = pos
         return None
 
     @micropython.native

@@ -116,24 +116,39 @@ def scaled_round(x, p, q):
     return r if x >= 0 else -r
 
 
-def block_weights(counts):
+@micropython.native
+def block_weights(counts, weights, steps):
     """Mixer weights that make the step loop give each drive exactly abs(counts[i])
     steps in a block (one whole period of the schedule); a block runs every drive the
-    same way. Returns (weights, steps given): when the steps are too many for the
-    mixer's integer range they are scaled, and the steps the schedule then gives are
-    worked out with the mixer itself."""
-    steps = [c if c >= 0 else -c for c in counts]
+    same way. Written into weights, and abs(counts) into steps (lists as long as
+    counts, made once: lists a line are garbage on the chips). Returns the steps given:
+    steps, or when they are too many for the mixer's integer range they are scaled,
+    and the steps the schedule then gives are worked out with the mixer itself."""
+    n = len(counts)
     g = 0
-    for c in steps:
+    for i in range(n):
+        c = counts[i]
+        if c < 0:
+            c = -c
+        steps[i] = c
         if c:
-            g = _gcd(c, g)
+            a = c
+            while g:
+                a, g = g, a % g
+            g = a
     if not g:
-        return tuple(steps), steps
+        for i in range(n):
+            weights[i] = 0
+        return steps
     total = sum(steps)
     if total // g <= MAX_PERIOD:
-        return tuple([c // g for c in steps]), steps
-    weights = normalize(steps, len(steps))
-    return weights, schedule_counts(weights, total)
+        for i in range(n):
+            weights[i] = steps[i] // g
+        return steps
+    scaled = normalize(steps, n)
+    for i in range(n):
+        weights[i] = scaled[i]
+    return schedule_counts(scaled, total)
 
 
 def _gcd(a, b):
@@ -211,6 +226,17 @@ class Planner:
         pulse_ticks = mem[st.S_PULSE_TICKS]
         # A STEP pin is high for pulse_ticks and low at least as long.
         self.max_step_rate = 1.0 / (2 * pulse_ticks * self.tick_s)
+        # Below this, speed * steps/mm leaves the step rate's limit unbound, with room
+        # for float32's rounding of the move's length.
+        self._max_rate_margin = self.max_step_rate * (1 - 1e-5)
+        # Products kept while their factors are the same objects (see _add_block).
+        self._seen_speed = None
+        self._seen_min_s = None
+        self._seen_speed2 = 0.0
+        self._seen_min_mm = 0.0
+        self._jd_accel = None
+        self._jd_mm = None
+        self._accel_jd = 0.0
         self.position_steps = [0, 0, 0, 0]
         # Per-slot planning data in integers, for the look-ahead (see lookahead.py).
         # A block's floats for lookahead.plan_words, with the tick's two.
@@ -235,13 +261,20 @@ class Planner:
                                        [self.steps_per_mm[3]] * self.drives)
         self._set_spm_fixed()
         # Each drive's exact filament is drive_nm[i] + drive_rem[i] / rem_total nm: the
-        # part of a share below a nanometre is carried, not dropped. The tuple
-        # (drive_nm, drive_rem, rem_total) is replaced, never changed in place: _plan_e
-        # knows its plans apart.
-        self.drive_pos = ([0] * self.drives, [0] * self.drives, 1)
+        # part of a share below a nanometre is carried, not dropped. A plan is the list
+        # [drive_nm, drive_rem, rem_total, targets]: targets, each drive's step at that
+        # filament, or None where not worked out. drive_pos, the plan of the moves
+        # queued, is replaced, never changed in place: _plan_e writes a move's plan
+        # into whichever of two plans made once is not drive_pos (a list per drive
+        # per line was a quarter of a line's garbage on the chips), and a move that
+        # fails leaves drive_pos as it was.
+        self.drive_pos = [[0] * self.drives, [0] * self.drives, 1, None]
+        self._plans = tuple([[0] * self.drives, [0] * self.drives, 1, [0] * self.drives]
+                            for _ in range(2))
+        self._counts = [0] * self.drives  # the latest plan's steps per drive
+        self._weights = [0] * self.drives  # the latest block's, from block_weights
+        self._given = [0] * self.drives
         self.drive_steps = [0] * self.drives
-        self._targets_of = None
-        self._targets = None
         self.before_sync = []  # fn() each: moves held before the planner are handed over
         self.dir_invert_mask = 0  # DIR pins of motors wired the other way round
         # For retract_policy 2: the latest extrusion as stretches [start, end) of block
@@ -331,28 +364,33 @@ class Planner:
         return scaled_round(steps, q, p)
 
     def _drive_pos_from_steps(self):
-        self.drive_pos = ([self._nm_of_steps(i, self.drive_steps[i])
-                           for i in range(self.drives)], [0] * self.drives, 1)
+        self.drive_pos = [[self._nm_of_steps(i, self.drive_steps[i])
+                           for i in range(self.drives)], [0] * self.drives, 1, None]
 
     @micropython.native
-    def _plan_e(self, e_nm, weights=None):
-        """Per-drive exact filament (a new drive_pos) and step counts after an E move of
-        e_nm nanometres shared by the weights."""
+    def _plan_e(self, e_nm, weights=None, now=None):
+        """The plan (see drive_pos) after an E move of e_nm nanometres shared by the
+        weights, from the plan now (drive_pos unless given); the move's steps per drive
+        in self._counts. Valid until the next call."""
         w = weights or self.tool_mix
         total = sum(w)
         per_nm = self._per_nm
-        now = self.drive_pos
-        now_nm, now_rem, now_total = now
-        now_steps = self.drive_steps
+        if now is None:
+            now = self.drive_pos
+        now_nm = now[0]
+        now_rem = now[1]
+        now_total = now[2]
         # A drive with no share in the move stays where it is, and so does its target
-        # step: taken from the last plan while drive_pos is still that plan's.
-        known = self._targets if self._targets_of is now else None
-        drives = self.drives
-        drive_nm = [0] * drives
-        drive_rem = [0] * drives
-        targets = [0] * drives
-        counts = [0] * drives
-        for i in range(drives):
+        # step, where the plan now knows it.
+        known = now[3]
+        now_steps = self.drive_steps
+        plans = self._plans
+        pos = plans[1] if self.drive_pos is plans[0] else plans[0]
+        drive_nm = pos[0]
+        drive_rem = pos[1]
+        targets = pos[3]
+        counts = self._counts
+        for i in range(self.drives):
             rem = now_rem[i]
             if now_total != total and rem:
                 rem = div_round(rem * total, now_total)  # below a nanometre either way
@@ -374,16 +412,14 @@ class Planner:
             drive_rem[i] = rem
             targets[i] = target
             counts[i] = target - now_steps[i]
-        pos = (drive_nm, drive_rem, total)
-        self._targets_of = pos
-        self._targets = targets
-        return pos, counts
+        pos[2] = total
+        return pos
 
     def _replay_counts(self, e_nm):
         """Per-drive steps of a retraction (e_nm < 0) that takes back exactly the drive
         steps of the latest e_nm of extrusion, newest first, or of an unretraction that
         pushes back exactly what retractions took, oldest first. What the record does
-        not cover follows the active mix."""
+        not cover follows the active mix. Returns the plan, as _plan_e does."""
         back = e_nm < 0
         take = self.extruded if back else self.retracted
         give = self.retracted if back else self.extruded
@@ -413,13 +449,11 @@ class Planner:
         # mix. The replayed steps are exact: they are the targets, not a rounding of the
         # new positions (which a half step could tip the other way).
         sign = -1 if back else 1
-        now_nm, now_rem, now_total = self.drive_pos
-        pos = ([now_nm[i] + sign * self._nm_of_steps(i, counts[i]) for i in range(self.drives)],
-               now_rem, now_total)
-        self.drive_pos = pos
-        self._targets_of = pos
-        self._targets = [self.drive_steps[i] + sign * counts[i] for i in range(self.drives)]
-        return self._plan_e(sign * need_nm if need_nm > 0 else 0)
+        now = self.drive_pos
+        replayed = [[now[0][i] + sign * self._nm_of_steps(i, counts[i])
+                     for i in range(self.drives)], now[1], now[2],
+                    [self.drive_steps[i] + sign * counts[i] for i in range(self.drives)]]
+        return self._plan_e(sign * need_nm if need_nm > 0 else 0, None, replayed)
 
     def _stretch(self, weights, start, end, counts=None):
         """A record of steps [start, end) of a block's schedule, with its per-drive
@@ -502,7 +536,7 @@ class Planner:
                                    mix, replay)
         pieces = (abs(e_nm) * max(self._spm_fixed)
                   // (NM_PER_MM * SPM_SCALE * (MAX_PERIOD - 2 * MAX_DRIVES))) + 1
-        start = self.position_steps
+        start = list(self.position_steps)  # which each piece changes in place
         added = False
         for k in range(1, pieces + 1):
             point = [start[i] + div_round((target_steps[i] - start[i]) * k, pieces)
@@ -519,12 +553,11 @@ class Planner:
         # Builtins (abs, min, max) and module attributes are lookups by name: the
         # arithmetic below is written out, as it runs for every line of G-code.
         pos = self.position_steps
-        saved = self.drive_pos
         if replay and e_nm:
-            drive_pos, counts = self._replay_counts(e_nm)
-            self.drive_pos = saved
+            drive_pos = self._replay_counts(e_nm)
         else:
-            drive_pos, counts = self._plan_e(e_nm, mix[1] if mix else None)
+            drive_pos = self._plan_e(e_nm, mix[1] if mix else None)
+        counts = self._counts
         # For speeds only: steps come from the integers.
         e_mm = e_nm / NM_PER_MM if e_nm else 0.0
         e_steps = sum(counts)
@@ -544,9 +577,11 @@ class Planner:
         steps[2] = dz if dz >= 0 else -dz
         steps[3] = e_steps if e_steps >= 0 else -e_steps
         n = 0
-        for k in steps:
-            if k > n:
-                n = k
+        lead = 0
+        for i in range(4):
+            if steps[i] > n:
+                n = steps[i]
+                lead = i
         if n == 0:
             self.drive_pos = drive_pos  # less than a step: it counts toward the next move
             return False
@@ -596,9 +631,13 @@ class Planner:
                 v = max_accel[i] / share
                 if v < accel:
                     accel = v
-        v = self.max_step_rate * dist / n
-        if v < speed:
-            speed = v
+        # The step rate's limit binds only where the lead axis asks more than it: an
+        # axis of X Y Z moves at most speed * its steps/mm (one product where the
+        # limit took two).
+        if lead >= 3 or speed * spm[lead] > self._max_rate_margin:
+            v = self.max_step_rate * dist / n
+            if v < speed:
+                speed = v
         # sqrt(x * x) is abs(x) exactly in binary floating point.
         if not de_mm:
             len4 = xyz_mm
@@ -614,8 +653,16 @@ class Planner:
         unit[3] = de_mm * inv if de_mm else 0.0
 
         slot = self._new_slot()
+        # Most lines keep the feed rate of the line before (the same float object):
+        # its square and its SLOWDOWN length are worked out once (each float operation
+        # allocates on the chips).
         min_s = self.min_segment_s
-        if min_s and speed * min_s > dist:
+        if speed is not self._seen_speed or min_s is not self._seen_min_s:
+            self._seen_speed = speed
+            self._seen_min_s = min_s
+            self._seen_speed2 = speed * speed
+            self._seen_min_mm = speed * min_s if min_s else 0.0
+        if min_s and self._seen_min_mm > dist:
             # Marlin's SLOWDOWN (set_min_segment_time), with its bounds: 2 to half the
             # queue's blocks waiting, and 2 (min_s - t) / waiting added to the time t.
             waiting = self._waiting()
@@ -624,7 +671,7 @@ class Planner:
                 speed = dist / (t + 2 * (min_s - t) / waiting)
         # Junction speed from the deviation model; a stop if the queue ran empty. In
         # squares, as the look-ahead takes them: no square root to undo.
-        nominal2 = speed * speed
+        nominal2 = self._seen_speed2 if speed is self._seen_speed else speed * speed
         max_entry2 = 0.0
         pu = self.prev_unit
         if pu is not None and not homing_axes:
@@ -642,7 +689,12 @@ class Planner:
                 max_entry2 = 0.0
             else:
                 sin_half = sqrt(0.5 * (1.0 + dot))
-                max_entry2 = accel * self.junction_deviation_mm * sin_half / (1.0 - sin_half)
+                jd = self.junction_deviation_mm
+                if accel is not self._jd_accel or jd is not self._jd_mm:
+                    self._jd_accel = accel
+                    self._jd_mm = jd
+                    self._accel_jd = accel * jd
+                max_entry2 = self._accel_jd * sin_half / (1.0 - sin_half)
             if nominal2 < max_entry2:
                 max_entry2 = nominal2
             if self.prev_nominal2 < max_entry2:
@@ -675,11 +727,13 @@ class Planner:
         if e_steps:
             # Exact per-drive counts as the block's mix; a fresh id, so the step loop
             # starts its schedule anew and gives each drive exactly its count.
-            weights, given = block_weights(counts)
+            weights = self._weights
+            given = block_weights(counts, weights, self._given)
             if e_steps < 0:
-                given = [-c for c in given]
+                for i in range(self.drives):
+                    given[i] = -given[i]
             elif self.keep_extrusion and not replay:
-                self._remember_extrusion(weights, given)
+                self._remember_extrusion(tuple(weights), list(given))
             self._block_mix_id = (self._block_mix_id + 1) & 0x3FFFFFF
             w = b + _B_MIX
             m[w] = self._block_mix_id
@@ -689,7 +743,11 @@ class Planner:
         self._set_plan(slot, dist, accel, speed, nominal2, max_entry2, n)
         self._recalculate(slot)
         self._commit(slot)
-        self.position_steps = [target_steps[0], target_steps[1], target_steps[2], pos[3] + e_steps]
+        # In place, as the drives' plans: a list a line is garbage on the chips.
+        pos[0] = target_steps[0]
+        pos[1] = target_steps[1]
+        pos[2] = target_steps[2]
+        pos[3] += e_steps
         self.drive_pos = drive_pos
         drive_steps = self.drive_steps
         for i in range(self.drives):
