@@ -33,7 +33,9 @@ L_UNTIL = const(14)
 L_AFTER = const(15)
 L_RATE_DECEL = const(16)
 L_DWELL = const(17)
-L_WORDS = const(18)
+L_V0 = const(18)  # the V2 whose rate RATE_V0 is (-1: none): an entry's rate, kept
+L_RATE_V0 = const(19)  # as the entry mostly stays when the block is rewritten
+L_WORDS = const(20)
 SHIFT_BIAS = const(64)
 _SHIFT_BIAS = const(SHIFT_BIAS)
 
@@ -100,6 +102,7 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf):
     for i in range(L_WORDS):
         lk[at + i] = 0
     lk[at + L_RN] = -1  # no schedule worked out yet
+    lk[at + L_V0] = -1
     if n <= 0:
         lk[at + L_DWELL] = 1
         return
@@ -212,7 +215,12 @@ def _write(lk_buf, mem_buf, slot: int, x2: int, hooks):
         elif vn2 > v02 + gain:
             vn2 = v02 + gain
     r_nom = int(_rate(lk_buf, at, vn2, io_buf))
-    r0 = int(_rate(lk_buf, at, v02, io_buf))
+    if v02 == lk[at + L_V0]:
+        r0 = lk[at + L_RATE_V0]
+    else:
+        r0 = int(_rate(lk_buf, at, v02, io_buf))
+        lk[at + L_V0] = v02
+        lk[at + L_RATE_V0] = r0
     if r0 > r_nom:
         r0 = r_nom
     r1 = int(_rate(lk_buf, at, x2, io_buf))

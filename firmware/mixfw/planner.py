@@ -51,7 +51,7 @@ _F_MAX_ENTRY2 = const(4)
 assert (_F_MM, _F_ACCEL, _F_NOMINAL, _F_NOMINAL2, _F_MAX_ENTRY2) == (
     lookahead.F_MM, lookahead.F_ACCEL, lookahead.F_NOMINAL, lookahead.F_NOMINAL2,
     lookahead.F_MAX_ENTRY2)
-_L_WORDS = const(18)
+_L_WORDS = const(20)
 assert _L_WORDS == lookahead.L_WORDS
 
 # Largest schedule period the step loop's mixer takes: its products stay below 2**30.
@@ -502,6 +502,7 @@ class Planner:
             self.prev_nominal2 = 0.0
         return m[_S_HEAD]
 
+    @micropython.native
     def _commit(self, slot):
         nxt = slot + 1
         self.mem[_S_HEAD] = 0 if nxt >= self.queue else nxt
@@ -760,6 +761,7 @@ class Planner:
             self.prev_nominal2 = nominal2
         return True
 
+    @micropython.native
     def _set_plan(self, slot, mm, accel, nominal, nominal2, max_entry2, n=0):
         """A new block's planning data; n: its lead-axis steps (0 for a dwell). Speeds
         in mm/s, nominal2 and max_entry2 their squares. The floats end here: the

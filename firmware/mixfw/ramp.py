@@ -79,25 +79,33 @@ def div_limbs(w_buf, c: int):
 
 @micropython.viper
 def isqrt_limbs(w_buf) -> int:
-    """floor(sqrt((hi, lo))), for a root below 2**28 (two bits a step)."""
+    """floor(sqrt((hi, lo))), for a root below 2**28 (two bits a step, from the
+    highest pair of bits that is not zero: the zero pairs above it add nothing)."""
     w = ptr32(w_buf)
-    hi = w[_HI]
-    lo = w[_LO]
+    x = w[_HI]
+    more = 1  # lo's pairs are still to come
+    if not x:
+        x = w[_LO]
+        more = 0
+    s = 28
+    while s > 0 and not (x >> s):
+        s -= 2
     res = 0
     rem = 0
-    i = 29
-    while i >= 0:
-        if i >= 15:
-            pair = (hi >> (2 * (i - 15))) & 3
-        else:
-            pair = (lo >> (2 * i)) & 3
-        rem = (rem << 2) | pair
+    while True:
+        rem = (rem << 2) | ((x >> s) & 3)
         t = (res << 2) | 1
         res = res << 1
         if rem >= t:
             rem -= t
             res |= 1
-        i -= 1
+        s -= 2
+        if s < 0:
+            if not more:
+                break
+            more = 0
+            x = w[_LO]
+            s = 28
     return res
 
 
