@@ -261,16 +261,16 @@ class Planner:
                                        [self.steps_per_mm[3]] * self.drives)
         self._set_spm_fixed()
         # Each drive's exact filament is drive_nm[i] + drive_rem[i] / rem_total nm: the
-        # part of a share below a nanometre is carried, not dropped. A plan is the list
-        # [drive_nm, drive_rem, rem_total, targets]: targets, each drive's step at that
-        # filament, or None where not worked out. drive_pos, the plan of the moves
-        # queued, is replaced, never changed in place: _plan_e writes a move's plan
-        # into whichever of two plans made once is not drive_pos (a list per drive
-        # per line was a quarter of a line's garbage on the chips), and a move that
-        # fails leaves drive_pos as it was.
-        self.drive_pos = [[0] * self.drives, [0] * self.drives, 1, None]
-        self._plans = tuple([[0] * self.drives, [0] * self.drives, 1, [0] * self.drives]
-                            for _ in range(2))
+        # part of a share below a nanometre is carried, not dropped; drive_targets[i] is
+        # its step there, where targets_known. _plan_e changes them in place, and only
+        # for the drives with a share in the move (copying every drive's plan for each
+        # line was most of its time on the chips): a move is refused, if at all, before
+        # its filament is planned.
+        self.drive_nm = [0] * self.drives
+        self.drive_rem = [0] * self.drives
+        self.rem_total = 1
+        self.drive_targets = [0] * self.drives
+        self.targets_known = False
         self._counts = [0] * self.drives  # the latest plan's steps per drive
         self._weights = [0] * self.drives  # the latest block's, from block_weights
         self._given = [0] * self.drives
@@ -364,39 +364,38 @@ class Planner:
         return scaled_round(steps, q, p)
 
     def _drive_pos_from_steps(self):
-        self.drive_pos = [[self._nm_of_steps(i, self.drive_steps[i])
-                           for i in range(self.drives)], [0] * self.drives, 1, None]
+        for i in range(self.drives):
+            self.drive_nm[i] = self._nm_of_steps(i, self.drive_steps[i])
+            self.drive_rem[i] = 0
+        self.rem_total = 1
+        self.targets_known = False
 
     @micropython.native
-    def _plan_e(self, e_nm, weights=None, now=None):
-        """The plan (see drive_pos) after an E move of e_nm nanometres shared by the
-        weights, from the plan now (drive_pos unless given); the move's steps per drive
-        in self._counts. Valid until the next call."""
+    def _plan_e(self, e_nm, weights=None):
+        """The drives' exact filament and target steps after an E move of e_nm
+        nanometres shared by the weights, in place; the move's steps per drive in
+        self._counts."""
         w = weights or self.tool_mix
         total = sum(w)
         per_nm = self._per_nm
-        if now is None:
-            now = self.drive_pos
-        now_nm = now[0]
-        now_rem = now[1]
-        now_total = now[2]
-        # A drive with no share in the move stays where it is, and so does its target
-        # step, where the plan now knows it.
-        known = now[3]
+        drive_nm = self.drive_nm
+        drive_rem = self.drive_rem
+        targets = self.drive_targets
         now_steps = self.drive_steps
-        plans = self._plans
-        pos = plans[1] if self.drive_pos is plans[0] else plans[0]
-        drive_nm = pos[0]
-        drive_rem = pos[1]
-        targets = pos[3]
         counts = self._counts
+        now_total = self.rem_total
+        rescale = now_total != total
+        # A drive with no share in the move stays where it is, and so does its target
+        # step, where it is known.
+        every = not self.targets_known
         for i in range(self.drives):
-            rem = now_rem[i]
-            if now_total != total and rem:
+            rem = drive_rem[i]
+            if rescale and rem:
                 rem = div_round(rem * total, now_total)  # below a nanometre either way
-            if (w[i] and e_nm) or known is None:
+                drive_rem[i] = rem
+            if (w[i] and e_nm) or every:
                 num = e_nm * w[i] + rem
-                nm = now_nm[i] + num // total
+                nm = drive_nm[i] + num // total
                 rem = num % total
                 p, q = per_nm[i]
                 # (nm + rem / total) * p / q, rounded: with no remainder (every
@@ -405,21 +404,20 @@ class Planner:
                     target = scaled_round(nm * total + rem, p, q * total)
                 else:
                     target = scaled_round(nm, p, q)
+                drive_nm[i] = nm
+                drive_rem[i] = rem
+                targets[i] = target
+                counts[i] = target - now_steps[i]
             else:
-                nm = now_nm[i]
-                target = known[i]
-            drive_nm[i] = nm
-            drive_rem[i] = rem
-            targets[i] = target
-            counts[i] = target - now_steps[i]
-        pos[2] = total
-        return pos
+                counts[i] = targets[i] - now_steps[i]
+        self.rem_total = total
+        self.targets_known = True
 
     def _replay_counts(self, e_nm):
         """Per-drive steps of a retraction (e_nm < 0) that takes back exactly the drive
         steps of the latest e_nm of extrusion, newest first, or of an unretraction that
         pushes back exactly what retractions took, oldest first. What the record does
-        not cover follows the active mix. Returns the plan, as _plan_e does."""
+        not cover follows the active mix. Plans as _plan_e does."""
         back = e_nm < 0
         take = self.extruded if back else self.retracted
         give = self.retracted if back else self.extruded
@@ -449,11 +447,11 @@ class Planner:
         # mix. The replayed steps are exact: they are the targets, not a rounding of the
         # new positions (which a half step could tip the other way).
         sign = -1 if back else 1
-        now = self.drive_pos
-        replayed = [[now[0][i] + sign * self._nm_of_steps(i, counts[i])
-                     for i in range(self.drives)], now[1], now[2],
-                    [self.drive_steps[i] + sign * counts[i] for i in range(self.drives)]]
-        return self._plan_e(sign * need_nm if need_nm > 0 else 0, None, replayed)
+        for i in range(self.drives):
+            self.drive_nm[i] += sign * self._nm_of_steps(i, counts[i])
+            self.drive_targets[i] = self.drive_steps[i] + sign * counts[i]
+        self.targets_known = True
+        self._plan_e(sign * need_nm if need_nm > 0 else 0)
 
     def _stretch(self, weights, start, end, counts=None):
         """A record of steps [start, end) of a block's schedule, with its per-drive
@@ -554,17 +552,22 @@ class Planner:
         # Builtins (abs, min, max) and module attributes are lookups by name: the
         # arithmetic below is written out, as it runs for every line of G-code.
         pos = self.position_steps
+        dx = target_steps[0] - pos[0]
+        dy = target_steps[1] - pos[1]
+        dz = target_steps[2] - pos[2]
+        # Before the filament is planned: a move refused changes nothing. (E has at
+        # most MAX_PERIOD steps a block: see add_move.)
+        if not (-0x3FFFFFFF < dx < 0x3FFFFFFF and -0x3FFFFFFF < dy < 0x3FFFFFFF
+                and -0x3FFFFFFF < dz < 0x3FFFFFFF):
+            raise PlanError("move too long: %d %d %d steps" % (dx, dy, dz))
         if replay and e_nm:
-            drive_pos = self._replay_counts(e_nm)
+            self._replay_counts(e_nm)
         else:
-            drive_pos = self._plan_e(e_nm, mix[1] if mix else None)
+            self._plan_e(e_nm, mix[1] if mix else None)
         counts = self._counts
         # For speeds only: steps come from the integers.
         e_mm = e_nm / NM_PER_MM if e_nm else 0.0
         e_steps = sum(counts)
-        dx = target_steps[0] - pos[0]
-        dy = target_steps[1] - pos[1]
-        dz = target_steps[2] - pos[2]
         # Lists made once and refilled: on the chips a tuple of 3 or more takes a heap
         # allocation of several blocks, which searches the heap from its first free block.
         delta = self._delta
@@ -584,10 +587,7 @@ class Planner:
                 n = steps[i]
                 lead = i
         if n == 0:
-            self.drive_pos = drive_pos  # less than a step: it counts toward the next move
-            return False
-        if n >= 0x3FFFFFFF:
-            raise PlanError("move too long: %d steps" % n)
+            return False  # less than a step: the filament counts toward the next move
         # Every float operation allocates on the chips: an axis the move leaves alone
         # takes none, where its 0.0 would change no sum or product below.
         spm = self.steps_per_mm
@@ -749,7 +749,6 @@ class Planner:
         pos[1] = target_steps[1]
         pos[2] = target_steps[2]
         pos[3] += e_steps
-        self.drive_pos = drive_pos
         drive_steps = self.drive_steps
         for i in range(self.drives):
             drive_steps[i] += given[i]
