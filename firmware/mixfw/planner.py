@@ -245,11 +245,13 @@ class Planner:
         self._plan_f[lookahead.F_TICK_S] = self.tick_s
         self.lk = lk or heap.zeros(lk_words(q))
         self._hooks = (irq_off, irq_on, _RAMP_IO)
-        self.prev_unit = None  # one of _units, or None after a stop
-        self._units = ([0.0] * 4, [0.0] * 4)
+        # The latest move's X Y Z E in mm (one of _dirs) and its length, for the next
+        # junction; None after a stop.
+        self.prev_dir_mm = None
+        self.prev_len_mm = 1.0
+        self._dirs = ([0.0] * 4, [0.0] * 4)
         self._delta = [0] * 4
         self._abs_steps = [0] * 4
-        self._d_mm = [0.0] * 4
         self.prev_nominal2 = 0.0
         self.mix_id = 0
         self.tool_mix = (1,) + (0,) * (MAX_DRIVES - 1)  # the active tool's weights
@@ -299,7 +301,7 @@ class Planner:
             fn()
         while self.busy():
             self.idle()
-        self.prev_unit = None
+        self.prev_dir_mm = None
         self.prev_nominal2 = 0.0
 
     def abort(self):
@@ -314,7 +316,7 @@ class Planner:
         for i in range(self.drives):
             self.drive_steps[i] = m[st.S_DRIVE_POS + i]
         self._drive_pos_from_steps()
-        self.prev_unit = None
+        self.prev_dir_mm = None
         self.prev_nominal2 = 0.0
         self.extruded = []
         self.retracted = []
@@ -494,9 +496,9 @@ class Planner:
         while self._queued() >= self.queue - 1:
             self.idle()
         if not self.busy():
-            if self.prev_unit is not None:
+            if self.prev_dir_mm is not None:
                 self.underruns += 1
-            self.prev_unit = None
+            self.prev_dir_mm = None
             self.prev_nominal2 = 0.0
         return m[_S_HEAD]
 
@@ -516,7 +518,7 @@ class Planner:
         m[b + st.B_DWELL] = ticks
         self._set_plan(slot, 0.0, 0.0, 0.0, 0.0, 0.0)
         self._commit(slot)
-        self.prev_unit = None
+        self.prev_dir_mm = None
         self.prev_nominal2 = 0.0
 
     @micropython.native
@@ -595,7 +597,7 @@ class Planner:
         y_mm = dy / spm[1] if dy else 0.0
         z_mm = dz / spm[2] if dz else 0.0
         de_mm = e_steps / spm[3] if e_steps and not e_mm else e_mm
-        d_mm = self._d_mm
+        d_mm = self._dirs[0] if self.prev_dir_mm is self._dirs[1] else self._dirs[1]
         d_mm[0] = x_mm
         d_mm[1] = y_mm
         d_mm[2] = z_mm
@@ -646,12 +648,6 @@ class Planner:
             len4 = sqrt(sq + de_mm * de_mm)
         else:
             len4 = dist
-        unit = self._units[0] if self.prev_unit is self._units[1] else self._units[1]
-        inv = 1.0 / len4
-        unit[0] = x_mm * inv if dx else 0.0
-        unit[1] = y_mm * inv if dy else 0.0
-        unit[2] = z_mm * inv if dz else 0.0
-        unit[3] = de_mm * inv if de_mm else 0.0
 
         slot = self._new_slot()
         # Most lines keep the feed rate of the line before (the same float object):
@@ -674,16 +670,19 @@ class Planner:
         # squares, as the look-ahead takes them: no square root to undo.
         nominal2 = self._seen_speed2 if speed is self._seen_speed else speed * speed
         max_entry2 = 0.0
-        pu = self.prev_unit
+        pu = self.prev_dir_mm
         if pu is not None and not homing_axes:
-            # The cosine of the angle between the moves is -dot.
-            dot = pu[0] * unit[0] if dx else 0.0
+            # The cosine of the angle between the moves is -dot, of their unit vectors:
+            # the directions' product over their lengths (two float operations fewer
+            # than making unit vectors first).
+            dot = pu[0] * x_mm if dx else 0.0
             if dy:
-                dot = dot + pu[1] * unit[1] if dx else pu[1] * unit[1]
+                dot = dot + pu[1] * y_mm if dx else pu[1] * y_mm
             if dz:
-                dot = dot + pu[2] * unit[2]
+                dot = dot + pu[2] * z_mm
             if de_mm:
-                dot = dot + pu[3] * unit[3]
+                dot = dot + pu[3] * de_mm
+            dot = dot / (self.prev_len_mm * len4)
             if dot > 0.999999:
                 max_entry2 = _INF
             elif dot < -0.999999:
@@ -753,10 +752,11 @@ class Planner:
         for i in range(self.drives):
             drive_steps[i] += given[i]
         if homing_axes:
-            self.prev_unit = None
+            self.prev_dir_mm = None
             self.prev_nominal2 = 0.0
         else:
-            self.prev_unit = unit
+            self.prev_dir_mm = d_mm
+            self.prev_len_mm = len4
             self.prev_nominal2 = nominal2
         return True
 
