@@ -11,13 +11,13 @@ from array import array
 from mixfw.compat import const, micropython, ptr8, ptr32
 
 LINE_OK = const(1)
-LINE_TOO_LONG = const(2)
-LINE_BAD_BYTE = const(3)
+_LINE_TOO_LONG = const(2)
+_LINE_BAD_BYTE = const(3)
 LINE_CUT = const(4)  # the stream ended inside a line
 
-RX_BYTES = const(256)  # the receive ring; a power of two
+_RX_BYTES = const(256)  # the receive ring; a power of two
 _RX_MASK = const(255)
-SCAN_BYTES = const(16)  # the start of each line, kept for the emergency commands
+_SCAN_BYTES = const(16)  # the start of each line, kept for the emergency commands
 
 # Words of the state array.
 _HEAD = const(0)  # the ring's first byte
@@ -49,7 +49,7 @@ def _put(ring_buf, st_buf, src_buf, at: int, end: int, scan_buf) -> int:
         tail += 1
         if c == 10:
             break
-        if scan_n < SCAN_BYTES:
+        if scan_n < _SCAN_BYTES:
             scan[scan_n] = c
             scan_n += 1
     st[_COUNT] = st[_COUNT] + (at - start)
@@ -81,10 +81,10 @@ def _take(ring_buf, st_buf, line_buf, size: int) -> int:
         if c == 59:
             in_comment = 1
         elif (c < 32 and c != 9) or c > 126:
-            fault = LINE_BAD_BYTE
+            fault = _LINE_BAD_BYTE
             st[_BAD_BYTE] = c
         elif n >= size:
-            fault = LINE_TOO_LONG
+            fault = _LINE_TOO_LONG
         else:
             line[n] = c
             n += 1
@@ -100,8 +100,8 @@ class Intake:
     def __init__(self, size):
         self.buf = bytearray(size)
         self.size = size
-        self.ring = bytearray(RX_BYTES)
-        self.scan = bytearray(SCAN_BYTES)
+        self.ring = bytearray(_RX_BYTES)
+        self.scan = bytearray(_SCAN_BYTES)
         self.st = array("i", [0] * _WORDS)
 
     @property
@@ -119,7 +119,7 @@ class Intake:
         return self.st[_COUNT]
 
     def room(self):
-        return RX_BYTES - self.st[_COUNT]
+        return _RX_BYTES - self.st[_COUNT]
 
     def put(self, src, at, end):
         """src[at:end] into the ring (room() must hold them), up to and including the
@@ -147,6 +147,6 @@ class Intake:
     def error_text(self, status):
         if status == LINE_CUT:
             return "line cut off by the end of the stream (no newline); not run"
-        if status == LINE_TOO_LONG:
+        if status == _LINE_TOO_LONG:
             return "line longer than %d bytes" % self.size
         return "byte 0x%02x is not printable ASCII" % self.st[_BAD_BYTE]

@@ -12,13 +12,13 @@ from mixfw import stepper as st
 from mixfw.ramp import isqrt_limbs, product, ramp_into
 
 V2_SCALE = 64
-V2_MAX = const(0x1FFFFFFF)
+_V2_MAX = const(0x1FFFFFFF)
 
 # Words per slot in the planner's lk array.
 L_GAIN = const(0)  # the V2 a block gains over its length: 2 a mm
 L_MAX_ENTRY = const(1)  # junction limit
 L_NOMINAL = const(2)
-L_BACK = const(3)  # the fastest entry that can still stop by the end of the queue
+_L_BACK = const(3)  # the fastest entry that can still stop by the end of the queue
 L_ENTRY = const(4)
 L_EXIT = const(5)  # the exit baked into the slot's record
 L_K2 = const(6)  # rate = isqrt(V2 * K2) << K_SHIFT (>> -K_SHIFT)
@@ -26,15 +26,15 @@ L_K_SHIFT = const(7)  # plus _SHIFT_BIAS: a 64-bit build's viper reads words uns
 L_RATE_NOM = const(8)  # the nominal speed's rate
 L_FLOOR = const(9)  # the slowest rate: reached from rest within half a step
 L_ACC = const(10)
-L_R0 = const(11)  # the rates of the record's schedule (R_NOM -1: none yet)
+_L_R0 = const(11)  # the rates of the record's schedule (R_NOM -1: none yet)
 L_RN = const(12)
-L_R1 = const(13)
-L_UNTIL = const(14)
-L_AFTER = const(15)
-L_RATE_DECEL = const(16)
+_L_R1 = const(13)
+_L_UNTIL = const(14)
+_L_AFTER = const(15)
+_L_RATE_DECEL = const(16)
 L_DWELL = const(17)
-L_V0 = const(18)  # the V2 whose rate RATE_V0 is (-1: none): an entry's rate, kept
-L_RATE_V0 = const(19)  # as the entry mostly stays when the block is rewritten
+_L_V0 = const(18)  # the V2 whose rate RATE_V0 is (-1: none): an entry's rate, kept
+_L_RATE_V0 = const(19)  # as the entry mostly stays when the block is rewritten
 L_WORDS = const(20)
 SHIFT_BIAS = const(64)
 _SHIFT_BIAS = const(SHIFT_BIAS)
@@ -102,7 +102,7 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf):
     for i in range(L_WORDS):
         lk[at + i] = 0
     lk[at + L_RN] = -1  # no schedule worked out yet
-    lk[at + L_V0] = -1
+    lk[at + _L_V0] = -1
     if n <= 0:
         lk[at + L_DWELL] = 1
         return
@@ -120,13 +120,13 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf):
     e_a = w[_W_E + F_ACCEL] - _BIAS
     # GAIN = 2 V2_SCALE a mm (V2_SCALE = 2**6)
     x = int(product(w_buf, m_a, m_mm, 1, e_a + e_mm + 7, _P_ROUND))
-    lk[at + L_GAIN] = x if x < V2_MAX else V2_MAX
+    lk[at + L_GAIN] = x if x < _V2_MAX else _V2_MAX
     x = int(product(w_buf, w[_W_M + F_MAX_ENTRY2], 1, 1,
                     w[_W_E + F_MAX_ENTRY2] - _BIAS + 6, _P_ROUND))
-    lk[at + L_MAX_ENTRY] = x if x < V2_MAX else V2_MAX
+    lk[at + L_MAX_ENTRY] = x if x < _V2_MAX else _V2_MAX
     x = int(product(w_buf, w[_W_M + F_NOMINAL2], 1, 1,
                     w[_W_E + F_NOMINAL2] - _BIAS + 6, _P_ROUND))
-    lk[at + L_NOMINAL] = x if x < V2_MAX else V2_MAX
+    lk[at + L_NOMINAL] = x if x < _V2_MAX else _V2_MAX
     # k = TICK_ONE n / mm as km 2**ke, km of 26 bits: n taken to 29 bits and TICK_ONE's
     # mantissa to 30 first, so the quotient has 33 bits or more.
     ns = 0
@@ -215,12 +215,12 @@ def _write(lk_buf, mem_buf, slot: int, x2: int, hooks):
         elif vn2 > v02 + gain:
             vn2 = v02 + gain
     r_nom = int(_rate(lk_buf, at, vn2, io_buf))
-    if v02 == lk[at + L_V0]:
-        r0 = lk[at + L_RATE_V0]
+    if v02 == lk[at + _L_V0]:
+        r0 = lk[at + _L_RATE_V0]
     else:
         r0 = int(_rate(lk_buf, at, v02, io_buf))
-        lk[at + L_V0] = v02
-        lk[at + L_RATE_V0] = r0
+        lk[at + _L_V0] = v02
+        lk[at + _L_RATE_V0] = r0
     if r0 > r_nom:
         r0 = r_nom
     r1 = int(_rate(lk_buf, at, x2, io_buf))
@@ -229,7 +229,7 @@ def _write(lk_buf, mem_buf, slot: int, x2: int, hooks):
     b = _BLOCK_BASE + slot * _B_WORDS
     # The look-ahead rewrites every waiting block for each new one, mostly with the
     # same rates: the schedule is worked out again only when they change.
-    if lk[at + L_R0] != r0 or lk[at + L_RN] != r_nom or lk[at + L_R1] != r1:
+    if lk[at + _L_R0] != r0 or lk[at + L_RN] != r_nom or lk[at + _L_R1] != r1:
         io = ptr32(io_buf)
         io[0] = mem[b + _B_N]  # ramp.IO_N .. IO_ACC, checked in planner.py
         io[1] = r0
@@ -237,12 +237,12 @@ def _write(lk_buf, mem_buf, slot: int, x2: int, hooks):
         io[3] = r1
         io[4] = lk[at + L_ACC]
         ramp_into(io_buf)
-        lk[at + L_UNTIL] = io[5]
-        lk[at + L_AFTER] = io[6]
-        lk[at + L_RATE_DECEL] = io[7]
-        lk[at + L_R0] = r0
+        lk[at + _L_UNTIL] = io[5]
+        lk[at + _L_AFTER] = io[6]
+        lk[at + _L_RATE_DECEL] = io[7]
+        lk[at + _L_R0] = r0
         lk[at + L_RN] = r_nom
-        lk[at + L_R1] = r1
+        lk[at + _L_R1] = r1
     state = hooks[0]()
     if slot == mem[_S_TAIL] and mem[_S_ACTIVE]:
         hooks[1](state)
@@ -251,9 +251,9 @@ def _write(lk_buf, mem_buf, slot: int, x2: int, hooks):
     mem[b + _B_RATE_NOM] = r_nom
     mem[b + _B_RATE_FINAL] = r1
     mem[b + _B_ACCEL] = lk[at + L_ACC]
-    mem[b + _B_ACCEL_UNTIL] = lk[at + L_UNTIL]
-    mem[b + _B_DECEL_AFTER] = lk[at + L_AFTER]
-    mem[b + _B_RATE_DECEL] = lk[at + L_RATE_DECEL]
+    mem[b + _B_ACCEL_UNTIL] = lk[at + _L_UNTIL]
+    mem[b + _B_DECEL_AFTER] = lk[at + _L_AFTER]
+    mem[b + _B_RATE_DECEL] = lk[at + _L_RATE_DECEL]
     hooks[1](state)
     lk[at + L_EXIT] = x2
 
@@ -282,7 +282,7 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
     e = lk[at + L_GAIN]
     if lk[at + L_MAX_ENTRY] <= e:
         e = lk[at + L_MAX_ENTRY]
-    lk[at + L_BACK] = e
+    lk[at + _L_BACK] = e
     while k != first:
         j = k - 1
         if j < 0:
@@ -292,9 +292,9 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
         if lk[at + L_MAX_ENTRY] <= e:
             e = lk[at + L_MAX_ENTRY]
         k = j
-        if e == lk[at + L_BACK]:
+        if e == lk[at + _L_BACK]:
             break
-        lk[at + L_BACK] = e
+        lk[at + _L_BACK] = e
     # Forward pass from block k, whose entry stands, then records.
     at = k * L_WORDS
     if k == first:
@@ -302,7 +302,7 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
         # at most at the exit baked into that record, also between blocks (tail
         # advanced, not yet started), where more look-ahead would otherwise raise it
         # above the speed the step loop left at. After a stop, MAX_ENTRY is 0 anyway.
-        v0 = lk[at + L_BACK]
+        v0 = lk[at + _L_BACK]
         p = k - 1
         if p < 0:
             p = q - 1
@@ -319,7 +319,7 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
         if k == newest:
             v1 = 0
         else:
-            v1 = lk[nk * L_WORDS + L_BACK]
+            v1 = lk[nk * L_WORDS + _L_BACK]
             reach = v0 + lk[at + L_GAIN]
             if v1 > reach:
                 v1 = reach

@@ -11,7 +11,7 @@
 # latency of the interrupt that opens a burst delays the whole burst (not its pulses).
 from mixfw.compat import const
 
-CYCLES_PER_TICK = const(20)  # the program below: pull (1) + out (1) + 18 delay
+_CYCLES_PER_TICK = const(20)  # the program below: pull (1) + out (1) + 18 delay
 LATENCY_TICKS = const(4)  # a joined TX FIFO holds 8 words
 
 
@@ -35,7 +35,7 @@ def start(rp2, Pin, pin_map, names, tick_us, sm_id=0):
         pull(block)  # noqa: F821 (PIO assembler names)
         out(pins, 32)[18]  # noqa: F821
 
-    sm = rp2.StateMachine(sm_id, step_levels, freq=CYCLES_PER_TICK * 1000000 // tick_us,
+    sm = rp2.StateMachine(sm_id, step_levels, freq=_CYCLES_PER_TICK * 1000000 // tick_us,
                           out_base=Pin(first))
     sm.active(1)
     return sm, first

@@ -3,7 +3,7 @@
 # cycles they hold), into a ring in RAM. Two DMA channels, chained to each other, move
 # the ring into a state machine's FIFO paced by its TX DREQ; the state machine writes
 # each word's levels to the pins and counts its cycles down.
-# The CPU takes one interrupt per batch (BATCH_US), not one per tick, and an edge lands
+# The CPU takes one interrupt per batch (_BATCH_US), not one per tick, and an edge lands
 # at its own time inside its tick, not on the tick.
 #
 # The ring has 3 segments: one the running channel reads, one armed on the other
@@ -31,14 +31,14 @@ from mixfw import heap, stepper as st
 from mixfw.stepper import tick
 from mixfw.pio import out_range
 
-PIO_HZ = const(8000000)
-CYCLES_PER_US = const(8)
-BATCH_US = const(2000)  # 1 ms batches gave late refills on the emulated chip
-SEGMENTS = const(3)
-FIFO_WORDS = const(8)  # the TX FIFO, joined
-DMA_BASE = const(0x50000000)
-PIO0_BASE = const(0x50200000)
-PIO0_TXF0 = const(0x50200010)
+_PIO_HZ = const(8000000)
+_CYCLES_PER_US = const(8)
+_BATCH_US = const(2000)  # 1 ms batches gave late refills on the emulated chip
+_SEGMENTS = const(3)
+_FIFO_WORDS = const(8)  # the TX FIFO, joined
+_DMA_BASE = const(0x50000000)
+_PIO0_BASE = const(0x50200000)
+_PIO0_TXF0 = const(0x50200010)
 _FLEVEL = const(3)  # PIO register word: each state machine's FIFO levels, a byte each
 # Word offsets: in a channel's block of 16 registers, and of the shared registers.
 _READ_ADDR = const(0)
@@ -91,19 +91,19 @@ def batch_ticks(tick_us, batch_us, pins):
     """Ticks a batch runs: batch_us, or less where a word's hold, in the bits the pins
     leave, could not count that long (a hold lasts a batch and a tick at most)."""
     ticks = min(batch_us // tick_us,
-                ((1 << (32 - pins)) - 1) // (tick_us * CYCLES_PER_US) - 1)
+                ((1 << (32 - pins)) - 1) // (tick_us * _CYCLES_PER_US) - 1)
     return max(1, ticks)
 
 
-def ring_words(tick_us, batch_us=BATCH_US):
+def ring_words(tick_us, batch_us=_BATCH_US):
     """The ring's words at most, whatever the pins."""
-    return SEGMENTS * seg_words(max(1, batch_us // tick_us))
+    return _SEGMENTS * seg_words(max(1, batch_us // tick_us))
 
 
 def make_ring(ticks):
     """The ring for batches of this many ticks, to be allocated early: a few kB in one
     block, which the heap may not have in one piece once the firmware is built."""
-    return heap.zeros(SEGMENTS * seg_words(ticks))
+    return heap.zeros(_SEGMENTS * seg_words(ticks))
 
 
 @micropython.viper
@@ -161,7 +161,7 @@ class Feed:
     right after the step loop's memory (its ring is the next largest block), set up
     by the first start(), once the pins and their masks are there."""
 
-    def __init__(self, machine, mem, settings, pin_map, sm_id=0, batch_us=BATCH_US):
+    def __init__(self, machine, mem, settings, pin_map, sm_id=0, batch_us=_BATCH_US):
         if settings.get("chip") not in ("rp2040", "rp2350"):
             raise ValueError("step_backend pio_dma needs an RP2040 or RP2350, not %r"
                              % settings.get("chip"))
@@ -174,7 +174,7 @@ class Feed:
         self.names = ["x", "y", "z"] + ["e%d" % i for i in range(settings["drives"])]
         self.first, self.count = out_range(pin_map, self.names)
         self.ticks = batch_ticks(settings["tick_us"], batch_us, self.count)
-        hold_cycles = (self.ticks + 1) * settings["tick_us"] * CYCLES_PER_US
+        hold_cycles = (self.ticks + 1) * settings["tick_us"] * _CYCLES_PER_US
         if hold_cycles >> (32 - self.count):
             raise ValueError("step_backend pio_dma: %d STEP/DIR pins leave %d bits, too "
                              "few for a hold of %d cycles" % (self.count, 32 - self.count,
@@ -198,9 +198,9 @@ class Feed:
         ticks = self.ticks
         mem[st.S_PIO] = 2
         mem[st.S_PIO_SHIFT] = self.first
-        mem[st.R_TC] = tick_us * CYCLES_PER_US
+        mem[st.R_TC] = tick_us * _CYCLES_PER_US
         mem[st.R_BATCH_TICKS] = ticks
-        mem[st.R_PULSE_CYC] = settings["step_pulse_us"] * CYCLES_PER_US
+        mem[st.R_PULSE_CYC] = settings["step_pulse_us"] * _CYCLES_PER_US
         mem[st.R_SEG_WORDS] = seg_words(ticks)
         mem[st.R_LEVEL_BITS] = self.count
         # Steps land anywhere in their tick and a DIR change at its start, after the
@@ -220,8 +220,8 @@ class Feed:
             mem[st.R_RING_ADDR] = 0
         else:
             import uctypes
-            self.regs = DMA_BASE
-            self.pio_regs = PIO0_BASE
+            self.regs = _DMA_BASE
+            self.pio_regs = _PIO0_BASE
             mem[st.R_RING_ADDR] = uctypes.addressof(self.ring)
         d = self.dmas[0]
         sm_id = self.sm_id
@@ -313,18 +313,18 @@ class Feed:
         rp2 = self.rp2
         if self.watch:
             pin, level = self.watch
-            self.sm = rp2.StateMachine(self.sm_id, self.programs[level], freq=PIO_HZ,
+            self.sm = rp2.StateMachine(self.sm_id, self.programs[level], freq=_PIO_HZ,
                                        out_base=self.out_base, jmp_pin=pin)
         else:
-            self.sm = rp2.StateMachine(self.sm_id, self.programs[None], freq=PIO_HZ,
+            self.sm = rp2.StateMachine(self.sm_id, self.programs[None], freq=_PIO_HZ,
                                        out_base=self.out_base)
         mem[st.R_LAST] = 0
-        for seg in range(SEGMENTS):
+        for seg in range(_SEGMENTS):
             self._fill(seg)
         mem[st.R_READY] = 2
         a, b = self.dmas
         words = mem[st.R_SEG_WORDS]
-        txf = PIO0_TXF0 + 4 * self.sm_id
+        txf = _PIO0_TXF0 + 4 * self.sm_id
         shift = mem[st.R_CHAIN_SHIFT]
         # The first word goes into the FIFO by hand: a state machine made again
         # after a stop with a full FIFO raised no DREQ on the emulated chip until its
@@ -358,7 +358,7 @@ class Feed:
         # as read but never reaches the FIFO).
         a, b = self.dmas
         for _ in range(200):
-            if self.sm.tx_fifo() >= FIFO_WORDS or not (a.active() or b.active()):
+            if self.sm.tx_fifo() >= _FIFO_WORDS or not (a.active() or b.active()):
                 break
         where = self._first_unsent()
         for dma in self.dmas:
@@ -383,7 +383,7 @@ class Feed:
         words = mem[st.R_SEG_WORDS]
         base = mem[st.R_RING_ADDR]
         regs = self._regs_view()
-        order = sorted(range(SEGMENTS), key=lambda s: mem[st.R_SEG_SEQ + s])
+        order = sorted(range(_SEGMENTS), key=lambda s: mem[st.R_SEG_SEQ + s])
         # Words read from the ring: up to where the later started channel got.
         read = 0
         for i in range(2):

@@ -8,7 +8,7 @@
 # below 2**31, so the 32-bit chips and the 64-bit unix port give the same results.
 from mixfw.compat import const, micropython, ptr32
 
-MAX_TICK = const(0x3FFFFFFF)
+_MAX_TICK = const(0x3FFFFFFF)
 _M30 = const(0x3FFFFFFF)
 # Fraction bits of the deceleration's start time, in ticks: enough that the rate the
 # first decelerating tick gets is exact to a rate unit for any acceleration the step
@@ -276,7 +276,7 @@ def ramp_into(io_buf):
         io[_LO] = c_lo
         div_limbs(io_buf, vn)
         if io[_HI]:
-            c_int = MAX_TICK
+            c_int = _MAX_TICK
         else:
             c_int = io[_LO]
             product(io_buf, io[_REM], _ONE_FRAC, vn, 0, P_LIMBS)
@@ -285,8 +285,8 @@ def ramp_into(io_buf):
     if frac >= _ONE_FRAC:
         frac -= _ONE_FRAC
         decel += 1
-    if decel > MAX_TICK or decel < 0:
-        decel = MAX_TICK
+    if decel > _MAX_TICK or decel < 0:
+        decel = _MAX_TICK
     accel_until = a_int + (1 if a_rem else 0)
     decel_after = decel + (1 if frac else 0)
     if decel_after < 1:
@@ -295,17 +295,17 @@ def ramp_into(io_buf):
     # its start), rounded.
     late = (decel_after - decel) * _ONE_FRAC - frac + _HALF
     r_decel = r1
-    if decel_after < MAX_TICK:
+    if decel_after < _MAX_TICK:
         product(io_buf, acc, late, 1, 0, P_LIMBS)
         lo = io[_LO] + _HALF
         fall = (io[_HI] << 14) + (lo >> _FRAC)
         r_decel = vn - fall
         if r_decel < r1:
             r_decel = r1
-    if accel_until > MAX_TICK:
-        accel_until = MAX_TICK
-    if decel_after > MAX_TICK:
-        decel_after = MAX_TICK
+    if accel_until > _MAX_TICK:
+        accel_until = _MAX_TICK
+    if decel_after > _MAX_TICK:
+        decel_after = _MAX_TICK
     io[IO_ACCEL_UNTIL] = accel_until
     io[IO_DECEL_AFTER] = decel_after
     io[IO_RATE_DECEL] = r_decel

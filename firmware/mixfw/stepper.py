@@ -31,11 +31,11 @@ E = const(3)
 S_HEAD = const(0)  # next free block slot (written by the planner)
 S_TAIL = const(1)  # block being run or next to run
 S_ACTIVE = const(2)  # 1 while the tail block has started
-S_EVENT = const(3)  # lead-axis steps done in the block
+_S_EVENT = const(3)  # lead-axis steps done in the block
 S_PHASE = const(4)
-S_RATE = const(5)
-S_ERR = const(6)  # Bresenham counters, one per axis (4 words), kept in 1..n
-S_PULSE_MASK = const(10)  # STEP pins raised by the last step
+_S_RATE = const(5)
+_S_ERR = const(6)  # Bresenham counters, one per axis (4 words), kept in 1..n
+_S_PULSE_MASK = const(10)  # STEP pins raised by the last step
 S_PULSE_LEFT = const(11)  # ticks until they fall
 S_WAIT = const(12)  # ticks of DIR setup or dwell still to wait
 S_DIR = const(13)  # current DIR pin levels
@@ -52,8 +52,8 @@ S_BLOCKS_DONE = const(29)  # blocks finished, wraps at 2**30
 # GPIO 32..39, whose pins 32 and 33 use mask bits 28 and 29 (ESP32 has no GPIO 28-31).
 S_REG_SET = const(30)
 S_REG_CLR = const(31)
-S_REG_HI_SET = const(32)
-S_REG_HI_CLR = const(33)
+_S_REG_HI_SET = const(32)
+_S_REG_HI_CLR = const(33)
 # Trace capture: a ring of (tick since start, set mask, clear mask) records after the
 # block ring. The interrupt writes at HEAD while there is room and counts what it had
 # to drop in LOST; the main loop reads from TAIL (M7301).
@@ -65,24 +65,24 @@ S_CAP_TAIL = const(38)
 S_CAP_LOST = const(39)
 S_CAP_T0 = const(40)  # S_TICKS when recording started
 # PIO output (see pio.py): out is the state machine's put; words are pin levels
-# shifted down by S_PIO_SHIFT. S_PIO_LEFT: ticks the current burst still runs.
+# shifted down by S_PIO_SHIFT. _S_PIO_LEFT: ticks the current burst still runs.
 S_PIO = const(41)  # 1 for the PIO path
 S_PIO_SHIFT = const(42)
-S_PIO_LEFT = const(43)
+_S_PIO_LEFT = const(43)
 S_PIO_LATENCY = const(44)
 S_LEVELS = const(45)  # STEP/DIR levels written so far
-S_PIO_DRAIN = const(46)  # tick by which the state machine will have output every word
-S_RAMP_TICKS = const(47)  # ticks of velocity ramp run in the block
-S_WORDS = const(48)
+_S_PIO_DRAIN = const(46)  # tick by which the state machine will have output every word
+_S_RAMP_TICKS = const(47)  # ticks of velocity ramp run in the block
+_S_WORDS = const(48)
 
 MIX_BASE = const(48)  # mixer section, mixer.M_WORDS long
 # The mixer words the step loop reads, at MIX_BASE + mixer.M_W, M_N, M_SUM, M_Q, M_C
 # (viper folds only this module's constants).
-MIX_W = const(49)
-MIX_N = const(55)
-MIX_SUM = const(56)
-MIX_Q = const(57)
-MIX_C = const(58)
+_MIX_W = const(49)
+_MIX_N = const(55)
+_MIX_SUM = const(56)
+_MIX_Q = const(57)
+_MIX_C = const(58)
 MASK_BASE = const(64)  # STEP pin masks: X Y Z then the drives (9 words)
 DIR_MASK_BASE = const(73)  # DIR pin masks in the same order (9 words)
 # Event ring (step_backend "pio_dma", S_PIO == 2; see piodma.py): one call of tick runs
@@ -137,7 +137,7 @@ B_RATE_DECEL = const(22)
 B_WORDS = const(24)
 # A PIO event takes this many cycles besides its delay (piodma.py's program): a pull,
 # two outs and the last pass of the delay loop.
-EV_MIN_CYCLES = const(4)
+_EV_MIN_CYCLES = const(4)
 # Every batch has at least this many words, one more than the state machine's FIFO
 # holds: a channel then never ends the moment it starts (several could end before
 # their IRQs ran), and the FIFO never holds a whole batch.
@@ -145,7 +145,7 @@ BATCH_MIN_WORDS = const(9)
 # A batch filled now has reached the pins once this many more have been filled: two
 # segments are ahead of it in the ring, and the batch after it has pushed it out of
 # the FIFO.
-PENDING_BATCHES = const(4)
+_PENDING_BATCHES = const(4)
 
 # Flag bits.
 F_DWELL = const(1)
@@ -155,13 +155,13 @@ F_HOME_SHIFT = const(8)  # homing axis mask (X=1, Y=2, Z=4) << F_HOME_SHIFT
 
 
 assert mixer.M_ID == 0  # the step loop reads the loaded mix id at MIX_BASE
-assert (MIX_W, MIX_N, MIX_SUM, MIX_Q, MIX_C) == tuple(
+assert (_MIX_W, _MIX_N, _MIX_SUM, _MIX_Q, _MIX_C) == tuple(
     MIX_BASE + m for m in (mixer.M_W, mixer.M_N, mixer.M_SUM, mixer.M_Q, mixer.M_C))
 
 
 CAP_WORDS = const(3)  # per capture record
-HI_SHIFT = const(28)  # ESP32: GPIO 32, 33 travel as mask bits 28, 29
-LO_MASK = const(0x0FFFFFFF)
+_HI_SHIFT = const(28)  # ESP32: GPIO 32, 33 travel as mask bits 28, 29
+_LO_MASK = const(0x0FFFFFFF)
 
 
 def mem_words(queue_blocks, capture_records=0):
@@ -176,7 +176,7 @@ def init_capture(mem, queue_blocks, capture_records):
 @micropython.viper
 def _pio_ahead(mem: ptr32) -> int:
     """Ticks of words the state machine still holds."""
-    ahead = (mem[S_PIO_DRAIN] - mem[S_TICKS]) & 0x3FFFFFFF
+    ahead = (mem[_S_PIO_DRAIN] - mem[S_TICKS]) & 0x3FFFFFFF
     return 0 if ahead > 0x1FFFFFFF else ahead
 
 
@@ -185,7 +185,7 @@ def _pio_put(mem_buf, out, count: int):
     """Hand the state machine count words of the current levels, one tick each."""
     mem = ptr32(mem_buf)
     word = mem[S_LEVELS] >> mem[S_PIO_SHIFT]
-    mem[S_PIO_DRAIN] = (mem[S_TICKS] + int(_pio_ahead(mem_buf)) + count) & 0x3FFFFFFF
+    mem[_S_PIO_DRAIN] = (mem[S_TICKS] + int(_pio_ahead(mem_buf)) + count) & 0x3FFFFFFF
     while count > 0:
         out(word)
         count -= 1
@@ -206,7 +206,7 @@ def _start(mem_buf, b: int) -> int:
     """Begin the block at word b. Returns the DIR pins whose level changed."""
     mem = ptr32(mem_buf)
     mem[S_ACTIVE] = 1
-    mem[S_EVENT] = 0
+    mem[_S_EVENT] = 0
     mem[S_HOME_STOP] = 0
     flags = mem[b + B_FLAGS]
     if flags & F_DWELL:
@@ -214,14 +214,14 @@ def _start(mem_buf, b: int) -> int:
         return 0
     n = mem[b + B_N]
     half = n - (n >> 1)
-    mem[S_ERR + 0] = half
-    mem[S_ERR + 1] = half
-    mem[S_ERR + 2] = half
-    mem[S_ERR + 3] = half
+    mem[_S_ERR + 0] = half
+    mem[_S_ERR + 1] = half
+    mem[_S_ERR + 2] = half
+    mem[_S_ERR + 3] = half
     # A tick moves by its rate, so the rate must be the mean speed over the tick
     # (trapezoidal integration): half a tick of acceleration above the entry speed.
-    mem[S_RATE] = mem[b + B_RATE_INIT] + (mem[b + B_ACCEL] >> 1)
-    mem[S_RAMP_TICKS] = 0
+    mem[_S_RATE] = mem[b + B_RATE_INIT] + (mem[b + B_ACCEL] >> 1)
+    mem[_S_RAMP_TICKS] = 0
     if mem[b + B_STEPS + E] != 0 and mem[b + B_MIX] != mem[MIX_BASE]:
         mix_load(mem_buf, MIX_BASE, b + B_MIX)
     old = mem[S_DIR]
@@ -267,8 +267,8 @@ def tick(mem_buf, out, endstops) -> int:
                 # Cruise: straight on to the tick before the next step, or the
                 # batch's end; the ticks between only add the same rate.
                 cruise = 0
-                rate = mem[S_RATE]
-                ramp = mem[S_RAMP_TICKS]
+                rate = mem[_S_RATE]
+                ramp = mem[_S_RAMP_TICKS]
                 if rate > 0 and rate == mem[b + B_RATE_NOM] and \
                         ramp + 1 >= mem[b + B_ACCEL_UNTIL]:
                     phase = mem[S_PHASE]
@@ -279,7 +279,7 @@ def tick(mem_buf, out, endstops) -> int:
                         skip = ticks_left
                     if skip > 0:
                         mem[S_PHASE] = phase + skip * rate
-                        mem[S_RAMP_TICKS] = ramp + skip
+                        mem[_S_RAMP_TICKS] = ramp + skip
                         mem[S_TICKS] = (mem[S_TICKS] + skip) & 0x3FFFFFFF
                         ticks_left -= skip
                         t0 += skip * tc
@@ -294,12 +294,12 @@ def tick(mem_buf, out, endstops) -> int:
         if mem[S_PIO] == 1:
             # The levels the last tick left, for the state machine; the burst goes on
             # while there is work.
-            left = mem[S_PIO_LEFT]
+            left = mem[_S_PIO_LEFT]
             if left > 0:
                 _pio_put(mem_buf, out, 1)
                 if mem[S_ACTIVE] or mem[S_TAIL] != mem[S_HEAD] or mem[S_PULSE_LEFT]:
                     left = mem[S_PIO_LATENCY] + 2
-                mem[S_PIO_LEFT] = left - 1
+                mem[_S_PIO_LEFT] = left - 1
         set_mask = 0
         clr_mask = 0
         stepped = 0
@@ -311,7 +311,7 @@ def tick(mem_buf, out, endstops) -> int:
             # next step back a tick longer (as the fall tick does here), and the tick
             # goes the cheap way.
             if left == 0 and ring == 0:
-                clr_mask = mem[S_PULSE_MASK]
+                clr_mask = mem[_S_PULSE_MASK]
         b = BLOCK_BASE + mem[S_TAIL] * B_WORDS
         run = 1
         if mem[S_ACTIVE] == 0:
@@ -348,9 +348,9 @@ def tick(mem_buf, out, endstops) -> int:
                 run = 0
         while run:
             # Velocity ramp, per tick so speed is linear in time.
-            ramp = mem[S_RAMP_TICKS] + 1
-            mem[S_RAMP_TICKS] = ramp
-            rate = mem[S_RATE]
+            ramp = mem[_S_RAMP_TICKS] + 1
+            mem[_S_RAMP_TICKS] = ramp
+            rate = mem[_S_RATE]
             step_rate = rate
             phase = mem[S_PHASE] + rate
             if ramp < mem[b + B_ACCEL_UNTIL]:
@@ -366,7 +366,7 @@ def tick(mem_buf, out, endstops) -> int:
                         rate = mem[b + B_RATE_FINAL]
             else:
                 rate = mem[b + B_RATE_NOM]
-            mem[S_RATE] = rate
+            mem[_S_RATE] = rate
             # A step waits while a STEP pin is still high or has just fallen (its low time).
             if phase >= ONE and left == 0 and clr_mask == 0:
                 mem[S_PHASE] = phase - ONE
@@ -403,7 +403,7 @@ def tick(mem_buf, out, endstops) -> int:
             stepped = 1
             n = mem[b + B_N]
             # Bresenham for X, Y, Z, written out: constant offsets cost nothing.
-            err = mem[S_ERR + X] + mem[b + B_STEPS + X]
+            err = mem[_S_ERR + X] + mem[b + B_STEPS + X]
             if err > n:
                 err -= n
                 if (stopped & 1) == 0:
@@ -412,8 +412,8 @@ def tick(mem_buf, out, endstops) -> int:
                         mem[S_POS + X] -= 1
                     else:
                         mem[S_POS + X] += 1
-            mem[S_ERR + X] = err
-            err = mem[S_ERR + Y] + mem[b + B_STEPS + Y]
+            mem[_S_ERR + X] = err
+            err = mem[_S_ERR + Y] + mem[b + B_STEPS + Y]
             if err > n:
                 err -= n
                 if (stopped & 2) == 0:
@@ -422,8 +422,8 @@ def tick(mem_buf, out, endstops) -> int:
                         mem[S_POS + Y] -= 1
                     else:
                         mem[S_POS + Y] += 1
-            mem[S_ERR + Y] = err
-            err = mem[S_ERR + Z] + mem[b + B_STEPS + Z]
+            mem[_S_ERR + Y] = err
+            err = mem[_S_ERR + Z] + mem[b + B_STEPS + Z]
             if err > n:
                 err -= n
                 if (stopped & 4) == 0:
@@ -432,15 +432,15 @@ def tick(mem_buf, out, endstops) -> int:
                         mem[S_POS + Z] -= 1
                     else:
                         mem[S_POS + Z] += 1
-            mem[S_ERR + Z] = err
-            err = mem[S_ERR + E] + mem[b + B_STEPS + E]
+            mem[_S_ERR + Z] = err
+            err = mem[_S_ERR + E] + mem[b + B_STEPS + E]
             if err > n:
                 err -= n
                 # The mixer (see mixer.py): forward, the drive whose next step is due
                 # first, ties to the lowest index; backward, the drive whose last step
                 # was due latest, ties to the highest, so a step back undoes a step forward.
-                drives = mem[MIX_N]
-                q = mem[MIX_Q]
+                drives = mem[_MIX_N]
+                q = mem[_MIX_Q]
                 best = -1
                 best_num = 0
                 best_w = 1
@@ -448,53 +448,53 @@ def tick(mem_buf, out, endstops) -> int:
                 if flags & (F_NEG << E):
                     if q <= 0:  # a new period, walked backwards from its end
                         while i < drives:
-                            mem[MIX_C + i] = mem[MIX_W + i]
+                            mem[_MIX_C + i] = mem[_MIX_W + i]
                             i += 1
-                        q = mem[MIX_SUM]
+                        q = mem[_MIX_SUM]
                         i = 0
                     while i < drives:
-                        w = mem[MIX_W + i]
+                        w = mem[_MIX_W + i]
                         if w > 0:
-                            num = 2 * mem[MIX_C + i] - 1
+                            num = 2 * mem[_MIX_C + i] - 1
                             if best < 0 or num * best_w >= best_num * w:
                                 best = i
                                 best_num = num
                                 best_w = w
                         i += 1
                     if best >= 0:
-                        mem[MIX_C + best] -= 1
-                        mem[MIX_Q] = q - 1
+                        mem[_MIX_C + best] -= 1
+                        mem[_MIX_Q] = q - 1
                         set_mask |= mem[MASK_BASE + 3 + best]
                         mem[S_DRIVE_POS + best] -= 1
                     mem[S_POS + E] -= 1
                 else:
-                    if q >= mem[MIX_SUM]:  # a new period
+                    if q >= mem[_MIX_SUM]:  # a new period
                         while i < drives:
-                            mem[MIX_C + i] = 0
+                            mem[_MIX_C + i] = 0
                             i += 1
                         q = 0
                         i = 0
                     while i < drives:
-                        w = mem[MIX_W + i]
+                        w = mem[_MIX_W + i]
                         if w > 0:
-                            num = 2 * mem[MIX_C + i] + 1
+                            num = 2 * mem[_MIX_C + i] + 1
                             if best < 0 or num * best_w < best_num * w:
                                 best = i
                                 best_num = num
                                 best_w = w
                         i += 1
                     if best >= 0:
-                        mem[MIX_C + best] += 1
-                        mem[MIX_Q] = q + 1
+                        mem[_MIX_C + best] += 1
+                        mem[_MIX_Q] = q + 1
                         set_mask |= mem[MASK_BASE + 3 + best]
                         mem[S_DRIVE_POS + best] += 1
                     mem[S_POS + E] += 1
-            mem[S_ERR + E] = err
+            mem[_S_ERR + E] = err
             if set_mask:
-                mem[S_PULSE_MASK] = set_mask
+                mem[_S_PULSE_MASK] = set_mask
                 mem[S_PULSE_LEFT] = mem[S_PULSE_TICKS] + ring
-            event = mem[S_EVENT] + 1
-            mem[S_EVENT] = event
+            event = mem[_S_EVENT] + 1
+            mem[_S_EVENT] = event
             if event >= n:
                 _finish(mem_buf)
         if (set_mask | clr_mask) == 0:
@@ -544,9 +544,9 @@ def tick(mem_buf, out, endstops) -> int:
                 bits = mem[R_LEVEL_BITS]
                 k = 0 if nxt != lv else 2  # else a pulse whose fall is written already
                 while k < 2:
-                    if t < last + EV_MIN_CYCLES:
-                        t = last + EV_MIN_CYCLES
-                    evr[w] = (lv >> shift) | ((t - last - EV_MIN_CYCLES) << bits)
+                    if t < last + _EV_MIN_CYCLES:
+                        t = last + _EV_MIN_CYCLES
+                    evr[w] = (lv >> shift) | ((t - last - _EV_MIN_CYCLES) << bits)
                     w += 1
                     last = t
                     lv = nxt
@@ -562,28 +562,28 @@ def tick(mem_buf, out, endstops) -> int:
                 mem[S_LEVELS] = lv
                 cruise = stepped & mem[S_ACTIVE]
                 continue
-            if mem[S_PIO_LEFT] == 0:
+            if mem[_S_PIO_LEFT] == 0:
                 # A burst starts: old levels until the latency is queued, so this
                 # tick's levels come out exactly LATENCY ticks from now.
                 fill = mem[S_PIO_LATENCY] - int(_pio_ahead(mem_buf))
                 if fill > 0:
                     _pio_put(mem_buf, out, fill)
             mem[S_LEVELS] = (mem[S_LEVELS] | set_mask) & (0 - 1 - clr_mask)
-            mem[S_PIO_LEFT] = mem[S_PIO_LATENCY] + 2
+            mem[_S_PIO_LEFT] = mem[S_PIO_LATENCY] + 2
             return stepped
         at = mem[S_REG_SET]
         if at == 0:
             out(set_mask, clr_mask)
             return stepped
         regs = ptr32(out)
-        hi = mem[S_REG_HI_SET]
+        hi = mem[_S_REG_HI_SET]
         if hi:
-            if set_mask >> HI_SHIFT:
-                regs[hi] = set_mask >> HI_SHIFT
-            if clr_mask >> HI_SHIFT:
-                regs[mem[S_REG_HI_CLR]] = clr_mask >> HI_SHIFT
-            set_mask = set_mask & LO_MASK
-            clr_mask = clr_mask & LO_MASK
+            if set_mask >> _HI_SHIFT:
+                regs[hi] = set_mask >> _HI_SHIFT
+            if clr_mask >> _HI_SHIFT:
+                regs[mem[_S_REG_HI_CLR]] = clr_mask >> _HI_SHIFT
+            set_mask = set_mask & _LO_MASK
+            clr_mask = clr_mask & _LO_MASK
         if set_mask:
             regs[at] = set_mask
         if clr_mask:
@@ -599,21 +599,21 @@ def tick(mem_buf, out, endstops) -> int:
     bits = mem[R_LEVEL_BITS]
     edges = w - w_first
     pieces = BATCH_MIN_WORDS - edges
-    if pieces < 1 or end - last < pieces * EV_MIN_CYCLES:
+    if pieces < 1 or end - last < pieces * _EV_MIN_CYCLES:
         pieces = 1
     while pieces > 1:
         piece = (end - last) // pieces
-        evr[w] = lv | ((piece - EV_MIN_CYCLES) << bits)
+        evr[w] = lv | ((piece - _EV_MIN_CYCLES) << bits)
         w += 1
         last += piece
         pieces -= 1
-    t = end if end >= last + EV_MIN_CYCLES else last + EV_MIN_CYCLES
-    evr[w] = lv | ((t - last - EV_MIN_CYCLES) << bits)
+    t = end if end >= last + _EV_MIN_CYCLES else last + _EV_MIN_CYCLES
+    evr[w] = lv | ((t - last - _EV_MIN_CYCLES) << bits)
     w += 1
     mem[R_W] = w
     mem[R_LAST] = t - end
     if edges or mem[S_ACTIVE] or mem[S_TAIL] != mem[S_HEAD] or mem[S_PULSE_LEFT]:
-        mem[R_PENDING] = PENDING_BATCHES
+        mem[R_PENDING] = _PENDING_BATCHES
     mem[R_BATCHES] = (mem[R_BATCHES] + 1) & 0x3FFFFFFF
     return w
 
@@ -627,7 +627,7 @@ def run_mix(weights, moves, out=None):
     drives = len(weights)
     mem = array("i", bytes(4 * mem_words(2)))
     mem[S_QUEUE] = 2
-    mem[MIX_N] = drives
+    mem[_MIX_N] = drives
     mem[MIX_BASE + mixer.M_ID] = -1
     for d in range(drives):
         mem[MASK_BASE + 3 + d] = 1 << d

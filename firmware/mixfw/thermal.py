@@ -14,9 +14,9 @@ from mixfw.gcode import GcodeError
 HEATER_NAMES = ("hotend", "bed")
 
 # Protection states of one heater.
-OFF = const(0)  # no target: only the safe-range check runs
-HEATING = const(1)  # more than runaway_c below the target: the watch checks the rise
-HOLDING = const(2)  # near or at the target: the runaway check runs
+_OFF = const(0)  # no target: only the safe-range check runs
+_HEATING = const(1)  # more than runaway_c below the target: the watch checks the rise
+_HOLDING = const(2)  # near or at the target: the runaway check runs
 
 # "Reached" for M109/M190/M116: within this of the target, as Marlin's TEMP_WINDOW.
 # A PID settles from below, so waiting for the exact target could last forever.
@@ -119,11 +119,11 @@ class Heater:
         self.temp_c = 0.0
         self.duty = 0.0
         self.duty_u16 = 0
-        self.state = OFF
+        self.state = _OFF
         self.fault = None  # reason, until M922 re-arms
-        self.watch_ms = 0  # watch period start (HEATING)
+        self.watch_ms = 0  # watch period start (_HEATING)
         self.watch_c = 0.0  # temperature then
-        self.below_ms = None  # since when too far below the target (HOLDING)
+        self.below_ms = None  # since when too far below the target (_HOLDING)
 
     def configure(self, settings):
         n = self.name
@@ -159,7 +159,7 @@ class Heater:
 
     def off(self):
         self.target_c = 0.0
-        self.state = OFF
+        self.state = _OFF
         self.output(0.0)
 
     def set_target(self, target_c, now_ms):
@@ -168,18 +168,18 @@ class Heater:
             self.off()
             return
         self.read_c()  # the last control period may be long ago, in a lockstep simulation
-        if self.state == OFF:
+        if self.state == _OFF:
             self.pid.reset(self.temp_c)
         self._arm(now_ms)
 
     def _arm(self, now_ms):
         self.below_ms = None
         if self.temp_c < self.target_c - self.runaway_c:
-            self.state = HEATING
+            self.state = _HEATING
             self.watch_ms = now_ms
             self.watch_c = self.temp_c
         else:
-            self.state = HOLDING
+            self.state = _HOLDING
 
     def reached(self):
         return self.target_c <= 0 or self.temp_c >= self.target_c - REACHED_C
@@ -194,11 +194,11 @@ class Heater:
             return "temperature %.1fC above %s_max_c %.1fC (thermistor short?)" % (
                 t, self.name, self.max_c)
         target = self.target_c
-        if self.state == HEATING:
+        if self.state == _HEATING:
             # The watch covers the climb to runaway_c below the target, the runaway
             # check the rest: a PID that creeps up the last degrees is not a fault.
             if t >= target - self.runaway_c:
-                self.state = HOLDING
+                self.state = _HOLDING
                 self.below_ms = None
                 return None
             # Re-armed at every step of progress, so a heater that stops heating is
@@ -210,7 +210,7 @@ class Heater:
                 return "heating failed: rose %.1fC in %d s, needs %s_watch_rise_c %.1fC" % (
                     t - self.watch_c, self.watch_period_ms // 1000, self.name,
                     self.watch_rise_c)
-        elif self.state == HOLDING:
+        elif self.state == _HOLDING:
             if t < target - self.runaway_c:
                 if self.below_ms is None:
                     self.below_ms = now_ms
@@ -234,7 +234,7 @@ class Heater:
             self.off()
             self.fault = reason
             return reason
-        if self.state == OFF:
+        if self.state == _OFF:
             self.output(0.0)
         else:
             self.output(self.pid.update(self.target_c, self.temp_c, dt_s))
