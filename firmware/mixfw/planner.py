@@ -132,10 +132,7 @@ def block_weights(counts, weights, steps):
             c = -c
         steps[i] = c
         if c:
-            a = c
-            while g:
-                a, g = g, a % g
-            g = a
+            g = _gcd(c, g)
     if not g:
         for i in range(n):
             weights[i] = 0
