@@ -348,3 +348,71 @@ def test_short_moves_slow_down_while_the_queue_is_under_half_full(mp):
             assert v2 == nominal, (waiting, v2)
     assert got[15] == [2, nominal]  # 86 mm: far longer than 20 ms
     assert [v2 for _, v2 in got[16:]] == [nominal] * 12  # M205 B0
+
+
+# --- the square root of two limbs (ramp.isqrt_limbs) --------------------------------
+
+ISQRT = """
+import sys, json
+from array import array
+from mixfw import ramp
+w = array("i", bytes(4 * ramp.IO_WORDS))
+out = []
+for v in json.loads(sys.stdin.read()):
+    w[ramp.IO_HI] = v >> 30
+    w[ramp.IO_LO] = v & 0x3FFFFFFF
+    out.append(ramp.isqrt_limbs(w))
+print(json.dumps(out))
+"""
+
+
+def test_the_root_of_two_limbs_is_the_integer_square_root(mp):
+    """Every bit length up to the 56 bits a root below 2**28 allows, with the zero
+    pairs the root skips at the top of either limb, and both limbs' edges."""
+    import random
+    from math import isqrt
+    rnd = random.Random(21)
+    values = [0, 1, 2, 3, 4, (1 << 30) - 1, 1 << 30, (1 << 30) + 1, (1 << 56) - 1,
+              ((1 << 28) - 1) ** 2, 5 << 30]
+    for bits in range(1, 57):
+        values += [rnd.getrandbits(bits) | (1 << (bits - 1)) for _ in range(40)]
+    assert mp.json(ISQRT, stdin=json.dumps(values).encode()) == [isqrt(v) for v in values]
+
+
+# --- a move refused leaves the drives' filament as it was --------------------------
+
+REFUSED = """
+import sys, json
+import simmachine
+sys.modules["machine"] = simmachine
+import board
+from mixfw import assemble
+from mixfw.planner import PlanError
+simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(6)])
+printer = assemble.build(files_root=None)
+pl = printer.planner
+weights = tuple([1, 2, 4] + [0] * (pl.drives - 3))[:pl.drives]
+pl.set_mix(1, weights)
+refused = []
+pl.add_move([800, 0, 0, 0], 30.0, e_nm=1234567)
+if sys.stdin.read() == "refuse":
+    try:
+        pl.add_move([1 << 31, 0, 0, 0], 30.0, e_nm=2345678)
+    except PlanError as e:
+        refused.append(str(e))
+pl.add_move([1600, 400, 0, 0], 30.0, e_nm=7654321)
+print(json.dumps({"refused": refused, "drive_steps": pl.drive_steps,
+                  "drive_nm": pl.drive_nm, "drive_rem": pl.drive_rem,
+                  "position": pl.position_steps}))
+"""
+
+
+def test_a_move_refused_changes_neither_the_position_nor_the_drives_filament(mp):
+    """The planner works out a move's filament in place (mixfw/planner.py): a move it
+    refuses must do so before, or the next move's drive steps would carry its share."""
+    plain = mp.json(REFUSED, stdin=b"")
+    with_refusal = mp.json(REFUSED, stdin=b"refuse")
+    assert len(with_refusal.pop("refused")) == 1
+    plain.pop("refused")
+    assert with_refusal == plain
+    assert plain["drive_steps"][:3] != [0, 0, 0]
