@@ -174,9 +174,9 @@ from mixfw import lookahead as la
 lk = array("i", bytes(4 * la.L_WORDS))
 w = array("i", bytes(4 * la.W_WORDS))
 out = []
-for bits, n in json.loads(sys.stdin.read()):
+for bits, n, entry_v2 in json.loads(sys.stdin.read()):
     f = array("f", bytes(array("I", bits)))
-    la.plan_words(lk, 0, f, n, w)
+    la.plan_words(lk, 0, f, n, w, entry_v2)
     out.append(list(lk))
 print(json.dumps(out))
 """
@@ -190,7 +190,8 @@ def _f32(x):
 def _plan_word_cases():
     """Blocks over the ranges the options allow (the planner's floats as float32, the
     chips' floats), with the extremes: a nanometre move, a metre, the slowest and the
-    fastest tick, a junction that is a stop or no limit at all."""
+    fastest tick, a junction that is a stop or no limit at all (the look-ahead's V2, from
+    geometry.junction)."""
     import random
     import struct
     rnd = random.Random(7)
@@ -199,16 +200,16 @@ def _plan_word_cases():
         mm = rnd.choice([1e-6, 0.001, 0.05, 0.2, 1.0, 30.0, 1000.0]) * rnd.uniform(0.5, 2)
         accel = rnd.choice([0.1, 10.0, 500.0, 3000.0, 1e6]) * rnd.uniform(0.5, 1)
         nominal = rnd.choice([0.01, 1.0, 25.0, 150.0, 10000.0]) * rnd.uniform(0.5, 1)
-        entry2 = rnd.choice([0.0, 1e30, nominal * nominal * rnd.random()])
+        entry_v2 = rnd.choice([0, (1 << 29) - 1, int(64 * nominal * nominal * rnd.random())])
         tick_s = rnd.choice([5, 10, 20, 50, 1000]) * 1e-6
         n = rnd.choice([1, 3, 16, 800, 10 ** 5, (1 << 30) - 2])
-        floats = [mm, accel, nominal, nominal * nominal, entry2, tick_s * (1 << 28), tick_s]
+        floats = [mm, accel, nominal, nominal * nominal, tick_s * (1 << 28), tick_s]
         bits = [struct.unpack("<I", struct.pack("<f", x))[0] for x in floats]
-        cases.append((bits, n))
+        cases.append((bits, n, min(entry_v2, (1 << 29) - 1)))
     return cases
 
 
-def _exact_plan_words(bits, n):
+def _exact_plan_words(bits, n, entry_v2):
     """The words from their definitions (planner.py, lookahead.py), in exact fractions of
     the float32 values: GAIN, MAX_ENTRY, NOMINAL, ACC rounded, RATE_NOM and FLOOR
     truncated, each within the range kept; K2 and K_SHIFT as the exact k**2 / 64."""
@@ -216,14 +217,14 @@ def _exact_plan_words(bits, n):
     from fractions import Fraction as F
     from math import isqrt
     cap, v2_max = (1 << 30) - 1, (1 << 29) - 1
-    mm, accel, nominal, nominal2, entry2, tick_one, tick_s = (
+    mm, accel, nominal, nominal2, tick_one, tick_s = (
         F(struct.unpack("<f", struct.pack("<I", b))[0]) for b in bits)
     k = tick_one * n / mm
     acc = k * accel * tick_s
     floor = min(cap, isqrt(int(acc * (1 << 28))))
+    nominal_v2 = min(v2_max, round(64 * nominal2))
     return {"gain": min(v2_max, round(128 * accel * mm)),
-            "max_entry": min(v2_max, round(64 * entry2)),
-            "nominal": min(v2_max, round(64 * nominal2)),
+            "max_entry": min(entry_v2, nominal_v2), "nominal": nominal_v2,
             "acc": max(1, min(cap, round(acc))), "floor": floor,
             "rate_nom": max(floor, min(cap, int(nominal * k))), "k2_64": k * k / 64}
 
@@ -239,12 +240,12 @@ def test_a_blocks_words_are_the_same_integers_on_every_build_and_the_exact_ones(
     lk = array("i", bytes(4 * la.L_WORDS))
     w = array("i", bytes(4 * la.W_WORDS))
     on_host = []
-    for bits, n in cases:
-        la.plan_words(lk, 0, array("f", bytes(array("I", bits))), n, w)
+    for bits, n, entry_v2 in cases:
+        la.plan_words(lk, 0, array("f", bytes(array("I", bits))), n, w, entry_v2)
         on_host.append(list(lk))
     assert mp.json(PLAN_WORDS, stdin=json.dumps(cases).encode()) == on_host
-    for (bits, n), got in zip(cases, on_host):
-        want = _exact_plan_words(bits, n)
+    for (bits, n, entry_v2), got in zip(cases, on_host):
+        want = _exact_plan_words(bits, n, entry_v2)
         assert abs(got[la.L_GAIN] - want["gain"]) <= 1, (bits, n)
         assert abs(got[la.L_MAX_ENTRY] - want["max_entry"]) <= 1, (bits, n)
         assert abs(got[la.L_NOMINAL] - want["nominal"]) <= 1, (bits, n)
@@ -416,3 +417,117 @@ def test_a_move_refused_changes_neither_the_position_nor_the_drives_filament(mp)
     plain.pop("refused")
     assert with_refusal == plain
     assert plain["drive_steps"][:3] != [0, 0, 0]
+
+
+# --- a move's lengths and junction in integers (mixfw/geometry.py) -------------------
+
+GEOMETRY = """
+import sys, json
+from array import array
+from mixfw import geometry as ge
+g = array("i", bytes(4 * ge.G_WORDS))
+f = array("f", bytes(4))
+out = []
+for gf_bits, moves in json.loads(sys.stdin.read()):
+    gf = array("f", bytes(array("I", gf_bits)))
+    for d, flags in moves:
+        for i in range(4):
+            g[ge.G_D + i] = d[i]
+        ge.lengths(g, gf, f, flags)
+        v2 = ge.junction(g, gf, flags)
+        out.append([list(array("I", bytes(f))), g[ge.G_LEN], g[ge.G_DIST], v2])
+print(json.dumps(out))
+"""
+
+
+def _geometry_cases():
+    """Runs of moves as the planner hands them over: X Y Z in steps, E in nanometres or
+    steps, each sign, from a step to the longest move a block takes, at steps/mm the
+    options allow; most join the move before."""
+    import random
+    rnd = random.Random(11)
+    runs = []
+    for _ in range(40):
+        spm = [rnd.choice([5.0, 80.0, 100.0, 93.7, 400.0, 415.0, 2560.0]) for _ in range(4)]
+        accel_jd = rnd.choice([0.01, 1.0, 50.0, 3000.0]) * rnd.uniform(0.5, 1)
+        moves = []
+        while len(moves) < 60:
+            d = [rnd.choice([0, 0, rnd.randint(1, 40), rnd.randint(1, 4000),
+                             rnd.randint(1, (1 << 30) - 2)]) for _ in range(3)]
+            e_nm = rnd.random() < 0.6
+            d.append(rnd.choice([0, rnd.randint(1, 2000), rnd.randint(1, 5 * 10 ** 7)])
+                     if e_nm else rnd.choice([0, rnd.randint(1, 20000)]))
+            if not any(d):
+                continue
+            flags = sum(rnd.choice([0, 1]) << i for i in range(4))
+            flags |= 16 if e_nm else 0
+            flags |= 32 if moves and rnd.random() < 0.9 else 0
+            moves.append((d, flags))
+        runs.append((spm, accel_jd, moves))
+    return runs
+
+
+def test_a_moves_lengths_and_junction_are_the_same_integers_everywhere_and_near_exact(mp):
+    """geometry.py works in integers: the same words on CPython, the unix port and (CI's
+    second pass) the 32-bit build. Against the lengths and the junction worked out from
+    the float32 mm per unit in double precision: the length to 2**-23 and three of the
+    move's units (2**-25 of its largest component), and the junction's V2 where it
+    matters (below 300 mm/s) as far as the cosine's 28 bits allow."""
+    import math
+    import struct
+    from array import array
+    from mixfw import geometry as ge
+    runs = _geometry_cases()
+    g = array("i", bytes(4 * ge.G_WORDS))
+    f = array("f", bytes(4))
+    on_host = []
+    given = []  # the floats as bits: a 32-bit build reads a float's text its own way
+    for spm, accel_jd, moves in runs:
+        gf = array("f", bytes(4 * ge.GF_WORDS))
+        for i in range(4):
+            gf[ge.GF_SCALE + i] = 1.0 / spm[i]
+        gf[ge.GF_E_NM] = 1e-6
+        gf[ge.GF_ACCEL_JD] = accel_jd
+        given.append((list(array("I", bytes(gf))), moves))
+        for d, flags in moves:
+            for i in range(4):
+                g[ge.G_D + i] = d[i]
+            ge.lengths(g, gf, f, flags)
+            v2 = ge.junction(g, gf, flags)
+            on_host.append([list(array("I", bytes(f))), g[ge.G_LEN], g[ge.G_DIST], v2])
+    assert mp.json(GEOMETRY, stdin=json.dumps(given).encode()) == on_host
+    got = iter(on_host)
+    checked = 0
+    for spm, accel_jd, moves in runs:
+        scale = [_f32(1.0 / s) for s in spm] + [_f32(1e-6)]
+        aj = _f32(accel_jd)
+        prev = None
+        for d, flags in moves:
+            bits, _, _, v2 = next(got)
+            dist = struct.unpack("<f", struct.pack("<I", bits[0]))[0]
+            e_scale = scale[4] if flags & 16 else scale[3]
+            mm = [d[i] * scale[i] * (-1 if flags >> i & 1 else 1) for i in range(3)]
+            mm.append(d[3] * e_scale * (-1 if flags >> 3 & 1 else 1))
+            want = math.hypot(*mm[:3]) if any(d[:3]) else abs(mm[3])
+            biggest = max(abs(x) for x in mm)
+            assert abs(dist - want) <= want * 2 ** -23 + 3 * biggest * 2 ** -25, (d, flags)
+            length = math.hypot(*mm)
+            if flags & 32:
+                dot = sum(a * b for a, b in zip(prev, mm)) / (math.hypot(*prev) * length)
+                if dot > 0.999999:
+                    want_v2 = (1 << 29) - 1
+                elif dot < -0.999999:
+                    want_v2 = 0
+                else:
+                    sin_half = math.sqrt(0.5 * (1 + dot))
+                    want_v2 = min((1 << 29) - 1, 64 * aj * sin_half / (1 - sin_half))
+                if want_v2 < 64 * 300 ** 2 and 1 - abs(dot) > 1e-5:
+                    # The cosine is good to a few parts in 2**28, which is the more of
+                    # the junction's speed the straighter (or the more reversed) it is.
+                    tolerance = 1 + want_v2 * (1e-6 + 2 ** -24 / (1 - abs(dot)))
+                    assert abs(v2 - want_v2) <= tolerance, (d, flags, dot)
+                    checked += 1
+            else:
+                assert v2 == 0
+            prev = mm
+    assert checked > 1000

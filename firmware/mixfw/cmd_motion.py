@@ -67,7 +67,7 @@ class Motion:
         axes stay where they are in millimetres."""
         p = self.planner
         p.synchronize()
-        p.steps_per_mm[:] = list(settings["steps_per_mm"])
+        p.set_steps_per_mm(settings["steps_per_mm"])
         p.set_drive_steps(settings["drive_steps_per_mm"])
         p.max_feed_mm_s = settings["max_feed_mm_s"]
         p.max_accel_mm_s2 = settings["max_accel_mm_s2"]

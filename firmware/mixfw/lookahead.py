@@ -69,15 +69,14 @@ F_MM = const(0)  # its length
 F_ACCEL = const(1)  # mm/s**2
 F_NOMINAL = const(2)  # mm/s
 F_NOMINAL2 = const(3)  # its square
-F_MAX_ENTRY2 = const(4)  # the junction's limit, squared
-F_TICK_ONE = const(5)  # the step loop's tick in s, times ONE (its rate of a step a tick)
-F_TICK_S = const(6)
-F_WORDS = const(7)
+F_TICK_ONE = const(4)  # the step loop's tick in s, times ONE (its rate of a step a tick)
+F_TICK_S = const(5)
+F_WORDS = const(6)
 # Scratch words of the planning io array, after the limbs ramp.py uses.
 _W_M = const(11)  # F_WORDS mantissas (with the hidden bit; 0 for 0)
-_W_E = const(18)  # and their exponent fields: x = m * 2**(field - _BIAS)
+_W_E = const(17)  # and their exponent fields: x = m * 2**(field - _BIAS)
 _BIAS = const(150)  # float32's exponent bias and its 23 fraction bits
-W_WORDS = const(25)
+W_WORDS = const(23)
 _CAP = const(0x3FFFFFFF)
 _HI = const(8)
 _LO = const(9)
@@ -91,9 +90,10 @@ assert (_HI, _LO, _W_M, _CAP, _P_LIMBS, _P_TRUNC, _P_ROUND, _P_TOP) == (
 
 
 @micropython.viper
-def plan_words(lk_buf, at: int, f_buf, n: int, w_buf):
-    """A new block's words in lk (slot at word `at`) from its floats (F_*) and n, its
-    lead-axis steps (0 for a dwell). Speeds become V2 within the range kept; what the
+def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int):
+    """A new block's words in lk (slot at word `at`) from its floats (F_*), n, its
+    lead-axis steps (0 for a dwell), and entry_v2, the junction's limit (V2, see
+    geometry.junction). Speeds become V2 within the range kept; what the
     block adds to v**2 over its length is 2 a s; mm/s becomes the step loop's rate with
     k = TICK_ONE n / mm, and mm/s**2 its rate change per tick, k a TICK_S."""
     lk = ptr32(lk_buf)
@@ -121,12 +121,11 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf):
     # GAIN = 2 V2_SCALE a mm (V2_SCALE = 2**6)
     x = int(product(w_buf, m_a, m_mm, 1, e_a + e_mm + 7, _P_ROUND))
     lk[at + L_GAIN] = x if x < _V2_MAX else _V2_MAX
-    x = int(product(w_buf, w[_W_M + F_MAX_ENTRY2], 1, 1,
-                    w[_W_E + F_MAX_ENTRY2] - _BIAS + 6, _P_ROUND))
-    lk[at + L_MAX_ENTRY] = x if x < _V2_MAX else _V2_MAX
     x = int(product(w_buf, w[_W_M + F_NOMINAL2], 1, 1,
                     w[_W_E + F_NOMINAL2] - _BIAS + 6, _P_ROUND))
-    lk[at + L_NOMINAL] = x if x < _V2_MAX else _V2_MAX
+    x = x if x < _V2_MAX else _V2_MAX
+    lk[at + L_NOMINAL] = x
+    lk[at + L_MAX_ENTRY] = entry_v2 if entry_v2 < x else x
     # k = TICK_ONE n / mm as km 2**ke, km of 26 bits: n taken to 29 bits and TICK_ONE's
     # mantissa to 30 first, so the quotient has 33 bits or more.
     ns = 0

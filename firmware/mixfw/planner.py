@@ -8,7 +8,7 @@
 from array import array
 from math import sqrt
 from mixfw.compat import const, micropython
-from mixfw import heap, lookahead, ramp
+from mixfw import geometry, heap, lookahead, ramp
 from mixfw import stepper as st
 from mixfw.mixer import MAX_DRIVES, normalize
 from mixfw.stepper import schedule_counts
@@ -47,17 +47,24 @@ _F_MM = const(0)
 _F_ACCEL = const(1)
 _F_NOMINAL = const(2)
 _F_NOMINAL2 = const(3)
-_F_MAX_ENTRY2 = const(4)
-assert (_F_MM, _F_ACCEL, _F_NOMINAL, _F_NOMINAL2, _F_MAX_ENTRY2) == (
-    lookahead.F_MM, lookahead.F_ACCEL, lookahead.F_NOMINAL, lookahead.F_NOMINAL2,
-    lookahead.F_MAX_ENTRY2)
+assert (_F_MM, _F_ACCEL, _F_NOMINAL, _F_NOMINAL2) == (
+    lookahead.F_MM, lookahead.F_ACCEL, lookahead.F_NOMINAL, lookahead.F_NOMINAL2)
 _L_WORDS = const(20)
-assert _L_WORDS == lookahead.L_WORDS
+_L_NOMINAL = const(2)
+assert (_L_WORDS, _L_NOMINAL) == (lookahead.L_WORDS, lookahead.L_NOMINAL)
+_G_D = const(11)
+_G_C = const(15)
+_G_DIST = const(20)
+_GF_ACCEL_JD = const(5)
+_FL_E_NM = const(16)
+_FL_JOIN = const(32)
+assert (_G_D, _G_C, _G_DIST, _GF_ACCEL_JD, _FL_E_NM, _FL_JOIN) == (
+    geometry.G_D, geometry.G_C, geometry.G_DIST, geometry.GF_ACCEL_JD, geometry.FL_E_NM,
+    geometry.FL_JOIN)
 
 # Largest schedule period the step loop's mixer takes: its products stay below 2**30.
 MAX_PERIOD = 20000
 
-_INF = 1e30
 # Filament is counted in integers, never summed in floats: a chip's 32-bit float
 # would drift by steps over a print. E in nanometres, and steps/mm in millionths, so a
 # drive's target step is an exact integer rounding (integers beyond 2**30 become big
@@ -189,6 +196,8 @@ _RAMP_IO = array("i", bytes(4 * lookahead.W_WORDS))
 _ramp_into = ramp.ramp_into
 _recalculate = lookahead.recalculate
 _plan_words = lookahead.plan_words
+_lengths = geometry.lengths
+_junction = geometry.junction
 assert (ramp.IO_N, ramp.IO_R0, ramp.IO_RNOM, ramp.IO_R1, ramp.IO_ACC, ramp.IO_ACCEL_UNTIL,
         ramp.IO_DECEL_AFTER, ramp.IO_RATE_DECEL) == tuple(range(8))  # as lookahead._write has them
 
@@ -211,7 +220,10 @@ class Planner:
         q = settings["queue_blocks"]
         self.queue = q
         mem[st.S_QUEUE] = q
-        self.steps_per_mm = list(settings["steps_per_mm"])
+        # The move's geometry in integers (geometry.py), with its mm per unit.
+        self._geo = array("i", bytes(4 * geometry.G_WORDS))
+        self._geo_f = array("f", bytes(4 * geometry.GF_WORDS))
+        self._geo_f[geometry.GF_E_NM] = 1.0 / NM_PER_MM
         self.max_feed_mm_s = settings["max_feed_mm_s"]
         self.max_accel_mm_s2 = settings["max_accel_mm_s2"]
         self.acceleration_mm_s2 = settings["acceleration_mm_s2"]
@@ -223,9 +235,7 @@ class Planner:
         pulse_ticks = mem[st.S_PULSE_TICKS]
         # A STEP pin is high for pulse_ticks and low at least as long.
         self.max_step_rate = 1.0 / (2 * pulse_ticks * self.tick_s)
-        # Below this, speed * steps/mm leaves the step rate's limit unbound, with room
-        # for float32's rounding of the move's length.
-        self._max_rate_margin = self.max_step_rate * (1 - 1e-5)
+        self.set_steps_per_mm(settings["steps_per_mm"])
         # Products kept while their factors are the same objects (see _add_block).
         self._seen_speed = None
         self._seen_min_s = None
@@ -233,7 +243,6 @@ class Planner:
         self._seen_min_mm = 0.0
         self._jd_accel = None
         self._jd_mm = None
-        self._accel_jd = 0.0
         self.position_steps = [0, 0, 0, 0]
         # Per-slot planning data in integers, for the look-ahead (see lookahead.py).
         # A block's floats for lookahead.plan_words, with the tick's two.
@@ -242,14 +251,12 @@ class Planner:
         self._plan_f[lookahead.F_TICK_S] = self.tick_s
         self.lk = lk or heap.zeros(lk_words(q))
         self._hooks = (irq_off, irq_on, _RAMP_IO)
-        # The latest move's X Y Z E in mm (one of _dirs) and its length, for the next
-        # junction; None after a stop.
-        self.prev_dir_mm = None
-        self.prev_len_mm = 1.0
-        self._dirs = ([0.0] * 4, [0.0] * 4)
+        # The latest block is a move the next one may join at speed (geometry.junction
+        # has its direction); False after a stop.
+        self.joins = False
         self._delta = [0] * 4
         self._abs_steps = [0] * 4
-        self.prev_nominal2 = 0.0
+        self.prev_nominal_v2 = 0  # the latest move's nominal speed, as the look-ahead's V2
         self.mix_id = 0
         self.tool_mix = (1,) + (0,) * (MAX_DRIVES - 1)  # the active tool's weights
         self._block_mix_id = 0
@@ -298,8 +305,7 @@ class Planner:
             fn()
         while self.busy():
             self.idle()
-        self.prev_dir_mm = None
-        self.prev_nominal2 = 0.0
+        self.joins = False
 
     def abort(self):
         """Drop every queued block at once (M112, faults). The step loop's counters
@@ -313,10 +319,19 @@ class Planner:
         for i in range(self.drives):
             self.drive_steps[i] = m[st.S_DRIVE_POS + i]
         self._drive_pos_from_steps()
-        self.prev_dir_mm = None
-        self.prev_nominal2 = 0.0
+        self.joins = False
         self.extruded = []
         self.retracted = []
+
+    def set_steps_per_mm(self, steps_per_mm):
+        """Steps/mm of X Y Z E (M92, M930), between moves."""
+        self.steps_per_mm = list(steps_per_mm)
+        for i in range(4):
+            self._geo_f[geometry.GF_SCALE + i] = 1.0 / self.steps_per_mm[i]
+        # Above these speeds, X Y or Z as the lead axis may reach the step rate's limit
+        # (with room for float32's rounding of the move's length).
+        self._lead_max_mm_s = [self.max_step_rate * (1 - 1e-5) / self.steps_per_mm[i]
+                               for i in range(3)]
 
     def set_min_segment_time(self, us):
         """Marlin's SLOWDOWN: while fewer than half the queue's blocks wait, a move
@@ -493,10 +508,9 @@ class Planner:
         while self._queued() >= self.queue - 1:
             self.idle()
         if not self.busy():
-            if self.prev_dir_mm is not None:
+            if self.joins:
                 self.underruns += 1
-            self.prev_dir_mm = None
-            self.prev_nominal2 = 0.0
+            self.joins = False
         return m[_S_HEAD]
 
     @micropython.native
@@ -513,10 +527,9 @@ class Planner:
             m[b + i] = 0
         m[b + st.B_FLAGS] = st.F_DWELL
         m[b + st.B_DWELL] = ticks
-        self._set_plan(slot, 0.0, 0.0, 0.0, 0.0, 0.0)
+        self._set_plan(slot, 0.0, 0.0, 0.0, 0)
         self._commit(slot)
-        self.prev_dir_mm = None
-        self.prev_nominal2 = 0.0
+        self.joins = False
 
     @micropython.native
     def add_move(self, target_steps, feed_mm_s, homing_axes=0, dir_masks=None, e_nm=0,
@@ -532,6 +545,14 @@ class Planner:
         if -self._one_piece_nm < e_nm < self._one_piece_nm:
             return self._add_block(target_steps, feed_mm_s, homing_axes, dir_masks, e_nm,
                                    mix, replay)
+        return self._add_pieces(target_steps, feed_mm_s, homing_axes, dir_masks, e_nm,
+                                mix, replay)
+
+    def _add_pieces(self, target_steps, feed_mm_s, homing_axes, dir_masks, e_nm, mix,
+                    replay):
+        """add_move's extrusion too long for one block, in equal pieces. Apart from
+        add_move: a comprehension's variables are heap cells, made at every call of the
+        function that holds it, and add_move runs for every line."""
         pieces = (abs(e_nm) * max(self._spm_fixed)
                   // (NM_PER_MM * SPM_SCALE * (MAX_PERIOD - 2 * MAX_DRIVES))) + 1
         start = list(self.position_steps)  # which each piece changes in place
@@ -565,7 +586,6 @@ class Planner:
             self._plan_e(e_nm, mix[1] if mix else None)
         counts = self._counts
         # For speeds only: steps come from the integers.
-        e_mm = e_nm / NM_PER_MM if e_nm else 0.0
         e_steps = sum(counts)
         # Lists made once and refilled: on the chips a tuple of 3 or more takes a heap
         # allocation of several blocks, which searches the heap from its first free block.
@@ -587,66 +607,50 @@ class Planner:
                 lead = i
         if n == 0:
             return False  # less than a step: the filament counts toward the next move
-        # Every float operation allocates on the chips: an axis the move leaves alone
-        # takes none, where its 0.0 would change no sum or product below.
-        spm = self.steps_per_mm
-        x_mm = dx / spm[0] if dx else 0.0
-        y_mm = dy / spm[1] if dy else 0.0
-        z_mm = dz / spm[2] if dz else 0.0
-        de_mm = e_steps / spm[3] if e_steps and not e_mm else e_mm
-        d_mm = self._dirs[0] if self.prev_dir_mm is self._dirs[1] else self._dirs[1]
-        d_mm[0] = x_mm
-        d_mm[1] = y_mm
-        d_mm[2] = z_mm
-        d_mm[3] = de_mm
-        sq = x_mm * x_mm if dx else 0.0
-        if dy:
-            sq = sq + y_mm * y_mm if dx else y_mm * y_mm
-        if dz:
-            sq = sq + z_mm * z_mm if dx or dy else z_mm * z_mm
+        slot = self._new_slot()
+        # The lengths and the junction in integers (geometry.py): every float operation
+        # allocates on the chips. The length its speed is along comes as a float too.
+        geo = self._geo
+        geo[_G_D] = steps[0]
+        geo[_G_D + 1] = steps[1]
+        geo[_G_D + 2] = steps[2]
+        geo_flags = (dx < 0) | (dy < 0) << 1 | (dz < 0) << 2
+        if e_nm:
+            geo[_G_D + 3] = e_nm if e_nm >= 0 else -e_nm
+            geo_flags |= _FL_E_NM | (e_nm < 0) << 3
+        else:
+            geo[_G_D + 3] = steps[3]
+            geo_flags |= (e_steps < 0) << 3
+        f = self._plan_f
+        _lengths(geo, self._geo_f, f, geo_flags)
         along_xyz = dx or dy or dz
-        xyz_mm = sqrt(sq) if along_xyz else 0.0
-        dist = xyz_mm if along_xyz else (de_mm if de_mm >= 0 else -de_mm)
         speed = feed_mm_s
-        accel = self.acceleration_mm_s2 if xyz_mm > 0 and along_xyz \
-            else self.retract_acceleration_mm_s2
+        accel = self.acceleration_mm_s2 if along_xyz else self.retract_acceleration_mm_s2
         max_feed = self.max_feed_mm_s
         max_accel = self.max_accel_mm_s2
         inv = 0.0
         for i in range(4):
             if steps[i]:
-                d = d_mm[i]
                 # An axis's share of the path is at most 1 (always on X Y Z), so its
                 # limits bind only when the move asks more than the limits themselves:
                 # most moves skip the arithmetic (each float operation allocates).
                 if speed <= max_feed[i] and accel <= max_accel[i] and (
-                        i < 3 or (d if d >= 0 else -d) <= dist):
+                        i < 3 or geo[_G_C + 3] <= geo[_G_DIST]):
                     continue
                 if not inv:
-                    inv = 1.0 / dist
-                share = (d if d >= 0 else -d) * inv
+                    inv = 1.0 / geo[_G_DIST]
+                share = geo[_G_C + i] * inv
                 v = max_feed[i] / share
                 if v < speed:
                     speed = v
                 v = max_accel[i] / share
                 if v < accel:
                     accel = v
-        # The step rate's limit binds only where the lead axis asks more than it: an
-        # axis of X Y Z moves at most speed * its steps/mm (one product where the
-        # limit took two).
-        if lead >= 3 or speed * spm[lead] > self._max_rate_margin:
-            v = self.max_step_rate * dist / n
+        # The step rate's limit binds only where the lead axis could ask more than it.
+        if lead >= 3 or speed > self._lead_max_mm_s[lead]:
+            v = self.max_step_rate * f[_F_MM] / n
             if v < speed:
                 speed = v
-        # sqrt(x * x) is abs(x) exactly in binary floating point.
-        if not de_mm:
-            len4 = xyz_mm
-        elif along_xyz:
-            len4 = sqrt(sq + de_mm * de_mm)
-        else:
-            len4 = dist
-
-        slot = self._new_slot()
         # Most lines keep the feed rate of the line before (the same float object):
         # its square and its SLOWDOWN length are worked out once (each float operation
         # allocates on the chips).
@@ -656,46 +660,30 @@ class Planner:
             self._seen_min_s = min_s
             self._seen_speed2 = speed * speed
             self._seen_min_mm = speed * min_s if min_s else 0.0
-        if min_s and self._seen_min_mm > dist:
-            # Marlin's SLOWDOWN (set_min_segment_time), with its bounds: 2 to half the
-            # queue's blocks waiting, and 2 (min_s - t) / waiting added to the time t.
-            waiting = self._waiting()
-            if 2 <= waiting < self.queue // 2:
-                t = dist / speed
-                speed = dist / (t + 2 * (min_s - t) / waiting)
-        # Junction speed from the deviation model; a stop if the queue ran empty. In
-        # squares, as the look-ahead takes them: no square root to undo.
+        if min_s:
+            dist = f[_F_MM]
+            if self._seen_min_mm > dist:
+                # Marlin's SLOWDOWN (set_min_segment_time), with its bounds: 2 to half
+                # the queue's blocks waiting, and 2 (min_s - t) / waiting added to the
+                # time t.
+                waiting = self._waiting()
+                if 2 <= waiting < self.queue // 2:
+                    t = dist / speed
+                    speed = dist / (t + 2 * (min_s - t) / waiting)
         nominal2 = self._seen_speed2 if speed is self._seen_speed else speed * speed
-        max_entry2 = 0.0
-        pu = self.prev_dir_mm
-        if pu is not None and not homing_axes:
-            # The cosine of the angle between the moves is -dot, of their unit vectors:
-            # the directions' product over their lengths (two float operations fewer
-            # than making unit vectors first).
-            dot = pu[0] * x_mm if dx else 0.0
-            if dy:
-                dot = dot + pu[1] * y_mm if dx else pu[1] * y_mm
-            if dz:
-                dot = dot + pu[2] * z_mm
-            if de_mm:
-                dot = dot + pu[3] * de_mm
-            dot = dot / (self.prev_len_mm * len4)
-            if dot > 0.999999:
-                max_entry2 = _INF
-            elif dot < -0.999999:
-                max_entry2 = 0.0
-            else:
-                sin_half = sqrt(0.5 * (1.0 + dot))
-                jd = self.junction_deviation_mm
-                if accel is not self._jd_accel or jd is not self._jd_mm:
-                    self._jd_accel = accel
-                    self._jd_mm = jd
-                    self._accel_jd = accel * jd
-                max_entry2 = self._accel_jd * sin_half / (1.0 - sin_half)
-            if nominal2 < max_entry2:
-                max_entry2 = nominal2
-            if self.prev_nominal2 < max_entry2:
-                max_entry2 = self.prev_nominal2
+        # The junction's speed, from the deviation model (a stop if the queue ran empty),
+        # as the look-ahead's V2: no faster than the move before.
+        join = self.joins and not homing_axes
+        if join:
+            jd = self.junction_deviation_mm
+            if accel is not self._jd_accel or jd is not self._jd_mm:
+                self._jd_accel = accel
+                self._jd_mm = jd
+                self._geo_f[_GF_ACCEL_JD] = accel * jd
+            geo_flags |= _FL_JOIN
+        entry_v2 = _junction(geo, self._geo_f, geo_flags)
+        if join and self.prev_nominal_v2 < entry_v2:
+            entry_v2 = self.prev_nominal_v2
 
         m = self.mem
         b = _BLOCK_BASE + slot * _B_WORDS
@@ -737,7 +725,8 @@ class Planner:
             last = len(weights) - 1
             for i in range(MAX_DRIVES):
                 m[w + 1 + i] = weights[i] if i <= last else 0
-        self._set_plan(slot, dist, accel, speed, nominal2, max_entry2, n)
+        self._set_plan(slot, accel, speed, nominal2, entry_v2, n)
+        self.prev_nominal_v2 = self.lk[slot * _L_WORDS + _L_NOMINAL]
         self._recalculate(slot)
         self._commit(slot)
         # In place, as the drives' plans: a list a line is garbage on the chips.
@@ -748,27 +737,20 @@ class Planner:
         drive_steps = self.drive_steps
         for i in range(self.drives):
             drive_steps[i] += given[i]
-        if homing_axes:
-            self.prev_dir_mm = None
-            self.prev_nominal2 = 0.0
-        else:
-            self.prev_dir_mm = d_mm
-            self.prev_len_mm = len4
-            self.prev_nominal2 = nominal2
+        self.joins = not homing_axes
         return True
 
     @micropython.native
-    def _set_plan(self, slot, mm, accel, nominal, nominal2, max_entry2, n=0):
-        """A new block's planning data; n: its lead-axis steps (0 for a dwell). Speeds
-        in mm/s, nominal2 and max_entry2 their squares. The floats end here: the
-        look-ahead works on integers (lookahead.plan_words)."""
+    def _set_plan(self, slot, accel, nominal, nominal2, entry_v2, n=0):
+        """A new block's planning data; n: its lead-axis steps (0 for a dwell), its
+        length already in the plan's floats (geometry.lengths). Speeds in mm/s, nominal2
+        its square; entry_v2 the junction's limit as the look-ahead's V2. The floats end
+        here: the look-ahead works on integers (lookahead.plan_words)."""
         f = self._plan_f
-        f[_F_MM] = mm
         f[_F_ACCEL] = accel
         f[_F_NOMINAL] = nominal
         f[_F_NOMINAL2] = nominal2
-        f[_F_MAX_ENTRY2] = max_entry2
-        _plan_words(self.lk, slot * _L_WORDS, f, n, _RAMP_IO)
+        _plan_words(self.lk, slot * _L_WORDS, f, n, _RAMP_IO, entry_v2)
 
     # --- look-ahead ---
     def _recalculate(self, newest):

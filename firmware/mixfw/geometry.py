@@ -1,0 +1,218 @@
+# A move's lengths and its junction with the move before, for the planner, in viper on
+# integers. They run for every G1 line; on the chips every float operation allocates,
+# and the float version took about 25 of them a line, and their garbage a collection
+# every few dozen lines.
+#
+# A move's X Y Z E come in as whole steps (E also as nanometres), each with its mm per
+# unit as a float32 (mantissa, exponent). Each becomes a component below 2**27 in a
+# unit common to the move: 2**-k mm, with k chosen so that the largest has 25 to 27
+# bits. Lengths are exact integer square roots of their sums of squares (two 30-bit
+# limbs, ramp.py), and the junction's cosine is worked out to 28 bits. Every
+# intermediate stays below 2**31, so the 32-bit chips and the 64-bit unix port give
+# the same integers.
+from mixfw.compat import const, micropython, ptr32
+from mixfw import ramp
+from mixfw.ramp import isqrt_limbs, product
+
+# Words of the geometry array g (array 'i', G_WORDS): first ramp.py's io words, which
+# product() and isqrt_limbs() use as scratch, then these.
+G_D = const(11)  # the move: |X| |Y| |Z| steps, then |E| in steps or nm (see GF_E_NM)
+G_C = const(15)  # its components: |X| |Y| |Z| |E| in the move's unit
+G_LEN = const(19)  # its length in X Y Z E, in that unit
+G_DIST = const(20)  # its length in X Y Z, or |E| for a move of E alone
+G_SIGNS = const(21)  # bit i: component i is negative
+G_PREV_C = const(22)  # the move before's components, signs and length (4 + 2 words)
+G_PREV_SIGNS = const(26)
+G_PREV_LEN = const(27)
+G_WORDS = const(28)
+# Words of the geometry floats (array 'f', GF_WORDS): mm per unit.
+GF_SCALE = const(0)  # X Y Z E: mm per step
+GF_E_NM = const(4)  # E: mm per nanometre
+GF_ACCEL_JD = const(5)  # acceleration (mm/s**2) times junction deviation (mm)
+GF_WORDS = const(6)
+# flags of lengths(): bit i for a negative component i, then
+FL_E_NM = const(16)  # E is in nanometres
+FL_JOIN = const(32)  # the move follows one it may join at speed: work out the junction
+
+_IO_HI = const(8)
+_IO_LO = const(9)
+_P_LIMBS = const(0)
+_P_TRUNC = const(1)
+_P_ROUND = const(2)
+_BIAS = const(150)  # float32's exponent bias and its 23 fraction bits
+_ONE = const(0x10000000)  # the cosine's and the sine's fixed point: 2**28
+# The moves are one line within this (1e-6 of ONE) either way: a straight junction, or
+# a reversal to a stop.
+_STRAIGHT = const(268)
+_V2_MAX = const(0x1FFFFFFF)  # lookahead's V2 range
+assert (_IO_HI, _IO_LO, _P_LIMBS, _P_TRUNC, _P_ROUND) == (
+    ramp.IO_HI, ramp.IO_LO, ramp.P_LIMBS, ramp.P_TRUNC, ramp.P_ROUND)
+assert G_D >= ramp.IO_WORDS
+
+
+@micropython.viper
+def lengths(g_buf, gf_buf, f_buf, flags: int):
+    """The move in g's G_D words -> its components (G_C), its length (G_LEN) and the
+    length its speed is along (G_DIST), which also goes into f_buf's first word (a
+    float array: lookahead.F_MM) as float32 bits. flags: FL_* and the signs."""
+    g = ptr32(g_buf)
+    gf = ptr32(gf_buf)
+    # The unit: 2**(top - 27) mm, top the highest bit any component can reach (a
+    # product of a and a mantissa of 24 bits has bits(a) + 23 or + 24 bits).
+    top = -1000
+    for i in range(4):
+        a = g[G_D + i]
+        if a:
+            nb = 0
+            while a:
+                a = a >> 1
+                nb += 1
+            k = GF_SCALE + i
+            if i == 3 and (flags & FL_E_NM):
+                k = GF_E_NM
+            t = nb + 24 + ((gf[k] >> 23) & 0xFF) - _BIAS
+            if t > top:
+                top = t
+    for i in range(4):
+        a = g[G_D + i]
+        c = 0
+        if a:
+            k = GF_SCALE + i
+            if i == 3 and (flags & FL_E_NM):
+                k = GF_E_NM
+            bits = gf[k]
+            c = int(product(g_buf, a, (bits & 0x7FFFFF) | 0x800000, 1,
+                            ((bits >> 23) & 0xFF) - _BIAS - top + 27, _P_TRUNC))
+        g[G_C + i] = c
+    g[G_SIGNS] = flags & 15
+    # Sums of squares, in two limbs: X Y Z, then E.
+    hi = 0
+    lo = 0
+    for i in range(3):
+        c = g[G_C + i]
+        if c:
+            product(g_buf, c, c, 1, 0, _P_LIMBS)
+            lo += g[_IO_LO]
+            hi += g[_IO_HI] + (lo >> 30)
+            lo = lo & 0x3FFFFFFF
+    dist = g[G_C + 3]  # a move of E alone
+    if hi or lo:
+        g[_IO_HI] = hi
+        g[_IO_LO] = lo
+        dist = int(isqrt_limbs(g_buf))
+    if dist < 1:
+        dist = 1  # X Y Z below the unit: still a length to divide by
+    g[G_DIST] = dist
+    c = g[G_C + 3]
+    if c:
+        product(g_buf, c, c, 1, 0, _P_LIMBS)
+        lo += g[_IO_LO]
+        hi += g[_IO_HI] + (lo >> 30)
+        lo = lo & 0x3FFFFFFF
+    g[_IO_HI] = hi
+    g[_IO_LO] = lo
+    g[G_LEN] = int(isqrt_limbs(g_buf))
+    # G_DIST as a float32: 24 bits of it, and the unit's exponent.
+    nb = 0
+    a = dist
+    while a:
+        a = a >> 1
+        nb += 1
+    if nb > 24:
+        mant = dist >> (nb - 24)
+    else:
+        mant = dist << (24 - nb)
+    f = ptr32(f_buf)
+    f[0] = ((top - 27 + nb - 24 + _BIAS) << 23) | (mant & 0x7FFFFF)
+
+
+@micropython.viper
+def junction(g_buf, gf_buf, flags: int) -> int:
+    """The fastest the move (its lengths() just worked out) may enter from the move
+    before, as the look-ahead's V2 ((mm/s)**2 * 64, at most its range), by the
+    junction deviation model; 0 without FL_JOIN. Then the move becomes the move before.
+
+    The angle's cosine comes from the two moves' components over their lengths, each in
+    its own move's unit, which cancels; sin(angle / 2) = sqrt((1 - cos) / 2) of the
+    angle between the moves' directions, and the junction's speed**2 is
+    accel * deviation * sin / (1 - sin)."""
+    g = ptr32(g_buf)
+    v2 = 0
+    if flags & FL_JOIN:
+        # The dot product of the directions, in two limbs: the products of the same sign
+        # summed, and the other sum taken off.
+        sign = 0
+        same_hi = 0
+        same_lo = 0
+        diff_hi = 0
+        diff_lo = 0
+        signs = g[G_SIGNS] ^ g[G_PREV_SIGNS]
+        for i in range(4):
+            a = g[G_C + i]
+            b = g[G_PREV_C + i]
+            if a and b:
+                product(g_buf, a, b, 1, 0, _P_LIMBS)
+                if (signs >> i) & 1:
+                    diff_lo += g[_IO_LO]
+                    diff_hi += g[_IO_HI] + (diff_lo >> 30)
+                    diff_lo = diff_lo & 0x3FFFFFFF
+                else:
+                    same_lo += g[_IO_LO]
+                    same_hi += g[_IO_HI] + (same_lo >> 30)
+                    same_lo = same_lo & 0x3FFFFFFF
+        if diff_hi > same_hi or (diff_hi == same_hi and diff_lo > same_lo):
+            sign = 1
+            hi = diff_hi - same_hi
+            lo = diff_lo - same_lo
+        else:
+            hi = same_hi - diff_hi
+            lo = same_lo - diff_lo
+        if lo < 0:
+            lo += 0x3FFFFFFF  # and 1: 2**30 is no small int on the chips
+            lo += 1
+            hi -= 1
+        # Over the product of the lengths (below 2**56), both taken down to 29 bits of
+        # it: the cosine to 28 bits, at most ONE.
+        product(g_buf, g[G_LEN], g[G_PREV_LEN], 1, 0, _P_LIMBS)
+        d_hi = g[_IO_HI]
+        d_lo = g[_IO_LO]
+        nb = 30
+        a = d_hi
+        while a:
+            a = a >> 1
+            nb += 1
+        k = nb - 29  # both lengths have 25 bits or more: k > 20
+        if k >= 30:
+            den = d_hi >> (k - 30)
+            num = hi >> (k - 30)
+        else:
+            den = (d_hi << (30 - k)) | (d_lo >> k)
+            num = (hi << (30 - k)) | (lo >> k)
+        cos = _ONE
+        if num < den:
+            cos = int(product(g_buf, num, _ONE, den, 0, _P_TRUNC))
+        if cos > _ONE - _STRAIGHT:
+            if not sign:
+                v2 = _V2_MAX  # straight on
+        else:
+            # sin**2 = (1 - cos) / 2 of the angle between the directions, where cos is
+            # minus that of the moves' dot product; its root to 28 bits.
+            if sign:
+                h = (_ONE - cos) >> 1
+            else:
+                h = (_ONE + cos) >> 1
+            g[_IO_HI] = h >> 2
+            g[_IO_LO] = (h & 3) << 28
+            s = int(isqrt_limbs(g_buf))
+            bits = ptr32(gf_buf)[GF_ACCEL_JD]
+            ex = (bits >> 23) & 0xFF
+            if ex:
+                v2 = int(product(g_buf, (bits & 0x7FFFFF) | 0x800000, s, _ONE - s,
+                                 ex - _BIAS + 6, _P_ROUND))
+            if v2 > _V2_MAX:
+                v2 = _V2_MAX
+    for i in range(4):
+        g[G_PREV_C + i] = g[G_C + i]
+    g[G_PREV_SIGNS] = g[G_SIGNS]
+    g[G_PREV_LEN] = g[G_LEN]
+    return v2
