@@ -254,7 +254,6 @@ class Planner:
         # The latest block is a move the next one may join at speed (geometry.junction
         # has its direction); False after a stop.
         self.joins = False
-        self._delta = [0] * 4
         self._abs_steps = [0] * 4
         self.prev_nominal_v2 = 0  # the latest move's nominal speed, as the look-ahead's V2
         self.mix_id = 0
@@ -283,6 +282,9 @@ class Planner:
         self.drive_steps = [0] * self.drives
         self.before_sync = []  # fn() each: moves held before the planner are handed over
         self.dir_invert_mask = 0  # DIR pins of motors wired the other way round
+        self._dir_set = [0] * 16  # see _dir_words
+        self._dir_clr = [0] * 16
+        self._dir_masks_seen = self._dir_invert_seen = None
         # For retract_policy 2: the latest extrusion as stretches [start, end) of block
         # schedules (weights, start, end), newest last, and what retractions took back
         # from it, taken-first first. See _replay_counts.
@@ -589,11 +591,6 @@ class Planner:
         e_steps = sum(counts)
         # Lists made once and refilled: on the chips a tuple of 3 or more takes a heap
         # allocation of several blocks, which searches the heap from its first free block.
-        delta = self._delta
-        delta[0] = dx
-        delta[1] = dy
-        delta[2] = dz
-        delta[3] = e_steps
         steps = self._abs_steps
         steps[0] = dx if dx >= 0 else -dx
         steps[1] = dy if dy >= 0 else -dy
@@ -614,13 +611,14 @@ class Planner:
         geo[_G_D] = steps[0]
         geo[_G_D + 1] = steps[1]
         geo[_G_D + 2] = steps[2]
-        geo_flags = (dx < 0) | (dy < 0) << 1 | (dz < 0) << 2
+        # Bit i: axis i runs backwards.
+        neg = (dx < 0) | (dy < 0) << 1 | (dz < 0) << 2 | (e_steps < 0) << 3
         if e_nm:
             geo[_G_D + 3] = e_nm if e_nm >= 0 else -e_nm
-            geo_flags |= _FL_E_NM | (e_nm < 0) << 3
+            geo_flags = (neg & 7) | _FL_E_NM | (e_nm < 0) << 3
         else:
             geo[_G_D + 3] = steps[3]
-            geo_flags |= (e_steps < 0) << 3
+            geo_flags = neg
         f = self._plan_f
         _lengths(geo, self._geo_f, f, geo_flags)
         along_xyz = dx or dy or dz
@@ -688,25 +686,21 @@ class Planner:
         m = self.mem
         b = _BLOCK_BASE + slot * _B_WORDS
         m[b + _B_N] = n
-        flags = 0
-        dset = 0
-        dclr = 0
-        for i in range(4):
-            m[b + _B_STEPS + i] = steps[i]
-            mask = dir_masks[i] if dir_masks else 0
-            if delta[i] < 0:
-                flags |= _F_NEG << i
-                dclr |= mask
-            else:
-                dset |= mask
+        m[b + _B_STEPS] = steps[0]
+        m[b + _B_STEPS + 1] = steps[1]
+        m[b + _B_STEPS + 2] = steps[2]
+        m[b + _B_STEPS + 3] = steps[3]
+        # The DIR pins to set and clear for each pattern of the axes' signs, worked out
+        # once for these masks.
         inv = self.dir_invert_mask
-        if inv:
-            dset, dclr = (dset & ~inv) | (dclr & inv), (dclr & ~inv) | (dset & inv)
+        if dir_masks is not self._dir_masks_seen or inv != self._dir_invert_seen:
+            self._dir_words(dir_masks, inv)
+        flags = neg * _F_NEG
         if homing_axes:
             flags |= st.F_HOMING | (homing_axes << st.F_HOME_SHIFT)
         m[b + _B_FLAGS] = flags
-        m[b + _B_DIR_SET] = dset
-        m[b + _B_DIR_CLR] = dclr
+        m[b + _B_DIR_SET] = self._dir_set[neg]
+        m[b + _B_DIR_CLR] = self._dir_clr[neg]
         m[b + _B_DWELL] = 0
         given = counts
         if e_steps:
@@ -739,6 +733,24 @@ class Planner:
             drive_steps[i] += given[i]
         self.joins = not homing_axes
         return True
+
+    def _dir_words(self, dir_masks, inv):
+        """The DIR pins a block sets and clears, for each of the 16 patterns of its X Y Z
+        E signs (bit i: axis i runs backwards), with dir_masks per axis (None: no pins)
+        and the motors wired the other way round (inv) flipped."""
+        for neg in range(16):
+            dset = 0
+            dclr = 0
+            for i in range(4):
+                mask = dir_masks[i] if dir_masks else 0
+                if neg >> i & 1:
+                    dclr |= mask
+                else:
+                    dset |= mask
+            self._dir_set[neg] = (dset & ~inv) | (dclr & inv)
+            self._dir_clr[neg] = (dclr & ~inv) | (dset & inv)
+        self._dir_masks_seen = dir_masks
+        self._dir_invert_seen = inv
 
     @micropython.native
     def _set_plan(self, slot, accel, nominal, nominal2, entry_v2, n=0):

@@ -155,8 +155,16 @@ def product(w_buf, a: int, b: int, c: int, s: int, how: int) -> int:
     if x >= 0x100:
         x = x >> 8
         n += 8
-    while x:
+    if x >= 0x10:
+        x = x >> 4
+        n += 4
+    if x >= 4:
+        x = x >> 2
+        n += 2
+    if x >= 2:
         x = x >> 1
+        n += 1
+    if x:
         n += 1
     if how == P_TOP:
         u = s - n
