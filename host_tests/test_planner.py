@@ -11,6 +11,7 @@ sys.modules["machine"] = simmachine
 import board
 from mixfw import assemble
 from mixfw import lookahead, stepper as st
+from mixfw import planner as planner_module
 
 simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%%d" %% i for i in range(6)])
 printer = assemble.build(files_root=None)
@@ -41,12 +42,12 @@ def take_one():
     mem[st.S_HOME_STOP] = 7  # homing: every endstop is hit at once
 
 pl.idle = take_one
-recalculate = pl._recalculate
+recalculate = planner_module._recalculate
 
-def checked_recalculate(newest):
+def checked_recalculate(lk_buf, mem_buf, newest, hooks):
     # The incremental look-ahead must plan what a full pass over the queue plans: in
     # V2 (speed squared), v**2 = v0**2 + 2 a s exactly, within each junction's limit.
-    recalculate(newest)
+    recalculate(lk_buf, mem_buf, newest, hooks)
     first = mem[st.S_TAIL]
     slots = []
     k = first
@@ -69,7 +70,7 @@ def checked_recalculate(newest):
         v = v1
     counts["checked"] += 1
 
-pl._recalculate = checked_recalculate
+planner_module._recalculate = checked_recalculate
 run = printer.run_line
 parse = printer.parser.parse
 run(parse(b"M302 P1", 7))

@@ -48,6 +48,7 @@ class Motion:
         self.drives = settings["drives"]
         self.dir_masks = pins.axis_dir_masks()
         self.enabled = 0  # bit per driver: X Y Z then drives
+        self._all_enabled = (1 << (3 + self.drives)) - 1
         self.soft_limits = settings.get("soft_limits", True)
         # Longest E move accepted, as Marlin's PREVENT_LENGTHY_EXTRUDE.
         self.max_extrude_mm = settings.get("max_extrude_mm", 200.0)
@@ -222,7 +223,8 @@ class Motion:
                                  % (abs(e_nm) / NM_PER_MM, self.max_extrude_mm))
             for guard in self.extrusion_guards:
                 guard()
-        self.enable_for(xyz | (8 if e_nm else 0))
+        if self.enabled != self._all_enabled:  # mostly all are on already
+            self.enable_for(xyz | (8 if e_nm else 0))
         q = self.queue
         policy = self.retract_policy
         if not xyz and policy == RETRACT_EQUAL and (e_nm < 0 or self.retracted_nm > 0):

@@ -236,7 +236,7 @@ class Planner:
         # A STEP pin is high for pulse_ticks and low at least as long.
         self.max_step_rate = 1.0 / (2 * pulse_ticks * self.tick_s)
         self.set_steps_per_mm(settings["steps_per_mm"])
-        # Products kept while their factors are the same objects (see _add_block).
+        # Products kept while their factors are the same objects (see add_move).
         self._seen_speed = None
         self._seen_min_s = None
         self._seen_speed2 = 0.0
@@ -529,7 +529,7 @@ class Planner:
             m[b + i] = 0
         m[b + st.B_FLAGS] = st.F_DWELL
         m[b + st.B_DWELL] = ticks
-        self._set_plan(slot, 0.0, 0.0, 0.0, 0)
+        _plan_words(self.lk, slot * _L_WORDS, self._plan_f, 0, _RAMP_IO, 0)
         self._commit(slot)
         self.joins = False
 
@@ -544,35 +544,14 @@ class Planner:
         # The mixer gives every drive exactly its count in a block of at most
         # MAX_PERIOD E steps (each drive's count rounds by up to a step: hence the
         # margin), so a longer extrusion, such as a purge, goes in equal pieces.
-        if -self._one_piece_nm < e_nm < self._one_piece_nm:
-            return self._add_block(target_steps, feed_mm_s, homing_axes, dir_masks, e_nm,
-                                   mix, replay)
-        return self._add_pieces(target_steps, feed_mm_s, homing_axes, dir_masks, e_nm,
-                                mix, replay)
-
-    def _add_pieces(self, target_steps, feed_mm_s, homing_axes, dir_masks, e_nm, mix,
-                    replay):
-        """add_move's extrusion too long for one block, in equal pieces. Apart from
-        add_move: a comprehension's variables are heap cells, made at every call of the
-        function that holds it, and add_move runs for every line."""
-        pieces = (abs(e_nm) * max(self._spm_fixed)
-                  // (NM_PER_MM * SPM_SCALE * (MAX_PERIOD - 2 * MAX_DRIVES))) + 1
-        start = list(self.position_steps)  # which each piece changes in place
-        added = False
-        for k in range(1, pieces + 1):
-            point = [start[i] + div_round((target_steps[i] - start[i]) * k, pieces)
-                     for i in range(3)]
-            piece_nm = e_nm * k // pieces - e_nm * (k - 1) // pieces
-            added = self._add_block(point, feed_mm_s, homing_axes, dir_masks, piece_nm,
-                                    mix, replay) or added
-        return added
-
-    @micropython.native
-    def _add_block(self, target_steps, feed_mm_s, homing_axes, dir_masks, e_nm, mix, replay):
+        if not -self._one_piece_nm < e_nm < self._one_piece_nm:
+            return self._add_pieces(target_steps, feed_mm_s, homing_axes, dir_masks, e_nm,
+                                    mix, replay)
         if feed_mm_s <= 0:
             raise PlanError("feed rate must be > 0")
         # Builtins (abs, min, max) and module attributes are lookups by name: the
-        # arithmetic below is written out, as it runs for every line of G-code.
+        # arithmetic below is written out, as it runs for every line of G-code. So is
+        # what small methods would do: a call costs the chip about 10 us.
         pos = self.position_steps
         dx = target_steps[0] - pos[0]
         dy = target_steps[1] - pos[1]
@@ -719,9 +698,15 @@ class Planner:
             last = len(weights) - 1
             for i in range(MAX_DRIVES):
                 m[w + 1 + i] = weights[i] if i <= last else 0
-        self._set_plan(slot, accel, speed, nominal2, entry_v2, n)
-        self.prev_nominal_v2 = self.lk[slot * _L_WORDS + _L_NOMINAL]
-        self._recalculate(slot)
+        # The floats end here: the look-ahead works on integers (lookahead.plan_words).
+        f[_F_ACCEL] = accel
+        f[_F_NOMINAL] = speed
+        f[_F_NOMINAL2] = nominal2
+        lk = self.lk
+        at = slot * _L_WORDS
+        _plan_words(lk, at, f, n, _RAMP_IO, entry_v2)
+        self.prev_nominal_v2 = lk[at + _L_NOMINAL]
+        _recalculate(lk, m, slot, self._hooks)
         self._commit(slot)
         # In place, as the drives' plans: a list a line is garbage on the chips.
         pos[0] = target_steps[0]
@@ -733,6 +718,23 @@ class Planner:
             drive_steps[i] += given[i]
         self.joins = not homing_axes
         return True
+
+    def _add_pieces(self, target_steps, feed_mm_s, homing_axes, dir_masks, e_nm, mix,
+                    replay):
+        """add_move's extrusion too long for one block, in equal pieces. Apart from
+        add_move: a comprehension's variables are heap cells, made at every call of the
+        function that holds it, and add_move runs for every line."""
+        pieces = (abs(e_nm) * max(self._spm_fixed)
+                  // (NM_PER_MM * SPM_SCALE * (MAX_PERIOD - 2 * MAX_DRIVES))) + 1
+        start = list(self.position_steps)  # which each piece changes in place
+        added = False
+        for k in range(1, pieces + 1):
+            point = [start[i] + div_round((target_steps[i] - start[i]) * k, pieces)
+                     for i in range(3)]
+            piece_nm = e_nm * k // pieces - e_nm * (k - 1) // pieces
+            added = self.add_move(point, feed_mm_s, homing_axes, dir_masks, piece_nm,
+                                  mix, replay) or added
+        return added
 
     def _dir_words(self, dir_masks, inv):
         """The DIR pins a block sets and clears, for each of the 16 patterns of its X Y Z
@@ -751,20 +753,3 @@ class Planner:
             self._dir_clr[neg] = (dclr & ~inv) | (dset & inv)
         self._dir_masks_seen = dir_masks
         self._dir_invert_seen = inv
-
-    @micropython.native
-    def _set_plan(self, slot, accel, nominal, nominal2, entry_v2, n=0):
-        """A new block's planning data; n: its lead-axis steps (0 for a dwell), its
-        length already in the plan's floats (geometry.lengths). Speeds in mm/s, nominal2
-        its square; entry_v2 the junction's limit as the look-ahead's V2. The floats end
-        here: the look-ahead works on integers (lookahead.plan_words)."""
-        f = self._plan_f
-        f[_F_ACCEL] = accel
-        f[_F_NOMINAL] = nominal
-        f[_F_NOMINAL2] = nominal2
-        _plan_words(self.lk, slot * _L_WORDS, f, n, _RAMP_IO, entry_v2)
-
-    # --- look-ahead ---
-    def _recalculate(self, newest):
-        """The look-ahead after `newest` was queued: lookahead.recalculate."""
-        _recalculate(self.lk, self.mem, newest, self._hooks)
