@@ -369,8 +369,9 @@ print(json.dumps(out))
 
 
 def test_the_root_of_two_limbs_is_the_integer_square_root(mp):
-    """Every bit length up to the 56 bits a root below 2**28 allows, with the zero
-    pairs the root skips at the top of either limb, and both limbs' edges."""
+    """Every bit length up to the 56 bits a root below 2**28 allows, both limbs'
+    edges, and squares and their neighbours, where the last digit's correction and
+    Newton's end are decided."""
     import random
     from math import isqrt
     rnd = random.Random(21)
@@ -378,6 +379,10 @@ def test_the_root_of_two_limbs_is_the_integer_square_root(mp):
               ((1 << 28) - 1) ** 2, 5 << 30]
     for bits in range(1, 57):
         values += [rnd.getrandbits(bits) | (1 << (bits - 1)) for _ in range(40)]
+    for bits in range(1, 29):
+        for _ in range(20):
+            r = rnd.getrandbits(bits) | (1 << (bits - 1))
+            values += [v for v in (r * r - 1, r * r, r * r + 2 * r) if v < 1 << 56]
     assert mp.json(ISQRT, stdin=json.dumps(values).encode()) == [isqrt(v) for v in values]
 
 
