@@ -195,8 +195,10 @@ class Motion:
             target_e_nm = v if self.absolute_e else target_e_nm + v
         if self.soft_limits:
             for i in range(3):
+                if not (moved >> i) & 1:
+                    continue
                 nm = target[i] + self.offset_nm[i]
-                if (moved >> i) & 1 and not -1 <= nm <= self._travel_nm[i] + 1:
+                if not -1 <= nm <= self._travel_nm[i] + 1:
                     raise GcodeError("move to %s%.3f is outside the soft limits 0..%g mm"
                                      % (AXIS_LETTERS[i], target[i] / NM_PER_MM,
                                         self.travel_mm[i]))

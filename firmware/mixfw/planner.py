@@ -342,12 +342,14 @@ class Planner:
         slow to bring (a stop and a blob on every short curve segment). 0: off."""
         self.min_segment_s = us * 1e-6
 
+    @micropython.native
     def _queued(self):
         """Blocks in the ring, the one the step loop runs included."""
         m = self.mem
         count = m[_S_HEAD] - m[_S_TAIL]
         return count + self.queue if count < 0 else count
 
+    @micropython.native
     def _waiting(self):
         """Blocks queued that the step loop has not started."""
         count = self._queued()
