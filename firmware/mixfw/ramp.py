@@ -240,6 +240,23 @@ def product(w_buf, a: int, b: int, c: int, s: int, how: int) -> int:
     return x
 
 
+_FRAC_MAX = const(0x8000000)
+
+
+@micropython.viper
+def _fraction(x: int, c: int) -> int:
+    """(x << FRAC) // c for 0 <= x < c < 2**27, in four digits of 4 bits in machine
+    words: product() takes two limbs and a call more, several times the arithmetic on
+    the chip."""
+    q = 0
+    for _ in range(4):
+        x = x << 4
+        d = x // c
+        x -= d * c
+        q = (q << 4) | d
+    return q
+
+
 @micropython.viper
 def ramp_into(io_buf):
     """The schedule (ACCEL_UNTIL, DECEL_AFTER, RATE_DECEL) of io's record (N, R0, RNOM,
@@ -307,8 +324,11 @@ def ramp_into(io_buf):
     # Acceleration time in ticks: (vn - r0) / acc, with FRAC fraction bits.
     a_int = (vn - r0) // acc
     a_rem = (vn - r0) - a_int * acc
-    product(io_buf, a_rem, _ONE_FRAC, acc, 0, P_LIMBS)
-    frac = io[_LO]
+    if acc < _FRAC_MAX:
+        frac = int(_fraction(a_rem, acc))
+    else:
+        product(io_buf, a_rem, _ONE_FRAC, acc, 0, P_LIMBS)
+        frac = io[_LO]
     # Cruise time: its steps / vn.
     c_int = 0
     if c_hi or c_lo:
@@ -319,8 +339,11 @@ def ramp_into(io_buf):
             c_int = _MAX_TICK
         else:
             c_int = io[_LO]
-            product(io_buf, io[_REM], _ONE_FRAC, vn, 0, P_LIMBS)
-            frac += io[_LO]
+            if vn < _FRAC_MAX:  # below half a step a tick, the planner's cap
+                frac += int(_fraction(io[_REM], vn))
+            else:
+                product(io_buf, io[_REM], _ONE_FRAC, vn, 0, P_LIMBS)
+                frac += io[_LO]
     decel = a_int + c_int
     if frac >= _ONE_FRAC:
         frac -= _ONE_FRAC
@@ -336,9 +359,14 @@ def ramp_into(io_buf):
     late = (decel_after - decel) * _ONE_FRAC - frac + _HALF
     r_decel = r1
     if decel_after < _MAX_TICK:
-        product(io_buf, acc, late, 1, 0, P_LIMBS)
-        lo = io[_LO] + _HALF
-        fall = (io[_HI] << 14) + (lo >> _FRAC)
+        # acc * late (late below 2**18) in two digits of late in machine words, as
+        # _fraction divides.
+        if acc < 0x100000:
+            fall = (acc * (late >> 8) + ((acc * (late & 0xFF) + _HALF) >> 8)) >> 8
+        else:
+            product(io_buf, acc, late, 1, 0, P_LIMBS)
+            lo = io[_LO] + _HALF
+            fall = (io[_HI] << 14) + (lo >> _FRAC)
         r_decel = vn - fall
         if r_decel < r1:
             r_decel = r1
