@@ -428,21 +428,24 @@ def test_a_move_refused_changes_neither_the_position_nor_the_drives_filament(mp)
 # --- a move's lengths and junction in integers (mixfw/geometry.py) -------------------
 
 GEOMETRY = """
-import sys, json
 from array import array
 from mixfw import geometry as ge
-g = array("i", bytes(4 * ge.G_WORDS))
-f = array("f", bytes(4))
-out = []
-for gf_bits, moves in json.loads(sys.stdin.read()):
-    gf = array("f", bytes(array("I", gf_bits)))
-    for d, flags in moves:
-        for i in range(4):
-            g[ge.G_D + i] = d[i]
-        ge.lengths(g, gf, f, flags)
-        v2 = ge.junction(g, gf, flags)
-        out.append([list(array("I", bytes(f))), g[ge.G_LEN], g[ge.G_DIST], v2])
-print(json.dumps(out))
+
+
+def run_geometry(runs):
+    # Each run: the geometry floats as bits, and its moves: (G_D words, flags).
+    g = array("i", bytes(4 * ge.G_WORDS))
+    f = array("f", bytes(4))
+    out = []
+    for gf_bits, moves in runs:
+        gf = array("f", bytes(array("I", gf_bits)))
+        for d, flags in moves:
+            for i in range(4):
+                g[ge.G_D + i] = d[i]
+            ge.lengths(g, gf, f, flags)
+            v2 = ge.junction(g, gf, flags)
+            out.append([list(array("I", bytes(f))), g[ge.G_LEN], g[ge.G_DIST], v2])
+    return out
 """
 
 
@@ -484,9 +487,6 @@ def test_a_moves_lengths_and_junction_are_the_same_integers_everywhere_and_near_
     from array import array
     from mixfw import geometry as ge
     runs = _geometry_cases()
-    g = array("i", bytes(4 * ge.G_WORDS))
-    f = array("f", bytes(4))
-    on_host = []
     given = []  # the floats as bits: a 32-bit build reads a float's text its own way
     for spm, accel_jd, moves in runs:
         gf = array("f", bytes(4 * ge.GF_WORDS))
@@ -495,13 +495,12 @@ def test_a_moves_lengths_and_junction_are_the_same_integers_everywhere_and_near_
         gf[ge.GF_E_NM] = 1e-6
         gf[ge.GF_ACCEL_JD] = accel_jd
         given.append((list(array("I", bytes(gf))), moves))
-        for d, flags in moves:
-            for i in range(4):
-                g[ge.G_D + i] = d[i]
-            ge.lengths(g, gf, f, flags)
-            v2 = ge.junction(g, gf, flags)
-            on_host.append([list(array("I", bytes(f))), g[ge.G_LEN], g[ge.G_DIST], v2])
-    assert mp.json(GEOMETRY, stdin=json.dumps(given).encode()) == on_host
+    host = {}
+    exec(GEOMETRY, host)  # the same code as the MicroPython run, on CPython
+    on_host = host["run_geometry"](given)
+    script = "import sys, json\n" + GEOMETRY + (
+        "print(json.dumps(run_geometry(json.loads(sys.stdin.read()))))\n")
+    assert mp.json(script, stdin=json.dumps(given).encode()) == on_host
     got = iter(on_host)
     checked = 0
     for spm, accel_jd, moves in runs:

@@ -88,31 +88,17 @@ def isqrt_limbs(w_buf) -> int:
     lo = w[_LO]
     if not (hi or lo):
         return 0
-    # Shifted left by an even 2 z bits, to have its top bit at bit 54 or 55.
-    nb = 0
+    # Shifted left by an even 2 z bits, to have its top pair of bits at 54 and 55.
     x = lo
+    top = 0
     if hi:
-        nb = 30
         x = hi
-    if x >= 0x10000:
-        x = x >> 16
-        nb += 16
-    if x >= 0x100:
-        x = x >> 8
-        nb += 8
-    if x >= 0x10:
-        x = x >> 4
-        nb += 4
-    if x >= 4:
-        x = x >> 2
-        nb += 2
-    if x >= 2:
-        x = x >> 1
-        nb += 1
-    if x:
-        nb += 1
-    z = (56 - nb) >> 1
-    sh = z + z
+        top = 30
+    t = 28
+    while t > 0 and not (x >> t):
+        t -= 2
+    sh = 54 - top - t
+    z = sh >> 1
     if sh >= 30:
         hi = lo << (sh - 30)
         lo = 0
