@@ -167,21 +167,12 @@ def product(w_buf, a: int, b: int, c: int, s: int, how: int) -> int:
     if not x:
         x = lo
         n = 0
-    if x >= 0x10000:
-        x = x >> 16
-        n += 16
-    if x >= 0x100:
-        x = x >> 8
-        n += 8
-    if x >= 0x10:
-        x = x >> 4
-        n += 4
-    if x >= 4:
-        x = x >> 2
-        n += 2
-    if x >= 2:
-        x = x >> 1
-        n += 1
+    b = 16  # halving the bits searched: five turns
+    while b:
+        if x >> b:
+            x = x >> b
+            n += b
+        b = b >> 1
     if x:
         n += 1
     if how == P_TOP:
