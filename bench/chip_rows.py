@@ -95,6 +95,10 @@ NOTES = {
         "what is planned never waits for the pins (bench/chip_main.py). "
         "chip_planner_lines_per_s_no_stepping: the same with no step path running; "
         "chip_planner_stepper_steps_per_s: the steps the stepping printer made meanwhile. "
+        "chip_planner_circles_lines_per_s_no_stepping: the same lines of the circles "
+        "print (testdata/circles_tube_emu_excerpt.gcode, 0.2 mm segments at 150 mm/s) "
+        "with no step path running: there the look-ahead rewrites about 13 records a "
+        "line, as the 16-block queue is too short to reach the segments' speed. "
         "Both printers at %d us ticks: two pio_dma rings for shorter ticks do not fit "
         "in the heap beside each other. " % ((BOARD,) + PLAN_LINES + (PLANNER_TICK_US,))),
     "chip_cpu_left_while_stepping": (
@@ -201,10 +205,12 @@ def _compiled(out, modules):
     return files
 
 
-def _planner_chip(work, requests):
-    """bench/chip_main.py's answers (JSON) to each request, on a chip of its own."""
+def _planner_chip(work, requests, gcode=None):
+    """bench/chip_main.py's answers (JSON) to each request, on a chip of its own, with
+    PLAN_LINES of gcode (the example) as plan.gcode."""
     excerpt = work / "chip_plan.gcode"
-    lines = paths.EXAMPLE_GCODE.read_text().splitlines()[PLAN_LINES[0] - 1:PLAN_LINES[1]]
+    gcode = gcode or paths.EXAMPLE_GCODE
+    lines = gcode.read_text().splitlines()[PLAN_LINES[0] - 1:PLAN_LINES[1]]
     excerpt.write_text("\n".join(lines) + "\n")
     files = _compiled(work / "chip_flash", {
         "chip_main": BENCH_DIR / "chip_main.py", "chip_profile": BENCH_DIR / "chip_profile.py",
@@ -253,6 +259,8 @@ def chip_planner(res, work):
     res["chip_planner_stepper_steps_per_s"] = r["stepper_steps_per_s"]
     res["chip_planner_move_lines"] = r["move_lines"]
     res["chip_planner_mem_free_bytes"] = r["mem_free_before"]
+    circles = _planner_chip(work, ["plan plan.gcode 0"], CIRCLES)[0]
+    res["chip_planner_circles_lines_per_s_no_stepping"] = circles["move_lines_per_s"]
 
 
 # --- stepping --------------------------------------------------------------------

@@ -71,6 +71,7 @@ TARGETS = {
     # On the emulated Pico (bench/chip_rows.py): estimates, real silicon is slower.
     "chip_planner_lines_per_s": (">=", 1000),
     "chip_planner_lines_per_s_no_stepping": None,
+    "chip_planner_circles_lines_per_s_no_stepping": None,
     "chip_cpu_left_while_stepping": (">=", 0.80),
     "chip_max_step_rate": (">=", 100000),
     "chip_max_step_rate_keeping_rate": None,
