@@ -20,10 +20,10 @@ G_D = const(11)  # the move: |X| |Y| |Z| steps, then |E| in steps or nm (see GF_
 G_C = const(15)  # its components: |X| |Y| |Z| |E| in the move's unit
 G_LEN = const(19)  # its length in X Y Z E, in that unit
 G_DIST = const(20)  # its length in X Y Z, or |E| for a move of E alone
-G_SIGNS = const(21)  # bit i: component i is negative
-G_PREV_C = const(22)  # the move before's components, signs and length (4 + 2 words)
-G_PREV_SIGNS = const(26)
-G_PREV_LEN = const(27)
+_G_SIGNS = const(21)  # bit i: component i is negative
+_G_PREV_C = const(22)  # the move before's components, signs and length (4 + 2 words)
+_G_PREV_SIGNS = const(26)
+_G_PREV_LEN = const(27)
 G_WORDS = const(28)
 # Words of the geometry floats (array 'f', GF_WORDS): mm per unit.
 GF_SCALE = const(0)  # X Y Z E: mm per step
@@ -84,7 +84,7 @@ def lengths(g_buf, gf_buf, f_buf, flags: int):
             c = int(product(g_buf, a, (bits & 0x7FFFFF) | 0x800000, 1,
                             ((bits >> 23) & 0xFF) - _BIAS - top + 27, _P_TRUNC))
         g[G_C + i] = c
-    g[G_SIGNS] = flags & 15
+    g[_G_SIGNS] = flags & 15
     # Sums of squares, in two limbs: X Y Z, then E.
     hi = 0
     lo = 0
@@ -146,10 +146,10 @@ def junction(g_buf, gf_buf, flags: int) -> int:
         same_lo = 0
         diff_hi = 0
         diff_lo = 0
-        signs = g[G_SIGNS] ^ g[G_PREV_SIGNS]
+        signs = g[_G_SIGNS] ^ g[_G_PREV_SIGNS]
         for i in range(4):
             a = g[G_C + i]
-            b = g[G_PREV_C + i]
+            b = g[_G_PREV_C + i]
             if a and b:
                 product(g_buf, a, b, 1, 0, _P_LIMBS)
                 if (signs >> i) & 1:
@@ -173,7 +173,7 @@ def junction(g_buf, gf_buf, flags: int) -> int:
             hi -= 1
         # Over the product of the lengths (below 2**56), both taken down to 29 bits of
         # it: the cosine to 28 bits, at most ONE.
-        product(g_buf, g[G_LEN], g[G_PREV_LEN], 1, 0, _P_LIMBS)
+        product(g_buf, g[G_LEN], g[_G_PREV_LEN], 1, 0, _P_LIMBS)
         d_hi = g[_IO_HI]
         d_lo = g[_IO_LO]
         nb = 30
@@ -212,7 +212,7 @@ def junction(g_buf, gf_buf, flags: int) -> int:
             if v2 > _V2_MAX:
                 v2 = _V2_MAX
     for i in range(4):
-        g[G_PREV_C + i] = g[G_C + i]
-    g[G_PREV_SIGNS] = g[G_SIGNS]
-    g[G_PREV_LEN] = g[G_LEN]
+        g[_G_PREV_C + i] = g[G_C + i]
+    g[_G_PREV_SIGNS] = g[_G_SIGNS]
+    g[_G_PREV_LEN] = g[G_LEN]
     return v2

@@ -6,7 +6,6 @@
 # Pure logic: the hooks that touch the chip (waiting, masking the interrupt) are
 # passed in by assemble.py, so host tools can plan on CPython too.
 from array import array
-from math import sqrt
 from mixfw.compat import const, micropython
 from mixfw import geometry, heap, lookahead, ramp
 from mixfw import stepper as st
@@ -568,7 +567,6 @@ class Planner:
         else:
             self._plan_e(e_nm, mix[1] if mix else None)
         counts = self._counts
-        # For speeds only: steps come from the integers.
         e_steps = sum(counts)
         # Lists made once and refilled: on the chips a tuple of 3 or more takes a heap
         # allocation of several blocks, which searches the heap from its first free block.
