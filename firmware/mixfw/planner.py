@@ -48,6 +48,7 @@ _F_NOMINAL = const(2)
 _F_NOMINAL2 = const(3)
 assert (_F_MM, _F_ACCEL, _F_NOMINAL, _F_NOMINAL2) == (
     lookahead.F_MM, lookahead.F_ACCEL, lookahead.F_NOMINAL, lookahead.F_NOMINAL2)
+assert _F_MM == 0  # where geometry.lengths writes a move's length
 _L_WORDS = const(20)
 _L_NOMINAL = const(2)
 assert (_L_WORDS, _L_NOMINAL) == (lookahead.L_WORDS, lookahead.L_NOMINAL)
@@ -254,7 +255,6 @@ class Planner:
         # has its direction); False after a stop.
         self.joins = False
         self._abs_steps = [0] * 4
-        self.prev_nominal_v2 = 0  # the latest move's nominal speed, as the look-ahead's V2
         self.mix_id = 0
         self.tool_mix = (1,) + (0,) * (MAX_DRIVES - 1)  # the active tool's weights
         self._block_mix_id = 0
@@ -659,8 +659,12 @@ class Planner:
                 self._geo_f[_GF_ACCEL_JD] = accel * jd
             geo_flags |= _FL_JOIN
         entry_v2 = _junction(geo, self._geo_f, geo_flags)
-        if join and self.prev_nominal_v2 < entry_v2:
-            entry_v2 = self.prev_nominal_v2
+        lk = self.lk
+        if join:
+            # The move before is the ring's slot before this one: its nominal V2.
+            prev_v2 = lk[(slot - 1 if slot else self.queue - 1) * _L_WORDS + _L_NOMINAL]
+            if prev_v2 < entry_v2:
+                entry_v2 = prev_v2
 
         m = self.mem
         b = _BLOCK_BASE + slot * _B_WORDS
@@ -702,10 +706,7 @@ class Planner:
         f[_F_ACCEL] = accel
         f[_F_NOMINAL] = speed
         f[_F_NOMINAL2] = nominal2
-        lk = self.lk
-        at = slot * _L_WORDS
-        _plan_words(lk, at, f, n, _RAMP_IO, entry_v2)
-        self.prev_nominal_v2 = lk[at + _L_NOMINAL]
+        _plan_words(lk, slot * _L_WORDS, f, n, _RAMP_IO, entry_v2)
         _recalculate(lk, m, slot, self._hooks)
         self._commit(slot)
         # In place, as the drives' plans: a list a line is garbage on the chips.
