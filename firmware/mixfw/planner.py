@@ -6,7 +6,7 @@
 # Pure logic: the hooks that touch the chip (waiting, masking the interrupt) are
 # passed in by assemble.py, so host tools can plan on CPython too.
 from array import array
-from mixfw.compat import const, micropython
+from mixfw.compat import const, micropython, ptr32
 from mixfw import geometry, heap, lookahead, ramp
 from mixfw import stepper as st
 from mixfw.mixer import MAX_DRIVES, normalize
@@ -35,6 +35,7 @@ _B_ACCEL = const(11)
 _B_ACCEL_UNTIL = const(12)
 _B_DECEL_AFTER = const(13)
 _B_RATE_DECEL = const(22)
+_MAX_DRIVES = const(6)
 assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _BLOCK_BASE, _B_WORDS, _B_N, _B_STEPS, _B_DIR_SET,
         _B_DIR_CLR, _B_FLAGS, _B_DWELL, _B_MIX, _F_NEG, _F_DWELL, _B_RATE_INIT, _B_RATE_NOM,
         _B_RATE_FINAL, _B_ACCEL, _B_ACCEL_UNTIL, _B_DECEL_AFTER, _B_RATE_DECEL) == (
@@ -42,6 +43,10 @@ assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _BLOCK_BASE, _B_WORDS, _B_N, _B_STEPS, _B_D
     st.B_DIR_SET, st.B_DIR_CLR, st.B_FLAGS, st.B_DWELL, st.B_MIX, st.F_NEG, st.F_DWELL,
     st.B_RATE_INIT, st.B_RATE_NOM, st.B_RATE_FINAL, st.B_ACCEL, st.B_ACCEL_UNTIL,
     st.B_DECEL_AFTER, st.B_RATE_DECEL)
+_S_QUEUE = const(26)
+_R_PENDING = const(93)
+assert (_S_QUEUE, _R_PENDING, _MAX_DRIVES) == (st.S_QUEUE, st.R_PENDING, MAX_DRIVES)
+_RING_IDLE = const(0x10000)  # see _ring_room
 _F_MM = const(0)
 _F_ACCEL = const(1)
 _F_NOMINAL = const(2)
@@ -155,6 +160,52 @@ def block_weights(counts, weights, steps):
     return schedule_counts(scaled, total)
 
 
+@micropython.viper
+def _ring_room(mem_buf) -> int:
+    """The slot for the next block (S_HEAD), plus _RING_IDLE if the step path has run
+    out of work (no block queued or running, no steps still in the DMA ring); -1 while
+    the ring is full: one slot stays free, so a full ring is not taken for an empty one.
+    One viper call where the queue's methods took three calls and a dozen lookups."""
+    m = ptr32(mem_buf)
+    head = m[_S_HEAD]
+    tail = m[_S_TAIL]
+    count = head - tail
+    if count < 0:
+        count += m[_S_QUEUE]
+    if count >= m[_S_QUEUE] - 1:
+        return -1
+    if count == 0 and m[_S_ACTIVE] == 0 and m[_R_PENDING] == 0:
+        return head | _RING_IDLE
+    return head
+
+
+@micropython.viper
+def _block_words(mem_buf, slot: int, steps_buf, n: int, flags: int, dir_set: int,
+                 dir_clr: int, mix_id: int, weights):
+    """A move's words in its slot of the step loop's ring: n, the axes' steps (steps_buf,
+    array X Y Z E), flags, the DIR words and, for mix_id >= 0, the mix id and its
+    weights (a list of each drive's; the rest 0). The rates are the look-ahead's."""
+    m = ptr32(mem_buf)
+    steps = ptr32(steps_buf)
+    b = _BLOCK_BASE + slot * _B_WORDS
+    m[b + _B_N] = n
+    m[b + _B_STEPS] = steps[0]
+    m[b + _B_STEPS + 1] = steps[1]
+    m[b + _B_STEPS + 2] = steps[2]
+    m[b + _B_STEPS + 3] = steps[3]
+    m[b + _B_FLAGS] = flags
+    m[b + _B_DIR_SET] = dir_set
+    m[b + _B_DIR_CLR] = dir_clr
+    m[b + _B_DWELL] = 0
+    if mix_id < 0:
+        return
+    w = b + _B_MIX
+    m[w] = mix_id
+    drives = int(len(weights))
+    for i in range(_MAX_DRIVES):
+        m[w + 1 + i] = int(weights[i]) if i < drives else 0
+
+
 def _gcd(a, b):
     while b:
         a, b = b, a % b
@@ -254,7 +305,7 @@ class Planner:
         # The latest block is a move the next one may join at speed (geometry.junction
         # has its direction); False after a stop.
         self.joins = False
-        self._abs_steps = [0] * 4
+        self._abs_steps = array("i", bytes(4 * 4))  # X Y Z E, for _block_words
         self.mix_id = 0
         self.tool_mix = (1,) + (0,) * (MAX_DRIVES - 1)  # the active tool's weights
         self._block_mix_id = 0
@@ -508,18 +559,16 @@ class Planner:
         """The slot for the next block, once the ring has room (one slot stays free, so
         a full ring is not taken for an empty one)."""
         m = self.mem
-        while self._queued() >= self.queue - 1:
+        slot = _ring_room(m)
+        while slot < 0:
             self.idle()
-        if not self.busy():
+            slot = _ring_room(m)
+        if slot & _RING_IDLE:
             if self.joins:
                 self.underruns += 1
             self.joins = False
-        return m[_S_HEAD]
-
-    @micropython.native
-    def _commit(self, slot):
-        nxt = slot + 1
-        self.mem[_S_HEAD] = 0 if nxt >= self.queue else nxt
+            slot ^= _RING_IDLE
+        return slot
 
     def add_dwell(self, seconds):
         ticks = int(seconds / self.tick_s + 0.5)
@@ -531,7 +580,8 @@ class Planner:
         m[b + st.B_FLAGS] = st.F_DWELL
         m[b + st.B_DWELL] = ticks
         _plan_words(self.lk, slot * _L_WORDS, self._plan_f, 0, _RAMP_IO, 0)
-        self._commit(slot)
+        slot += 1
+        m[_S_HEAD] = 0 if slot >= self.queue else slot
         self.joins = False
 
     @micropython.native
@@ -666,13 +716,6 @@ class Planner:
             if prev_v2 < entry_v2:
                 entry_v2 = prev_v2
 
-        m = self.mem
-        b = _BLOCK_BASE + slot * _B_WORDS
-        m[b + _B_N] = n
-        m[b + _B_STEPS] = steps[0]
-        m[b + _B_STEPS + 1] = steps[1]
-        m[b + _B_STEPS + 2] = steps[2]
-        m[b + _B_STEPS + 3] = steps[3]
         # The DIR pins to set and clear for each pattern of the axes' signs, worked out
         # once for these masks.
         inv = self.dir_invert_mask
@@ -681,34 +724,29 @@ class Planner:
         flags = neg * _F_NEG
         if homing_axes:
             flags |= st.F_HOMING | (homing_axes << st.F_HOME_SHIFT)
-        m[b + _B_FLAGS] = flags
-        m[b + _B_DIR_SET] = self._dir_set[neg]
-        m[b + _B_DIR_CLR] = self._dir_clr[neg]
-        m[b + _B_DWELL] = 0
         given = counts
+        mix_id = -1
         if e_steps:
             # Exact per-drive counts as the block's mix; a fresh id, so the step loop
             # starts its schedule anew and gives each drive exactly its count.
-            weights = self._weights
-            given = block_weights(counts, weights, self._given)
+            given = block_weights(counts, self._weights, self._given)
             if e_steps < 0:
                 for i in range(self.drives):
                     given[i] = -given[i]
             elif self.keep_extrusion and not replay:
-                self._remember_extrusion(tuple(weights), list(given))
-            self._block_mix_id = (self._block_mix_id + 1) & 0x3FFFFFF
-            w = b + _B_MIX
-            m[w] = self._block_mix_id
-            last = len(weights) - 1
-            for i in range(MAX_DRIVES):
-                m[w + 1 + i] = weights[i] if i <= last else 0
+                self._remember_extrusion(tuple(self._weights), list(given))
+            mix_id = self._block_mix_id = (self._block_mix_id + 1) & 0x3FFFFFF
+        m = self.mem
+        _block_words(m, slot, steps, n, flags, self._dir_set[neg], self._dir_clr[neg],
+                     mix_id, self._weights)
         # The floats end here: the look-ahead works on integers (lookahead.plan_words).
         f[_F_ACCEL] = accel
         f[_F_NOMINAL] = speed
         f[_F_NOMINAL2] = nominal2
         _plan_words(lk, slot * _L_WORDS, f, n, _RAMP_IO, entry_v2)
         _recalculate(lk, m, slot, self._hooks)
-        self._commit(slot)
+        slot += 1  # committed: the step loop may start it
+        m[_S_HEAD] = 0 if slot >= self.queue else slot
         # In place, as the drives' plans: a list a line is garbage on the chips.
         pos[0] = target_steps[0]
         pos[1] = target_steps[1]
