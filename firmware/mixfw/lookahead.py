@@ -76,6 +76,8 @@ F_WORDS = const(6)
 _W_M = const(11)  # F_WORDS mantissas (with the hidden bit; 0 for 0)
 _W_E = const(17)  # and their exponent fields: x = m * 2**(field - _BIAS)
 _BIAS = const(150)  # float32's exponent bias and its 23 fraction bits
+_W_V2 = const(11)  # while _write works out a record's rates: its three V2
+_W_RATE = const(14)  # and their rates
 W_WORDS = const(23)
 _CAP = const(0x3FFFFFFF)
 _HI = const(8)
@@ -171,40 +173,6 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int):
 
 
 @micropython.viper
-def _rate(lk_buf, at: int, x2: int, io_buf) -> int:
-    """The step loop's rate for V2 x2 in the slot at word `at`, within its floor and
-    nominal rate."""
-    lk = ptr32(lk_buf)
-    if x2 >= lk[at + L_NOMINAL]:
-        return lk[at + L_RATE_NOM]
-    if x2 <= 0:
-        return lk[at + L_FLOOR]  # a stop: the root below would take 30 turns to say 0
-    # x2 * K2 (below 2**29 and 2**26) in two 30-bit limbs, as product() gives them:
-    # written out, as a call more for each of a record's rates costs the chip 7 us.
-    k2 = lk[at + L_K2]
-    a1 = x2 >> 15
-    a0 = x2 & 0x7FFF
-    b1 = k2 >> 15
-    b0 = k2 & 0x7FFF
-    mid = a1 * b0 + a0 * b1
-    lo = ((mid & 0x7FFF) << 15) + a0 * b0
-    io = ptr32(io_buf)
-    io[_HI] = a1 * b1 + (mid >> 15) + (lo >> 30)
-    io[_LO] = lo & _CAP
-    r = int(isqrt_limbs(io_buf))
-    s = lk[at + L_K_SHIFT] - _SHIFT_BIAS
-    if s >= 0:
-        r = r << s
-    else:
-        r = r >> (0 - s)
-    if r > lk[at + L_RATE_NOM]:
-        r = lk[at + L_RATE_NOM]
-    if r < lk[at + L_FLOOR]:
-        r = lk[at + L_FLOOR]
-    return r
-
-
-@micropython.viper
 def _write(lk_buf, mem_buf, slot: int, x2: int, hooks):
     """The slot's record for its entry and this exit (V2), unless the step loop has
     started it. hooks: (irq_off, irq_on, io array for ramp)."""
@@ -224,23 +192,60 @@ def _write(lk_buf, mem_buf, slot: int, x2: int, hooks):
             vn2 = v02
         elif vn2 > v02 + gain:
             vn2 = v02 + gain
-    r_nom = int(_rate(lk_buf, at, vn2, io_buf))
-    if v02 == lk[at + _L_V0]:
-        r0 = lk[at + _L_RATE_V0]
-    else:
-        r0 = int(_rate(lk_buf, at, v02, io_buf))
+    # The step loop's rates for V2 vn2, v02 and x2, within the floor and the nominal
+    # rate: rate = isqrt(V2 * K2) scaled by 2**K_SHIFT. In one loop, as a call for each
+    # costs the chip about 6 us, and a record has three.
+    io = ptr32(io_buf)
+    io[_W_V2] = vn2
+    io[_W_V2 + 1] = v02
+    io[_W_V2 + 2] = x2
+    rate_nom = lk[at + L_RATE_NOM]
+    floor = lk[at + L_FLOOR]
+    k2 = lk[at + L_K2]
+    shift = lk[at + L_K_SHIFT] - _SHIFT_BIAS
+    for j in range(3):
+        x = io[_W_V2 + j]
+        if j == 1 and x == lk[at + _L_V0]:
+            r = lk[at + _L_RATE_V0]  # the entry's rate, mostly the same as before
+        elif x >= lk[at + L_NOMINAL]:
+            r = rate_nom
+        elif x <= 0:
+            r = floor  # a stop: the root below would take 30 turns to say 0
+        else:
+            # x * K2 (below 2**29 and 2**26) in two 30-bit limbs, as product() gives
+            # them.
+            a1 = x >> 15
+            a0 = x & 0x7FFF
+            b1 = k2 >> 15
+            b0 = k2 & 0x7FFF
+            mid = a1 * b0 + a0 * b1
+            lo = ((mid & 0x7FFF) << 15) + a0 * b0
+            io[_HI] = a1 * b1 + (mid >> 15) + (lo >> 30)
+            io[_LO] = lo & _CAP
+            r = int(isqrt_limbs(io_buf))
+            if shift >= 0:
+                r = r << shift
+            else:
+                r = r >> (0 - shift)
+            if r > rate_nom:
+                r = rate_nom
+            if r < floor:
+                r = floor
+        io[_W_RATE + j] = r
+    r_nom = io[_W_RATE]
+    r0 = io[_W_RATE + 1]
+    if v02 != lk[at + _L_V0]:
         lk[at + _L_V0] = v02
         lk[at + _L_RATE_V0] = r0
     if r0 > r_nom:
         r0 = r_nom
-    r1 = int(_rate(lk_buf, at, x2, io_buf))
+    r1 = io[_W_RATE + 2]
     if r1 > r_nom:
         r1 = r_nom
     b = _BLOCK_BASE + slot * _B_WORDS
     # The look-ahead rewrites every waiting block for each new one, mostly with the
     # same rates: the schedule is worked out again only when they change.
     if lk[at + _L_R0] != r0 or lk[at + L_RN] != r_nom or lk[at + _L_R1] != r1:
-        io = ptr32(io_buf)
         io[0] = mem[b + _B_N]  # ramp.IO_N .. IO_ACC, checked in planner.py
         io[1] = r0
         io[2] = r_nom
