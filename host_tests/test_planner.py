@@ -120,6 +120,18 @@ def _ramp_cases():
         n = rnd.choice([1, 2, 5, 30, 300, 5000, 10 ** 6, 10 ** 8, (1 << 30) - 1])
         if abs(r0 * r0 - r1 * r1) <= 2 * acc * n * one:
             cases.append((n, r0, r_nom, r1, acc))
+    # Short blocks whose ramps meet below the nominal rate, with entry and exit close
+    # enough to be reached: the peak's sum of squares in limbs. The first one, found by
+    # test_step_timing on the 32-bit build, overflowed a 32-bit word there.
+    cases.append((3, 566139, 1010775, 957027, 501))
+    while len(cases) < 2000:
+        acc = rnd.choice([1, 7, 161, 501, 5000, 20000])
+        n = rnd.choice([1, 2, 3, 5, 30])
+        r0 = rnd.randint(isqrt(acc * one), one // 4)
+        reach = 2 * acc * n * one
+        r1 = isqrt(max(r0 * r0 + rnd.randint(-reach, reach), acc * one))
+        if abs(r0 * r0 - r1 * r1) <= reach:
+            cases.append((n, r0, one // 2, r1, acc))
     return cases
 
 

@@ -276,9 +276,12 @@ def ramp_into(io_buf):
         product(io_buf, r1, r1, 1, 0, P_LIMBS)
         h1 = io[_HI]
         l1 = io[_LO]
-        # 2 acc n ONE = p << 29
-        lo = l0 + l1 + ((p & 1) << 29)
+        # 2 acc n ONE = p << 29, added a limb at a time: l0 + l1 + 2**29 may pass
+        # 2**31, a 32-bit chip's sign bit.
+        lo = l0 + l1
         hi = h0 + h1 + (p >> 1) + (lo >> 30)
+        lo = (lo & _M30) + ((p & 1) << 29)
+        hi += lo >> 30
         lo &= _M30
         lo = (lo >> 1) | ((hi & 1) << 29)
         hi = hi >> 1
