@@ -160,6 +160,19 @@ def test_look_ahead_keeps_speed_through_collinear_segments(session, board):
     assert cruise_us == pytest.approx(1e6 / (100 * 80), abs=board["SETTINGS"]["tick_us"])
 
 
+def test_positions_beyond_the_32_bit_range_are_refused_whole(session):
+    """X Y Z are kept in 32-bit integers of nanometres: a word, target or G92 offset
+    beyond +-1,073 mm is refused with the axis named, and a G92 refused sets nothing."""
+    session.send("M211 S0", "G1 X10 Y20 F6000")
+    beyond = "Error:%s beyond +-1073 mm: positions are kept in 32-bit integers of nanometres"
+    assert session.send("G1 Y1100")[0] == beyond % "Y"
+    assert session.send("G91", "G1 X1000")[0] == "ok"
+    assert session.send("G1 X100")[0] == beyond % "X"
+    assert session.send("G90", "G92 Y5 X-1000")[0] == beyond % "X"
+    assert session.send("M114")[0].startswith("X:1010.00 Y:20.00 Z:0.00")
+    assert session.send("G92 X5 Y7", "M114")[0].startswith("X:5.00 Y:7.00 Z:0.00")
+
+
 def test_m119_reports_endstops_and_soft_limits_guard_moves(session):
     assert session.send("M119") == ["Reporting endstop status", "x_min: TRIGGERED",
                                     "y_min: TRIGGERED", "z_min: TRIGGERED", "ok"]

@@ -303,6 +303,73 @@ def test_positions_become_the_same_steps_as_by_the_full_product(mp):
         assert a == b and c == d, case
 
 
+# --- a G1 line's X Y Z words to nanometres (cmd_motion.xyz_targets) -----------------
+
+XYZ_CASES = """
+import sys, json
+from mixfw.gcode import Parser
+from mixfw.cmd_motion import xyz_targets, _XYZ_BITS
+p = Parser()
+out = []
+for text, pos, relative, travel in json.loads(sys.stdin.read()):
+    b = text.encode()
+    line = p.parse(b, len(b))
+    target = [None, None, None]
+    got = xyz_targets(line.mant, line.decimals, line.present & _XYZ_BITS, pos, target,
+                      relative, [0, 0, 0], travel)
+    out.append([got, target])
+print(json.dumps(out))
+"""
+
+
+def _nm_of_word(word):
+    """A word's exact nanometres, further decimals rounded half away from zero."""
+    from decimal import ROUND_HALF_UP, Decimal
+    return int((Decimal(word) * 10 ** 6).quantize(Decimal(1), rounding=ROUND_HALF_UP))
+
+
+def test_xyz_words_become_the_exact_nanometres_or_a_clear_refusal(mp):
+    """X Y Z words (up to the parser's 9 digits, and 9 decimals) to nanometres in one
+    viper call, absolute and relative, with the 64-bit build's unsigned words read right:
+    the exact value rounded half away from zero, as Line.fixed_at gives it; beyond
+    +-2**30 nm (1,073 mm) the axis is named, as with soft limits outside 0..travel."""
+    import random
+    rnd = random.Random(11)
+    nm_max = 2 ** 30 - 1
+    cases = []
+    for _ in range(1500):
+        words = []
+        for letter in "XYZ":
+            if rnd.random() < 0.6:
+                digits = rnd.randint(1, 9)
+                mant = rnd.randint(0, 10 ** digits - 1)
+                dec = rnd.randint(0, min(digits, 9))
+                text = str(mant).rjust(dec + 1, "0")
+                text = text[:len(text) - dec] + ("." + text[len(text) - dec:] if dec else "")
+                words.append(letter + rnd.choice(["", "-"]) + text)
+        pos = [rnd.randint(-nm_max, nm_max) // rnd.choice([1, 1000]) for _ in range(3)]
+        travel = rnd.choice([None, [250 * 10 ** 6] * 3])
+        cases.append(["G1 " + " ".join(words), pos, rnd.random() < 0.5, travel])
+    got = mp.json(XYZ_CASES, stdin=json.dumps(cases).encode())
+    for (text, pos, relative, travel), (verdict, target) in zip(cases, got):
+        named = {w[0]: _nm_of_word(w[1:]) for w in text.split()[1:]}
+        want = 0
+        for a, letter in enumerate("XYZ"):
+            if letter not in named:
+                assert target[a] == pos[a], text
+                continue
+            value = named[letter] + (pos[a] if relative else 0)
+            if abs(named[letter]) > nm_max or abs(value) > nm_max:
+                want = -1 - a
+                break
+            assert target[a] == value, (text, pos, relative)
+            if travel and not -1 <= value <= travel[a] + 1:
+                want = -4 - a
+                break
+            want |= 1 << a
+        assert verdict == want, (text, pos, relative, travel)
+
+
 # --- Marlin's SLOWDOWN (min_segment_time_us, M205 B) ------------------------------
 
 SLOWDOWN = """

@@ -3,7 +3,7 @@
 from mixfw.gcode import GcodeError, letter_index
 from mixfw.planner import nm_from_mm, scaled_round, steps_per_nm, NM_PER_MM
 from mixfw import stepper as st
-from mixfw.compat import micropython
+from mixfw.compat import const, micropython, ptr8, ptr32
 
 AXIS_LETTERS = "XYZE"
 _AXIS_INDEX = tuple(letter_index(ch) for ch in AXIS_LETTERS)
@@ -11,12 +11,76 @@ _AXIS_BITS = sum(1 << i for i in _AXIS_INDEX)  # in a parsed line's present mask
 _F_INDEX = letter_index("F")
 _E_INDEX = letter_index("E")
 _NM_DECIMALS = 6  # axis words are read as exact nanometres
+_X_INDEX = const(23)  # letter_index("X"), then Y and Z
+_NM_MAX = const(0x3FFFFFFF)  # a position's nanometres: a 32-bit chip's small ints
+assert (_X_INDEX, _X_INDEX + 1, _X_INDEX + 2) == _AXIS_INDEX[:3]
+_XYZ_BITS = 7 << _X_INDEX
+# xyz_targets's verdicts on a word, for axis a: -_BEYOND - a, -_OUTSIDE - a.
+_BEYOND = const(1)
+_OUTSIDE = const(4)
 # retract_policy: retractions follow the mix and run it exactly backwards, or pull every
 # drive equally (and push them back equally), or take back exactly the steps each drive
 # made in the latest extrusion (and push exactly those back).
 RETRACT_FOLLOW_MIX = 0
 RETRACT_EQUAL = 1
 RETRACT_REPLAY = 2
+
+
+@micropython.viper
+def xyz_targets(mant_buf, dec_buf, named: int, pos, target, relative: int, off,
+                travel) -> int:
+    """The X Y Z a G0/G1 line names with a number (bits of letter indexes in named),
+    from its parsed words (gcode.Line's mant and decimals), as exact nanometres into
+    target: pos's where not named, added to pos's if relative. Further decimals round
+    half away from zero, as Line.fixed_at. Returns the axes named (X=1, Y=2, Z=4), or
+    -_BEYOND - a if axis a's word or target is beyond +-_NM_MAX nanometres (1,073 mm, the
+    chips' small ints), or with soft limits (travel: each axis's in nm; None: off)
+    -_OUTSIDE - a if its machine position (target + off) is outside 0..travel.
+    In one viper call, where Line.fixed_at, the sums and the checks cost the chip a
+    tenth of a millisecond a line."""
+    mant = ptr32(mant_buf)
+    dec = ptr8(dec_buf)
+    moved = 0
+    for a in range(3):
+        k = _X_INDEX + a
+        if not (named >> k) & 1:
+            target[a] = pos[a]
+            continue
+        m = mant[k]
+        if (m >> 30) & 1:  # |m| < 10**9: bit 30 is the sign, which a 64-bit build's
+            m |= ~0x3FFFFFFF  # viper leaves unextended
+        neg = m < 0
+        if neg:
+            m = 0 - m
+        d = dec[k]
+        if d > 6:
+            div = 10
+            while d > 7:
+                div *= 10
+                d -= 1
+            q = m // div
+            if 2 * (m - q * div) >= div:
+                q += 1
+            m = q
+        else:
+            while d < 6:
+                if m > _NM_MAX // 10:
+                    return 0 - _BEYOND - a
+                m *= 10
+                d += 1
+        if neg:
+            m = 0 - m
+        if relative:
+            m += int(pos[a])
+        if m > _NM_MAX or m < 0 - _NM_MAX:
+            return 0 - _BEYOND - a
+        target[a] = m
+        moved |= 1 << a
+        if travel:
+            nm = m + int(off[a])
+            if nm < -1 or nm > int(travel[a]) + 1:
+                return 0 - _OUTSIDE - a
+    return moved
 
 
 class Motion:
@@ -179,29 +243,18 @@ class Motion:
         # when the line is refused.
         pos = self.pos_nm
         target = self._spare_nm
-        target[0] = pos[0]
-        target[1] = pos[1]
-        target[2] = pos[2]
-        moved = 0
-        for i in range(3):
-            k = _AXIS_INDEX[i]
-            if (present >> k) & 1:
-                v = line.fixed_at(k, _NM_DECIMALS)
-                target[i] = v if self.absolute else target[i] + v
-                moved |= 1 << i
+        if present & ~line.valued & _XYZ_BITS:
+            for k in _AXIS_INDEX:
+                line.fixed_at(k, _NM_DECIMALS)  # raises for the word with no number
+        moved = xyz_targets(line.mant, line.decimals, present & _XYZ_BITS, pos, target,
+                            not self.absolute, self.offset_nm,
+                            self._travel_nm if self.soft_limits else None)
+        if moved < 0:
+            self._refuse_target(target, moved)
         target_e_nm = self.e_nm
         if (present >> _E_INDEX) & 1:
             v = line.fixed_at(_E_INDEX, _NM_DECIMALS)
             target_e_nm = v if self.absolute_e else target_e_nm + v
-        if self.soft_limits:
-            for i in range(3):
-                if not (moved >> i) & 1:
-                    continue
-                nm = target[i] + self.offset_nm[i]
-                if not -1 <= nm <= self._travel_nm[i] + 1:
-                    raise GcodeError("move to %s%.3f is outside the soft limits 0..%g mm"
-                                     % (AXIS_LETTERS[i], target[i] / NM_PER_MM,
-                                        self.travel_mm[i]))
         steps = self._steps(target)
         e_nm = target_e_nm - self.e_nm
         at = self.queue.position_steps
@@ -215,6 +268,15 @@ class Motion:
         self.pos_nm = target
         self._spare_nm = pos
         return None
+
+    def _refuse_target(self, target, verdict):
+        if verdict <= -_OUTSIDE:
+            i = -_OUTSIDE - verdict
+            raise GcodeError("move to %s%.3f is outside the soft limits 0..%g mm"
+                             % (AXIS_LETTERS[i], target[i] / NM_PER_MM, self.travel_mm[i]))
+        raise GcodeError("%s beyond +-%d mm: positions are kept in 32-bit integers of "
+                         "nanometres" % (AXIS_LETTERS[-_BEYOND - verdict],
+                                         _NM_MAX // NM_PER_MM))
 
     @micropython.native
     def _queue(self, steps, xyz, e_nm, feed_mm_s):
@@ -344,9 +406,14 @@ class Motion:
 
     # G92 [X Y Z E]: say where the axes are now, without moving. Example: G92 E0
     def g92(self, line):
-        named = [i for i in range(4) if line.has(AXIS_LETTERS[i])]
-        for i in named or range(4):
-            v = line.fixed_at(_AXIS_INDEX[i], _NM_DECIMALS, 0)
+        named = [i for i in range(4) if line.has(AXIS_LETTERS[i])] or range(4)
+        values = [line.fixed_at(_AXIS_INDEX[i], _NM_DECIMALS, 0) for i in named]
+        for i, v in zip(named, values):
+            # X Y Z and their offsets stay within what xyz_targets takes.
+            if i < 3 and not (-_NM_MAX <= v <= _NM_MAX and
+                              -_NM_MAX <= self.offset_nm[i] + self.pos_nm[i] - v <= _NM_MAX):
+                self._refuse_target(self.pos_nm, -_BEYOND - i)
+        for i, v in zip(named, values):
             if i == 3:
                 self.e_offset_nm += self.e_nm - v
                 self.e_nm = v
