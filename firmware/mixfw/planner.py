@@ -36,6 +36,9 @@ _B_ACCEL_UNTIL = const(12)
 _B_DECEL_AFTER = const(13)
 _B_RATE_DECEL = const(22)
 _MAX_DRIVES = const(6)
+_CAP = const(0x3FFFFFFF)
+_S_N_XYZ = const(4)  # words of Planner._abs_steps after X Y Z E: see _xyz_steps
+_S_LEAD = const(5)
 assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _BLOCK_BASE, _B_WORDS, _B_N, _B_STEPS, _B_DIR_SET,
         _B_DIR_CLR, _B_FLAGS, _B_DWELL, _B_MIX, _F_NEG, _F_DWELL, _B_RATE_INIT, _B_RATE_NOM,
         _B_RATE_FINAL, _B_ACCEL, _B_ACCEL_UNTIL, _B_DECEL_AFTER, _B_RATE_DECEL) == (
@@ -206,6 +209,41 @@ def _block_words(mem_buf, slot: int, steps_buf, n: int, flags: int, dir_set: int
         m[w + 1 + i] = int(weights[i]) if i < drives else 0
 
 
+@micropython.viper
+def _xyz_steps(pos, target, steps_buf, geo_buf) -> int:
+    """X Y Z's steps from pos to target (absolute steps): their sizes into steps_buf
+    (X Y Z) and geometry's D words, the largest into steps_buf[_S_N_XYZ] and its axis
+    into [_S_LEAD]. Returns the bits of the axes that run backwards, or -1 for a move
+    of 2**30 steps or more, beyond the chips' small ints. One viper call where the same
+    arithmetic in native code cost the chip about 0.1 ms a line."""
+    steps = ptr32(steps_buf)
+    geo = ptr32(geo_buf)
+    neg = 0
+    n = 0
+    lead = 0
+    for i in range(3):
+        t = int(target[i])
+        p = int(pos[i])
+        # In halves first: the difference itself could pass a 32-bit word.
+        h = (t >> 1) - (p >> 1)
+        if h >= 0x20000000 or h <= -0x20000000:
+            return -1
+        d = t - p
+        if d < 0:
+            neg |= 1 << i
+            d = 0 - d
+        if d >= _CAP:
+            return -1
+        steps[i] = d
+        geo[_G_D + i] = d
+        if d > n:
+            n = d
+            lead = i
+    steps[_S_N_XYZ] = n
+    steps[_S_LEAD] = lead
+    return neg
+
+
 def _gcd(a, b):
     while b:
         a, b = b, a % b
@@ -305,7 +343,7 @@ class Planner:
         # The latest block is a move the next one may join at speed (geometry.junction
         # has its direction); False after a stop.
         self.joins = False
-        self._abs_steps = array("i", bytes(4 * 4))  # X Y Z E, for _block_words
+        self._abs_steps = array("i", bytes(4 * 6))  # X Y Z E, n, lead: _xyz_steps
         self.mix_id = 0
         self.tool_mix = (1,) + (0,) * (MAX_DRIVES - 1)  # the active tool's weights
         self._block_mix_id = 0
@@ -604,53 +642,46 @@ class Planner:
         # arithmetic below is written out, as it runs for every line of G-code. So is
         # what small methods would do: a call costs the chip about 10 us.
         pos = self.position_steps
-        dx = target_steps[0] - pos[0]
-        dy = target_steps[1] - pos[1]
-        dz = target_steps[2] - pos[2]
+        # The lengths and the junction in integers (geometry.py): every float operation
+        # allocates on the chips. X Y Z's steps go into its words here.
+        geo = self._geo
+        steps = self._abs_steps
+        # Bit i: axis i runs backwards.
+        neg = _xyz_steps(pos, target_steps, steps, geo)
         # Before the filament is planned: a move refused changes nothing. (E has at
         # most MAX_PERIOD steps a block: see add_move.)
-        if not (-0x3FFFFFFF < dx < 0x3FFFFFFF and -0x3FFFFFFF < dy < 0x3FFFFFFF
-                and -0x3FFFFFFF < dz < 0x3FFFFFFF):
-            raise PlanError("move too long: %d %d %d steps" % (dx, dy, dz))
+        if neg < 0:
+            raise PlanError("move too long: from %s to %s steps"
+                            % (pos[:3], list(target_steps[:3])))
         if replay and e_nm:
             self._replay_counts(e_nm)
         else:
             self._plan_e(e_nm, mix[1] if mix else None)
         counts = self._counts
         e_steps = sum(counts)
-        # Lists made once and refilled: on the chips a tuple of 3 or more takes a heap
-        # allocation of several blocks, which searches the heap from its first free block.
-        steps = self._abs_steps
-        steps[0] = dx if dx >= 0 else -dx
-        steps[1] = dy if dy >= 0 else -dy
-        steps[2] = dz if dz >= 0 else -dz
-        steps[3] = e_steps if e_steps >= 0 else -e_steps
-        n = 0
-        lead = 0
-        for i in range(4):
-            if steps[i] > n:
-                n = steps[i]
-                lead = i
+        n = steps[_S_N_XYZ]
+        along_xyz = n
+        lead = steps[_S_LEAD]
+        if e_steps < 0:
+            neg |= 8
+            e_steps_abs = -e_steps
+        else:
+            e_steps_abs = e_steps
+        steps[3] = e_steps_abs
+        if e_steps_abs > n:
+            n = e_steps_abs
+            lead = 3
         if n == 0:
             return False  # less than a step: the filament counts toward the next move
         slot = self._new_slot()
-        # The lengths and the junction in integers (geometry.py): every float operation
-        # allocates on the chips. The length its speed is along comes as a float too.
-        geo = self._geo
-        geo[_G_D] = steps[0]
-        geo[_G_D + 1] = steps[1]
-        geo[_G_D + 2] = steps[2]
-        # Bit i: axis i runs backwards.
-        neg = (dx < 0) | (dy < 0) << 1 | (dz < 0) << 2 | (e_steps < 0) << 3
         if e_nm:
             geo[_G_D + 3] = e_nm if e_nm >= 0 else -e_nm
             geo_flags = (neg & 7) | _FL_E_NM | (e_nm < 0) << 3
         else:
-            geo[_G_D + 3] = steps[3]
+            geo[_G_D + 3] = e_steps_abs
             geo_flags = neg
         f = self._plan_f
         _lengths(geo, self._geo_f, f, geo_flags)
-        along_xyz = dx or dy or dz
         speed = feed_mm_s
         accel = self.acceleration_mm_s2 if along_xyz else self.retract_acceleration_mm_s2
         max_feed = self.max_feed_mm_s
