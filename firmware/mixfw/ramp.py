@@ -248,22 +248,35 @@ def ramp_into(io_buf):
     # The whole block: n << 28.
     all_hi = n >> 2
     all_lo = (n & 3) << 28
-    # Steps (<< 28) to accelerate from r0 and to decelerate to r1: (vn^2 - r^2) / 2acc.
-    sa_hi = 0
-    sa_lo = 0
-    if vn > r0:
-        product(io_buf, vn - r0, vn + r0, 2 * acc, 0, P_LIMBS)
-        sa_hi = io[_HI]
-        sa_lo = io[_LO]
-    sd_hi = 0
-    sd_lo = 0
-    if vn > r1:
-        product(io_buf, vn - r1, vn + r1, 2 * acc, 0, P_LIMBS)
-        sd_hi = io[_HI]
-        sd_lo = io[_LO]
-    s_lo = sa_lo + sd_lo
-    s_hi = sa_hi + sd_hi + (s_lo >> 30)
-    s_lo &= _M30
+    # Steps (<< 28) to accelerate from r0 and to decelerate to r1, together:
+    # (vn^2 - r0^2 + vn^2 - r1^2) / 2acc, each (vn - r)(vn + r) (below 2**28 and 2**29)
+    # in two 30-bit limbs as product() makes them, and one division. Written out: a
+    # call costs the chip several microseconds, and the look-ahead runs this for most
+    # lines, on curves a dozen times a line.
+    s_hi = 0
+    s_lo = 0
+    r = r0
+    for _ in range(2):
+        if vn > r:
+            a = vn - r
+            b = vn + r
+            a1 = a >> 15
+            a0 = a & 0x7FFF
+            b1 = b >> 15
+            b0 = b & 0x7FFF
+            mid = a1 * b0 + a0 * b1
+            lo = ((mid & 0x7FFF) << 15) + a0 * b0
+            s_hi += a1 * b1 + (mid >> 15) + (lo >> 30)
+            s_lo += lo & _M30
+            s_hi += s_lo >> 30
+            s_lo &= _M30
+        r = r1
+    if s_hi or s_lo:
+        io[_HI] = s_hi
+        io[_LO] = s_lo
+        div_limbs(io_buf, 2 * acc)
+        s_hi = io[_HI]
+        s_lo = io[_LO]
     c_hi = 0
     c_lo = 0
     if s_hi > all_hi or (s_hi == all_hi and s_lo > all_lo):
