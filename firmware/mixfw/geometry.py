@@ -51,10 +51,12 @@ assert G_D >= ramp.IO_WORDS
 
 
 @micropython.viper
-def lengths(g_buf, gf_buf, f_buf, flags: int):
+def lengths(g_buf, gf_buf, f_buf, flags: int) -> int:
     """The move in g's G_D words -> its components (G_C), its length (G_LEN) and the
     length its speed is along (G_DIST), which also goes into f_buf's first word (a
-    float array: lookahead.F_MM) as float32 bits. flags: FL_* and the signs."""
+    float array: lookahead.F_MM) as float32 bits. flags: FL_* and the signs. Returns
+    those bits halved (a small int), which order as the lengths do: a comparison
+    without reading the float, which allocates on the chips."""
     g = ptr32(g_buf)
     gf = ptr32(gf_buf)
     # The unit: 2**(top - 27) mm, top the highest bit any component can reach (a
@@ -123,7 +125,9 @@ def lengths(g_buf, gf_buf, f_buf, flags: int):
     else:
         mant = dist << (24 - nb)
     f = ptr32(f_buf)
-    f[0] = ((top - 27 + nb - 24 + _BIAS) << 23) | (mant & 0x7FFFFF)
+    bits = ((top - 27 + nb - 24 + _BIAS) << 23) | (mant & 0x7FFFFF)
+    f[0] = bits
+    return (bits >> 1) & 0x3FFFFFFF
 
 
 @micropython.viper

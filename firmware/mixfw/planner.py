@@ -244,6 +244,13 @@ def _xyz_steps(pos, target, steps_buf, geo_buf) -> int:
     return neg
 
 
+@micropython.viper
+def _half_bits(f_buf) -> int:
+    """A positive float32's bits halved (a small int), as geometry.lengths returns a
+    length's: they order as the floats do."""
+    return (ptr32(f_buf)[0] >> 1) & 0x3FFFFFFF
+
+
 def _gcd(a, b):
     while b:
         a, b = b, a % b
@@ -329,8 +336,11 @@ class Planner:
         self._seen_speed = None
         self._seen_min_s = None
         self._seen_speed2 = 0.0
-        self._seen_min_mm = 0.0
+        # speed * min_segment_s as float32 halved bits, against geometry.lengths's
+        self._seen_min_bits = 0
+        self._min_mm_f = array("f", bytes(4))
         self._jd_accel = None
+        self._e8_of = (None, None, 0.0, 0.0)  # see add_move's limits
         self._jd_mm = None
         self.position_steps = [0, 0, 0, 0]
         # Per-slot planning data in integers, for the look-ahead (see lookahead.py).
@@ -681,7 +691,7 @@ class Planner:
             geo[_G_D + 3] = e_steps_abs
             geo_flags = neg
         f = self._plan_f
-        _lengths(geo, self._geo_f, f, geo_flags)
+        dist_bits = _lengths(geo, self._geo_f, f, geo_flags)
         speed = feed_mm_s
         accel = self.acceleration_mm_s2 if along_xyz else self.retract_acceleration_mm_s2
         max_feed = self.max_feed_mm_s
@@ -695,6 +705,14 @@ class Planner:
                 if speed <= max_feed[i] and accel <= max_accel[i] and (
                         i < 3 or geo[_G_C + 3] <= geo[_G_DIST]):
                     continue
+                if i == 3 and (geo[_G_C + 3] << 3) <= geo[_G_DIST]:
+                    # E, at most an eighth of the path (as when printing), binds only
+                    # beyond eight times its limits, kept from the limits' last change.
+                    if max_feed is not self._e8_of[0] or max_accel is not self._e8_of[1]:
+                        self._e8_of = (max_feed, max_accel, 8 * max_feed[3],
+                                       8 * max_accel[3])
+                    if speed <= self._e8_of[2] and accel <= self._e8_of[3]:
+                        continue
                 if not inv:
                     inv = 1.0 / geo[_G_DIST]
                 share = geo[_G_C + i] * inv
@@ -717,17 +735,16 @@ class Planner:
             self._seen_speed = speed
             self._seen_min_s = min_s
             self._seen_speed2 = speed * speed
-            self._seen_min_mm = speed * min_s if min_s else 0.0
-        if min_s:
-            dist = f[_F_MM]
-            if self._seen_min_mm > dist:
-                # Marlin's SLOWDOWN (set_min_segment_time), with its bounds: 2 to half
-                # the queue's blocks waiting, and 2 (min_s - t) / waiting added to the
-                # time t.
-                waiting = self._waiting()
-                if 2 <= waiting < self.queue // 2:
-                    t = dist / speed
-                    speed = dist / (t + 2 * (min_s - t) / waiting)
+            self._min_mm_f[0] = speed * min_s
+            self._seen_min_bits = _half_bits(self._min_mm_f)
+        if min_s and self._seen_min_bits > dist_bits:
+            # Marlin's SLOWDOWN (set_min_segment_time), with its bounds: 2 to half the
+            # queue's blocks waiting, and 2 (min_s - t) / waiting added to the time t.
+            waiting = self._waiting()
+            if 2 <= waiting < self.queue // 2:
+                dist = f[_F_MM]
+                t = dist / speed
+                speed = dist / (t + 2 * (min_s - t) / waiting)
         nominal2 = self._seen_speed2 if speed is self._seen_speed else speed * speed
         # The junction's speed, from the deviation model (a stop if the queue ran empty),
         # as the look-ahead's V2: no faster than the move before.
