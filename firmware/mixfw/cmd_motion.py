@@ -304,7 +304,8 @@ class Motion:
         else:
             if policy == RETRACT_REPLAY and e_nm > 0:
                 self.retracted_nm = 0  # as the planner forgets them on extrusion
-            q.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_nm=e_nm)
+            # Positional: a call with keywords costs the chip more.
+            q.add_move(steps, feed_mm_s, self.dir_masks, e_nm)
 
     # G10: firmware retraction by retract_mm at retract_feed_mm_s; the logical E stays.
     def g10(self, line):

@@ -633,8 +633,8 @@ class Planner:
         self.joins = False
 
     @micropython.native
-    def add_move(self, target_steps, feed_mm_s, homing_axes=0, dir_masks=None, e_nm=0,
-                 mix=None, replay=False):
+    def add_move(self, target_steps, feed_mm_s, dir_masks=None, e_nm=0, mix=None,
+                 replay=False, homing_axes=0):
         """Queue a straight move to absolute X Y Z step targets (target_steps[:3]) with
         e_nm (an integer) of filament shared by the drives in the active mix. Returns False if the
         move is shorter than one step on every axis (nothing to do). mix: (id, weights)
@@ -644,8 +644,8 @@ class Planner:
         # MAX_PERIOD E steps (each drive's count rounds by up to a step: hence the
         # margin), so a longer extrusion, such as a purge, goes in equal pieces.
         if not -self._one_piece_nm < e_nm < self._one_piece_nm:
-            return self._add_pieces(target_steps, feed_mm_s, homing_axes, dir_masks, e_nm,
-                                    mix, replay)
+            return self._add_pieces(target_steps, feed_mm_s, dir_masks, e_nm, mix, replay,
+                                    homing_axes)
         if feed_mm_s <= 0:
             raise PlanError("feed rate must be > 0")
         # Builtins (abs, min, max) and module attributes are lookups by name: the
@@ -806,8 +806,8 @@ class Planner:
         self.joins = not homing_axes
         return True
 
-    def _add_pieces(self, target_steps, feed_mm_s, homing_axes, dir_masks, e_nm, mix,
-                    replay):
+    def _add_pieces(self, target_steps, feed_mm_s, dir_masks, e_nm, mix, replay,
+                    homing_axes):
         """add_move's extrusion too long for one block, in equal pieces. Apart from
         add_move: a comprehension's variables are heap cells, made at every call of the
         function that holds it, and add_move runs for every line."""
@@ -819,8 +819,8 @@ class Planner:
             point = [start[i] + div_round((target_steps[i] - start[i]) * k, pieces)
                      for i in range(3)]
             piece_nm = e_nm * k // pieces - e_nm * (k - 1) // pieces
-            added = self.add_move(point, feed_mm_s, homing_axes, dir_masks, piece_nm,
-                                  mix, replay) or added
+            added = self.add_move(point, feed_mm_s, dir_masks, piece_nm, mix, replay,
+                                  homing_axes) or added
         return added
 
     def _dir_words(self, dir_masks, inv):
