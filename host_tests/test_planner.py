@@ -303,21 +303,71 @@ def test_positions_become_the_same_steps_as_by_the_full_product(mp):
         assert a == b and c == d, case
 
 
+STEPS_OF_NM = """
+import sys, json
+from array import array
+from mixfw.planner import steps_of_nm, spm_digits, scaled_round, steps_per_nm
+digits = array("i", bytes(4 * 3))
+out = []
+for spm, xs in json.loads(sys.stdin.read()):
+    spm_digits(spm, digits, 0)
+    p, q = steps_per_nm(spm)
+    out.append([[steps_of_nm(x, digits, 0) for x in xs], [scaled_round(x, p, q) for x in xs]])
+print(json.dumps(out))
+"""
+
+
+def test_positions_become_the_same_steps_in_small_ints(mp):
+    """X Y Z's positions to steps in viper (planner.steps_of_nm, 15-bit digits and
+    30-bit limbs): the integer scaled_round gives, halves away from zero included, over
+    the options' whole range of steps/mm and positions within +-2**30 nm, on both
+    builds."""
+    import random
+    from mixfw.planner import scaled_round, steps_per_nm
+    rnd = random.Random(17)
+    top = 2 ** 30 - 1
+    cases = []
+    for spm in (80.0, 100.0, 400.0, 415.0, 93.42, 93.71234, 0.001, 100000.0, 2560.0,
+                837.123456) + tuple(rnd.uniform(0.001, 100000.0) for _ in range(20)):
+        p, q = steps_per_nm(spm)
+        xs = [0, 1, -1, top, -top, 6250, -6250, 12500, -12500]
+        # Halves: positions whose step is exactly half way, where the fraction allows.
+        xs += [(2 * k + 1) * q // (2 * p) for k in range(3) if (2 * k + 1) * q % (2 * p) == 0]
+        xs += [rnd.randint(-top, top) for _ in range(60)]
+        cases.append([spm, [x for x in xs if abs(x) <= top]])
+    got = mp.json(STEPS_OF_NM, stdin=json.dumps(cases).encode())
+    for (spm, xs), (steps, by_fraction) in zip(cases, got):
+        # Against scaled_round on the same build: a 32-bit build's steps/mm in
+        # millionths may round differently from a 64-bit one's (100,000 steps/mm is
+        # 99,999.997952 in float32).
+        assert steps == by_fraction, spm
+        p, q = steps_per_nm(spm)
+        if spm in (80.0, 100.0, 400.0, 415.0, 2560.0):  # and the 64-bit answer where
+            # float32 holds the steps/mm in millionths exactly
+            assert steps == [scaled_round(x, p, q) for x in xs], spm
+
+
 # --- a G1 line's X Y Z words to nanometres (cmd_motion.xyz_targets) -----------------
 
 XYZ_CASES = """
 import sys, json
 from mixfw.gcode import Parser
 from mixfw.cmd_motion import xyz_targets, _XYZ_BITS
+from mixfw.planner import spm_digits
+from array import array
 p = Parser()
+spm = array("i", bytes(4 * 9))
+for i, s in enumerate((80.0, 93.71234, 400.0)):
+    spm_digits(s, spm, 3 * i)
+steps = array("i", bytes(4 * 4))
 out = []
 for text, pos, relative, travel in json.loads(sys.stdin.read()):
     b = text.encode()
     line = p.parse(b, len(b))
     target = [None, None, None]
     got = xyz_targets(line.mant, line.decimals, line.present & _XYZ_BITS, pos, target,
-                      relative, [0, 0, 0], travel)
-    out.append([got, target])
+                      relative, [0, 0, 0], travel, spm, steps)
+    out.append([got, target, list(steps)[:3]])
 print(json.dumps(out))
 """
 
@@ -351,7 +401,9 @@ def test_xyz_words_become_the_exact_nanometres_or_a_clear_refusal(mp):
         travel = rnd.choice([None, [250 * 10 ** 6] * 3])
         cases.append(["G1 " + " ".join(words), pos, rnd.random() < 0.5, travel])
     got = mp.json(XYZ_CASES, stdin=json.dumps(cases).encode())
-    for (text, pos, relative, travel), (verdict, target) in zip(cases, got):
+    from mixfw.planner import scaled_round, steps_per_nm
+    fractions = [steps_per_nm(s) for s in (80.0, 93.71234, 400.0)]
+    for (text, pos, relative, travel), (verdict, target, steps) in zip(cases, got):
         named = {w[0]: _nm_of_word(w[1:]) for w in text.split()[1:]}
         want = 0
         for a, letter in enumerate("XYZ"):
@@ -368,6 +420,8 @@ def test_xyz_words_become_the_exact_nanometres_or_a_clear_refusal(mp):
                 break
             want |= 1 << a
         assert verdict == want, (text, pos, relative, travel)
+        if verdict >= 0:  # each axis's step at its position (no offsets here)
+            assert steps == [scaled_round(target[a], *fractions[a]) for a in range(3)]
 
 
 # --- Marlin's SLOWDOWN (min_segment_time_us, M205 B) ------------------------------

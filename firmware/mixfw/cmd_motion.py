@@ -1,7 +1,9 @@
 # Motion commands: G0/G1, G4, G28, G90/G91, G92, G20/G21, M82/M83, M400, M17/M18/M84.
 # Handlers parse and check; the planner does the work.
+from array import array
 from mixfw.gcode import GcodeError, letter_index
-from mixfw.planner import nm_from_mm, scaled_round, steps_per_nm, NM_PER_MM
+from mixfw.planner import (nm_from_mm, scaled_round, spm_digits, steps_of_nm,
+                           steps_per_nm, NM_PER_MM)
 from mixfw import stepper as st
 from mixfw.compat import const, micropython, ptr8, ptr32
 
@@ -28,23 +30,30 @@ RETRACT_REPLAY = 2
 
 @micropython.viper
 def xyz_targets(mant_buf, dec_buf, named: int, pos, target, relative: int, off,
-                travel) -> int:
+                travel, spm_buf, steps_buf) -> int:
     """The X Y Z a G0/G1 line names with a number (bits of letter indexes in named),
     from its parsed words (gcode.Line's mant and decimals), as exact nanometres into
     target: pos's where not named, added to pos's if relative. Further decimals round
-    half away from zero, as Line.fixed_at. Returns the axes named (X=1, Y=2, Z=4), or
-    -_BEYOND - a if axis a's word or target is beyond +-_NM_MAX nanometres (1,073 mm, the
-    chips' small ints), or with soft limits (travel: each axis's in nm; None: off)
-    -_OUTSIDE - a if its machine position (target + off) is outside 0..travel.
-    In one viper call, where Line.fixed_at, the sums and the checks cost the chip a
-    tenth of a millisecond a line."""
+    half away from zero, as Line.fixed_at. Then each axis's absolute step at its
+    machine position (target + off) into steps_buf (array 'i'), by planner.steps_of_nm
+    with the steps/mm spm_digits put in spm_buf. Returns the axes named (X=1, Y=2,
+    Z=4), or -_BEYOND - a if axis a's word, target or machine position is beyond
+    +-_NM_MAX nanometres (1,073 mm, the chips' small ints), or with soft limits
+    (travel: each axis's in nm; None: off) -_OUTSIDE - a if its machine position is
+    outside 0..travel. In one viper call, where Line.fixed_at, the sums, the checks and
+    scaled_round cost the chip a quarter of a millisecond a line."""
     mant = ptr32(mant_buf)
     dec = ptr8(dec_buf)
+    steps = ptr32(steps_buf)
     moved = 0
     for a in range(3):
         k = _X_INDEX + a
         if not (named >> k) & 1:
             target[a] = pos[a]
+            nm = int(pos[a]) + int(off[a])
+            if nm > _NM_MAX or nm < 0 - _NM_MAX:
+                return 0 - _BEYOND - a
+            steps[a] = int(steps_of_nm(nm, spm_buf, 3 * a))
             continue
         m = mant[k]
         if (m >> 30) & 1:  # |m| < 10**9: bit 30 is the sign, which a 64-bit build's
@@ -76,10 +85,12 @@ def xyz_targets(mant_buf, dec_buf, named: int, pos, target, relative: int, off,
             return 0 - _BEYOND - a
         target[a] = m
         moved |= 1 << a
-        if travel:
-            nm = m + int(off[a])
-            if nm < -1 or nm > int(travel[a]) + 1:
-                return 0 - _OUTSIDE - a
+        nm = m + int(off[a])
+        if nm > _NM_MAX or nm < 0 - _NM_MAX:
+            return 0 - _BEYOND - a
+        if travel and (nm < -1 or nm > int(travel[a]) + 1):
+            return 0 - _OUTSIDE - a
+        steps[a] = int(steps_of_nm(nm, spm_buf, 3 * a))
     return moved
 
 
@@ -98,10 +109,10 @@ class Motion:
         self.pos_nm = [0, 0, 0]
         self._spare_nm = [0, 0, 0]  # g1's target, then pos_nm: see g1
         self.offset_nm = [0, 0, 0]
-        self._xyz_per_nm = [steps_per_nm(s) for s in planner.steps_per_mm[:3]]
-        self._seen_nm = [None, None, None]  # see _steps
-        self._seen_steps = [0, 0, 0]
-        self._steps_out = [0, 0, 0, 0]
+        # X Y Z's steps/mm for xyz_targets, and the steps it works out, then E's.
+        self._xyz_spm = array("i", bytes(4 * 9))
+        self._steps_out = array("i", bytes(4 * 4))
+        self._set_steps_per_mm(planner.steps_per_mm)
         self.e_nm = 0  # logical E
         self.e_offset_nm = 0  # filament = logical E + offset (G92 E, G10/G11)
         self.absolute = True
@@ -140,10 +151,7 @@ class Motion:
         p.retract_acceleration_mm_s2 = settings["retract_acceleration_mm_s2"]
         p.junction_deviation_mm = settings["junction_deviation_mm"]
         p.set_min_segment_time(settings["min_segment_time_us"])
-        self._xyz_per_nm = [steps_per_nm(s) for s in p.steps_per_mm[:3]]
-        self._seen_nm = [None, None, None]  # see _steps
-        self._seen_steps = [0, 0, 0]
-        self._steps_out = [0, 0, 0, 0]
+        self._set_steps_per_mm(p.steps_per_mm)
         p.set_position_steps(self.machine_steps())
         self._travel(settings["travel_mm"])
         self.homing_feed_mm_s = settings["homing_feed_mm_s"]
@@ -151,6 +159,11 @@ class Motion:
         self.max_extrude_mm = settings.get("max_extrude_mm", 200.0)
         self._max_extrude_nm = nm_from_mm(self.max_extrude_mm)
         self._retraction_settings(settings)
+
+    def _set_steps_per_mm(self, steps_per_mm):
+        self._xyz_per_nm = [steps_per_nm(s) for s in steps_per_mm[:3]]
+        for i in range(3):
+            spm_digits(steps_per_mm[i], self._xyz_spm, 3 * i)
 
     def _travel(self, travel_mm):
         self.travel_mm = travel_mm
@@ -182,28 +195,17 @@ class Motion:
                 - self.offset_nm[i]
 
     def machine_steps(self):
-        """X Y Z as absolute steps from the logical position; E as planned (drive steps)."""
-        return self._steps(self.pos_nm)
-
-    @micropython.native
-    def _steps(self, pos_nm):
-        """Absolute steps of X Y Z at pos_nm, and the planner's E, in a list made once:
-        valid until the next call (the planner and Transitions copy what they keep)."""
-        per_nm = self._xyz_per_nm
-        off = self.offset_nm
-        # An axis the move leaves where it was keeps the steps worked out last time.
-        seen_nm = self._seen_nm
-        seen_steps = self._seen_steps
-        steps = self._steps_out
-        steps[3] = self.planner.position_steps[3]
-        for i in range(3):
-            nm = pos_nm[i] + off[i]
-            if nm != seen_nm[i]:
-                p, q = per_nm[i]
-                seen_steps[i] = scaled_round(nm, p, q)
-                seen_nm[i] = nm
-            steps[i] = seen_steps[i]
-        return steps
+        """X Y Z as absolute steps from the logical position; E as planned (drive steps).
+        In an array made once: valid until the next call or G1 (the planner and
+        Transitions copy what they keep)."""
+        # No word named: the word arrays are not read (any array will do).
+        spm = self._xyz_spm
+        verdict = xyz_targets(spm, spm, 0, self.pos_nm, self._spare_nm, 0, self.offset_nm,
+                              None, spm, self._steps_out)
+        if verdict < 0:
+            self._refuse_target(self.pos_nm, verdict)
+        self._steps_out[3] = self.planner.position_steps[3]
+        return self._steps_out
 
     def enable_for(self, axes_mask):
         want = axes_mask & 7
@@ -246,16 +248,18 @@ class Motion:
         if present & ~line.valued & _XYZ_BITS:
             for k in _AXIS_INDEX:
                 line.fixed_at(k, _NM_DECIMALS)  # raises for the word with no number
+        steps = self._steps_out
         moved = xyz_targets(line.mant, line.decimals, present & _XYZ_BITS, pos, target,
                             not self.absolute, self.offset_nm,
-                            self._travel_nm if self.soft_limits else None)
+                            self._travel_nm if self.soft_limits else None,
+                            self._xyz_spm, steps)
         if moved < 0:
             self._refuse_target(target, moved)
         target_e_nm = self.e_nm
         if (present >> _E_INDEX) & 1:
             v = line.fixed_at(_E_INDEX, _NM_DECIMALS)
             target_e_nm = v if self.absolute_e else target_e_nm + v
-        steps = self._steps(target)
+        steps[3] = self.planner.position_steps[3]
         e_nm = target_e_nm - self.e_nm
         at = self.queue.position_steps
         xyz = (steps[0] != at[0]) | (steps[1] != at[1]) << 1 | (steps[2] != at[2]) << 2
