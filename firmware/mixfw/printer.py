@@ -163,7 +163,7 @@ class Printer:
         self.refuse_after_error = False
         self.failed = False
         self.sink = None  # M28 upload: takes each received line's text instead of running it
-        self.job = None  # a file being printed: next_line() -> bytes or None, .paused
+        self.job = None  # a file being printed: files.Job
         for name, fn, text in (
             ("M110", self.m110, "set the line number: M110 N<n>"),
             ("M112", self.m112, "emergency stop"),
@@ -444,15 +444,19 @@ class Printer:
         """Run the next line of the file being printed. Its replies go to every host;
         an error pauses the print (M24 resumes after the failed line)."""
         job = self.job
-        data = job.next_line()
-        if data is None:
+        n = job.next_line()
+        if n < 0:
             self.job = None
             job.done()
             return
         self._cmd_halt_count = self.halt_count
         self._cmd_stop_count = self.stop_count
         try:
-            line = self.parser.parse(data, len(data))
+            if n > len(job.text):
+                if job.too_long(n):
+                    raise GcodeError("line longer than %d bytes" % len(job.text))
+                n = len(job.text)  # the rest is a comment
+            line = self.parser.parse(job.text, n)
             self.run_line(line)
         except Halted:
             pass
