@@ -107,9 +107,9 @@ class Files:
         self.selected = None  # Job, printing or not
         self.upload = None  # open file while M28 writes
         self.upload_name = None
-        # Made once for every job: a chip's heap may not hold them whole later.
-        self._block = bytearray(_BLOCK_BYTES)
-        self._text = bytearray(printer.line_bytes)
+        # Made at the first M23 and kept for every job after it: no heap for a board
+        # that never prints from its flash.
+        self._block = self._text = None
 
     def path(self, name):
         return "%s/%s" % (self.root, _check_name(name))
@@ -125,6 +125,9 @@ class Files:
 
     def select(self, name):
         path = self.path(name)
+        if self._block is None:
+            self._block = bytearray(_BLOCK_BYTES)
+            self._text = bytearray(self.printer.line_bytes)
         try:
             job = Job(path, name, self.printer.broadcast, self._block, self._text)
         except OSError:

@@ -95,7 +95,6 @@ def steps_from_mm(mm, steps_per_mm):
     return round_steps(mm * steps_per_mm)
 
 
-@micropython.native
 def div_round(a, b):
     """a / b for integers (b > 0), rounded as round_steps does: half away from zero."""
     q = (2 * (a if a >= 0 else -a) + b) // (2 * b)
@@ -507,18 +506,13 @@ class Planner:
         slow to bring (a stop and a blob on every short curve segment). 0: off."""
         self.min_segment_s = us * 1e-6
 
-    @micropython.native
-    def _queued(self):
-        """Blocks in the ring, the one the step loop runs included."""
-        m = self.mem
-        count = m[_S_HEAD] - m[_S_TAIL]
-        return count + self.queue if count < 0 else count
-
-    @micropython.native
     def _waiting(self):
         """Blocks queued that the step loop has not started."""
-        count = self._queued()
-        return count - 1 if count and self.mem[_S_ACTIVE] else count
+        m = self.mem
+        count = m[_S_HEAD] - m[_S_TAIL]
+        if count < 0:
+            count += self.queue
+        return count - 1 if count and m[_S_ACTIVE] else count
 
     def set_mix(self, mix_id, weights, tool=-1):
         """The mix for E moves queued from now on (already normalised weights). The
