@@ -49,7 +49,8 @@ class Lines:
         with open(path, "rb") as f:
             f.readinto(self.blob)
         blob = self.blob
-        bounds = []
+        # 16-bit offsets where they fit: the heap holds two printers beside this.
+        bounds = array("H" if size < 0x10000 else "i")
         self.moves = 0
         at = 0
         while at < size:
@@ -64,7 +65,7 @@ class Lines:
                 bounds.append(stop)
                 self.moves += head[:3] in (b"G1 ", b"G0 ")
             at = end + 1
-        self.bounds = array("i", bounds)
+        self.bounds = bounds
         self.count = len(bounds) // 2
         self.buf = bytearray(LINE_MAX)
 

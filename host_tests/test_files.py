@@ -78,39 +78,3 @@ def test_bad_file_commands_get_errors(tmp_path):
     assert p.send("M29")[0].startswith("Error:not writing a file")
     assert p.send("M30 nothing.gcode")[0] == "Error:Deletion failed, File: nothing.gcode."
     p.finish()
-
-
-def test_long_lines_from_flash_keep_their_words_or_are_refused(tmp_path):
-    """Lines are read through a buffer of line_buffer_bytes (96, as Marlin's
-    MAX_CMD_SIZE): a longer line whose part past it is comment prints, one whose words
-    run past it is refused with an error naming the file and line, which pauses the
-    print; M24 resumes after it. M26 rewinds exactly, and the byte count stays exact."""
-    files = tmp_path / "flash"
-    files.mkdir()
-    lines = ["G28", "; " + "x" * 200, "G1 X10 F3000 ; " + "y" * 150,
-             "M117 " + "z" * 120, "G1 X20", "G1 Y5"]
-    data = ("\n".join(lines) + "\n").encode()
-    (files / "long.gcode").write_bytes(data)
-    p = SimPrinter(files_dir=files)
-    p.send("M23 long.gcode")
-    replies = p.send("M24")
-    while not any(r.startswith("Error:") for r in replies):
-        replies = p.send("M27")
-    assert [r for r in replies if r.startswith("Error:")] == [
-        "Error:line longer than 96 bytes (file long.gcode, line 4)"]
-    p.send("M400")
-    assert p.send("M114")[0].startswith("X:10.00 Y:0.00")
-    done = len(data) - len(lines[4]) - len(lines[5]) - 2
-    assert p.send("M27")[0] == "SD printing byte %d/%d" % (done, len(data))
-    p.send("M24")
-    while p.send("M27")[0] != "SD printing byte %d/%d" % (len(data), len(data)):
-        pass
-    p.send("M400")
-    assert p.send("M114")[0].startswith("X:20.00 Y:5.00")
-    # Rewound to the start of "G1 X20" (M26 S<byte>) and printed again from there.
-    send_all(p, ["G1 X0 Y0", "M400", "M26 S%d" % done, "M24"])
-    while p.send("M27")[0] != "SD printing byte %d/%d" % (len(data), len(data)):
-        pass
-    p.send("M400")
-    assert p.send("M114")[0].startswith("X:20.00 Y:5.00")
-    p.finish()

@@ -58,7 +58,6 @@ class Line:
         d = self.decimals[i]
         return self.mant[i] / _POW10[d] if d else float(self.mant[i])
 
-    @micropython.native
     def fixed_at(self, i, decimals, default=None):
         """The number of the letter with letter_index i as an exact integer count of
         10**-decimals: kept in integers, positions add up the same on every port (a

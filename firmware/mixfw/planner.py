@@ -660,10 +660,10 @@ class Planner:
         self.position_steps = list(steps)
 
     # --- adding blocks ---
-    # The methods every G1 line runs are native code: 35 % more lines a second on the
-    # emulated Pico, with cmd_motion's, for about 9.5 kB of heap the machine code
-    # takes there (bench/chip_rows.py profile).
-    @micropython.native
+    # The methods every G1 line runs with much to do are native code: 35 % more lines a
+    # second on the emulated Pico, with cmd_motion's, for about 9.5 kB of heap the
+    # machine code takes there (bench/chip_rows.py profile). Native code takes about
+    # four times the heap bytecode does: short ones such as this stay bytecode.
     def _new_slot(self):
         """The slot for the next block, once the ring has room (one slot stays free, so
         a full ring is not taken for an empty one)."""

@@ -163,7 +163,7 @@ class Printer:
         self.refuse_after_error = False
         self.failed = False
         self.sink = None  # M28 upload: takes each received line's text instead of running it
-        self.job = None  # a file being printed: files.Job
+        self.job = None  # a file being printed: next_line() -> bytes or None, .paused
         for name, fn, text in (
             ("M110", self.m110, "set the line number: M110 N<n>"),
             ("M112", self.m112, "emergency stop"),
@@ -444,19 +444,15 @@ class Printer:
         """Run the next line of the file being printed. Its replies go to every host;
         an error pauses the print (M24 resumes after the failed line)."""
         job = self.job
-        n = job.next_line()
-        if n < 0:
+        data = job.next_line()
+        if data is None:
             self.job = None
             job.done()
             return
         self._cmd_halt_count = self.halt_count
         self._cmd_stop_count = self.stop_count
         try:
-            if n > len(job.text):
-                if job.too_long(n):
-                    raise GcodeError("line longer than %d bytes" % len(job.text))
-                n = len(job.text)  # the rest is a comment
-            line = self.parser.parse(job.text, n)
+            line = self.parser.parse(data, len(data))
             self.run_line(line)
         except Halted:
             pass
