@@ -536,10 +536,12 @@ pl.set_mix(1, weights)
 refused = []
 pl.add_move([800, 0, 0, 0], 30.0, e_nm=1234567)
 if sys.stdin.read() == "refuse":
-    try:
-        pl.add_move([1 << 31, 0, 0, 0], 30.0, e_nm=2345678)
-    except PlanError as e:
-        refused.append(str(e))
+    # Beyond a 32-bit word, and beyond it by as little as a 32-bit word would keep.
+    for far in (1 << 31, (1 << 32) + 5, -(1 << 40)):
+        try:
+            pl.add_move([far, 0, 0, 0], 30.0, e_nm=2345678)
+        except PlanError as e:
+            refused.append(str(e))
 pl.add_move([1600, 400, 0, 0], 30.0, e_nm=7654321)
 print(json.dumps({"refused": refused, "drive_steps": pl.drive_steps,
                   "drive_nm": pl.drive_nm, "drive_rem": pl.drive_rem,
@@ -552,7 +554,7 @@ def test_a_move_refused_changes_neither_the_position_nor_the_drives_filament(mp)
     refuses must do so before, or the next move's drive steps would carry its share."""
     plain = mp.json(REFUSED, stdin=b"")
     with_refusal = mp.json(REFUSED, stdin=b"refuse")
-    assert len(with_refusal.pop("refused")) == 1
+    assert len(with_refusal.pop("refused")) == 3
     plain.pop("refused")
     assert with_refusal == plain
     assert plain["drive_steps"][:3] != [0, 0, 0]

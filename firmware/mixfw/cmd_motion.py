@@ -41,7 +41,7 @@ def xyz_targets(mant_buf, dec_buf, named: int, pos, target, relative: int, off,
     +-_NM_MAX nanometres (1,073 mm, the chips' small ints), or with soft limits
     (travel: each axis's in nm; None: off) -_OUTSIDE - a if its machine position is
     outside 0..travel. In one viper call, where Line.fixed_at, the sums, the checks and
-    scaled_round cost the chip a quarter of a millisecond a line."""
+    scaled_round, per axis, cost the chip about 0.15 ms a line."""
     mant = ptr32(mant_buf)
     dec = ptr8(dec_buf)
     steps = ptr32(steps_buf)

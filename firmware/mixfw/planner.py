@@ -714,11 +714,14 @@ class Planner:
         # what small methods would do: a call costs the chip about 10 us.
         pos = self.position_steps
         # The lengths and the junction in integers (geometry.py): every float operation
-        # allocates on the chips. X Y Z's steps go into its words here.
+        # allocates on the chips. X Y Z's steps go into its words here, in viper, which
+        # would take a big int's low bits for its value: the targets are checked first.
         geo = self._geo
         steps = self._abs_steps
-        # Bit i: axis i runs backwards.
-        neg = _xyz_steps(pos, target_steps, steps, geo)
+        neg = -1
+        if (-_CAP <= target_steps[0] <= _CAP and -_CAP <= target_steps[1] <= _CAP
+                and -_CAP <= target_steps[2] <= _CAP):
+            neg = _xyz_steps(pos, target_steps, steps, geo)  # bit i: axis i backwards
         # Before the filament is planned: a move refused changes nothing. (E has at
         # most MAX_PERIOD steps a block: see add_move.)
         if neg < 0:
