@@ -10,19 +10,21 @@
 # the time goes, and the unwrapped run beside them says how fast the lines really go.
 import gc
 import time
-from mixfw import planner as planner_mod, lookahead
+from mixfw import cmd_motion, planner as planner_mod, lookahead
 
 # (label, owner, attribute): owner is a name looked up in `targets` below.
 TIMED = (
     ("parse", "parser", "parse"),
     ("g1", "commands", "G1"),
-    ("motion._steps", "motion", "_steps"),
+    ("motion.xyz_targets", "cmd_motion", "xyz_targets"),
     ("motion._queue", "motion", "_queue"),
     ("before_extrude", "before_extrude", 0),
     ("planner.add_move", "planner", "add_move"),
     ("planner._plan_e", "planner", "_plan_e"),
     ("block_weights", "planner_mod", "block_weights"),
+    ("planner._xyz_steps", "planner_mod", "_xyz_steps"),
     ("planner._new_slot", "planner", "_new_slot"),
+    ("planner._block_words", "planner_mod", "_block_words"),
     ("planner._remember_extrusion", "planner", "_remember_extrusion"),
     ("geometry.lengths", "planner_mod", "_lengths"),
     ("geometry.junction", "planner_mod", "_junction"),
@@ -50,7 +52,7 @@ def _targets(printer):
     motion = printer.motion
     return {"parser": printer.parser, "commands": printer.commands, "motion": motion,
             "before_extrude": motion.before_extrude, "planner": printer.planner,
-            "planner_mod": planner_mod, "lookahead": lookahead}
+            "planner_mod": planner_mod, "lookahead": lookahead, "cmd_motion": cmd_motion}
 
 
 def install(printer, command_key, heap=False):
