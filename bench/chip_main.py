@@ -11,7 +11,7 @@
 #   profile FILE           plan FILE without stepping, then again with the planner's
 #                          functions timed (bench/chip_profile.py): `bench:{json}`.
 # Written against the firmware's API: heap.reserve/release/step_loop_bytes (one more
-# reserve, for the second printer), assemble.build(files_root=None),
+# reserve, for the second printer), assemble.build(config, files_root=None), Config,
 # assemble.start_timer(printer, tick_us) (returns what has deinit()), printer.parser.parse,
 # printer.run_line, printer.planner (.idle, .queue, .synchronize), printer.mem with the
 # stepper's S_HEAD/S_TAIL/S_ACTIVE/S_POS words (plan_only.retire_one).
@@ -96,6 +96,7 @@ import board  # noqa: E402
 from mixfw import heap  # noqa: E402
 heap.reserve(heap.step_loop_bytes(board.SETTINGS))
 from mixfw import assemble  # noqa: E402
+from mixfw.config import Config  # noqa: E402
 from mixfw import stepper as st  # noqa: E402
 from plan_only import retire_one  # noqa: E402
 
@@ -124,7 +125,10 @@ def planned_printer():
     """The printer whose planning is measured, its queue retired by hand."""
     if not PRINTERS.get("planned"):
         gc.collect()
-        printer = assemble.build(files_root=None)
+        # No trace records (3 kB at the firmware's 256): its step loop never runs, and
+        # the heap holds two printers beside the lines.
+        config = Config(dict(board.SETTINGS, trace_records=0), None)
+        printer = assemble.build(config, files_root=None)
         printer.planner.idle = retire_one(printer.mem, printer.planner.queue)
         printer.run_line(printer.parser.parse(b"M302 P1", 7))
         PRINTERS["planned"] = printer
