@@ -48,47 +48,44 @@ def xyz_targets(mant_buf, dec_buf, named: int, pos, target, relative: int, off,
     moved = 0
     for a in range(3):
         k = _X_INDEX + a
-        if not (named >> k) & 1:
-            target[a] = pos[a]
-            nm = int(pos[a]) + int(off[a])
-            if nm > _NM_MAX or nm < 0 - _NM_MAX:
+        word = (named >> k) & 1
+        if word:
+            m = mant[k]
+            if (m >> 30) & 1:  # |m| < 10**9: bit 30 is the sign, which a 64-bit build's
+                m |= ~0x3FFFFFFF  # viper leaves unextended
+            neg = m < 0
+            if neg:
+                m = 0 - m
+            d = dec[k]
+            if d > 6:
+                div = 10
+                while d > 7:
+                    div *= 10
+                    d -= 1
+                q = m // div
+                if 2 * (m - q * div) >= div:
+                    q += 1
+                m = q
+            else:
+                while d < 6:
+                    if m > _NM_MAX // 10:
+                        return 0 - _BEYOND - a
+                    m *= 10
+                    d += 1
+            if neg:
+                m = 0 - m
+            if relative:
+                m += int(pos[a])
+            if m > _NM_MAX or m < 0 - _NM_MAX:
                 return 0 - _BEYOND - a
-            steps[a] = int(steps_of_nm(nm, spm_buf, 3 * a))
-            continue
-        m = mant[k]
-        if (m >> 30) & 1:  # |m| < 10**9: bit 30 is the sign, which a 64-bit build's
-            m |= ~0x3FFFFFFF  # viper leaves unextended
-        neg = m < 0
-        if neg:
-            m = 0 - m
-        d = dec[k]
-        if d > 6:
-            div = 10
-            while d > 7:
-                div *= 10
-                d -= 1
-            q = m // div
-            if 2 * (m - q * div) >= div:
-                q += 1
-            m = q
+            moved |= 1 << a
         else:
-            while d < 6:
-                if m > _NM_MAX // 10:
-                    return 0 - _BEYOND - a
-                m *= 10
-                d += 1
-        if neg:
-            m = 0 - m
-        if relative:
-            m += int(pos[a])
-        if m > _NM_MAX or m < 0 - _NM_MAX:
-            return 0 - _BEYOND - a
+            m = int(pos[a])
         target[a] = m
-        moved |= 1 << a
-        nm = m + int(off[a])
+        nm = m + int(off[a])  # the machine's position
         if nm > _NM_MAX or nm < 0 - _NM_MAX:
             return 0 - _BEYOND - a
-        if travel and (nm < -1 or nm > int(travel[a]) + 1):
+        if word and travel and (nm < -1 or nm > int(travel[a]) + 1):
             return 0 - _OUTSIDE - a
         steps[a] = int(steps_of_nm(nm, spm_buf, 3 * a))
     return moved

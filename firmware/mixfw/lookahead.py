@@ -76,8 +76,6 @@ F_WORDS = const(6)
 _W_M = const(11)  # F_WORDS mantissas (with the hidden bit; 0 for 0)
 _W_E = const(17)  # and their exponent fields: x = m * 2**(field - _BIAS)
 _BIAS = const(150)  # float32's exponent bias and its 23 fraction bits
-_W_V2 = const(11)  # while _write works out a record's rates: its three V2
-_W_RATE = const(14)  # and their rates
 W_WORDS = const(23)
 _CAP = const(0x3FFFFFFF)
 _HI = const(8)
@@ -196,18 +194,19 @@ def _write(lk_buf, mem_buf, slot: int, x2: int, hooks):
     # rate: rate = isqrt(V2 * K2) scaled by 2**K_SHIFT. In one loop, as a call for each
     # costs the chip about 6 us, and a record has three.
     io = ptr32(io_buf)
-    io[_W_V2] = vn2
-    io[_W_V2 + 1] = v02
-    io[_W_V2 + 2] = x2
     rate_nom = lk[at + L_RATE_NOM]
+    nominal = lk[at + L_NOMINAL]
     floor = lk[at + L_FLOOR]
     k2 = lk[at + L_K2]
     shift = lk[at + L_K_SHIFT] - _SHIFT_BIAS
+    r_nom = 0
+    r0 = 0
+    r1 = 0
     for j in range(3):
-        x = io[_W_V2 + j]
+        x = vn2 if j == 0 else (v02 if j == 1 else x2)
         if j == 1 and x == lk[at + _L_V0]:
             r = lk[at + _L_RATE_V0]  # the entry's rate, mostly the same as before
-        elif x >= lk[at + L_NOMINAL]:
+        elif x >= nominal:
             r = rate_nom
         elif x <= 0:
             r = floor  # a stop: the root below would take 30 turns to say 0
@@ -231,15 +230,17 @@ def _write(lk_buf, mem_buf, slot: int, x2: int, hooks):
                 r = rate_nom
             if r < floor:
                 r = floor
-        io[_W_RATE + j] = r
-    r_nom = io[_W_RATE]
-    r0 = io[_W_RATE + 1]
+        if j == 0:
+            r_nom = r
+        elif j == 1:
+            r0 = r
+        else:
+            r1 = r
     if v02 != lk[at + _L_V0]:
         lk[at + _L_V0] = v02
         lk[at + _L_RATE_V0] = r0
     if r0 > r_nom:
         r0 = r_nom
-    r1 = io[_W_RATE + 2]
     if r1 > r_nom:
         r1 = r_nom
     b = _BLOCK_BASE + slot * _B_WORDS
