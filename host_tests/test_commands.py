@@ -171,6 +171,9 @@ def test_positions_beyond_the_32_bit_range_are_refused_whole(session):
     assert session.send("G90", "G92 Y5 X-1000")[0] == beyond % "X"
     assert session.send("M114")[0].startswith("X:1010.00 Y:20.00 Z:0.00")
     assert session.send("G92 X5 Y7", "M114")[0].startswith("X:5.00 Y:7.00 Z:0.00")
+    # E is not held to that range: G1 reads an E word beyond it in Python.
+    session.send("M302 P1", "M82", "G92 E1500", "G1 E1500.5 F600", "M83", "G1 E-0.25")
+    assert session.send("M114")[0].startswith("X:5.00 Y:7.00 Z:0.00 E:1500.25")
 
 
 def test_m119_reports_endstops_and_soft_limits_guard_moves(session):

@@ -352,22 +352,22 @@ def test_positions_become_the_same_steps_in_small_ints(mp):
 XYZ_CASES = """
 import sys, json
 from mixfw.gcode import Parser
-from mixfw.cmd_motion import xyz_targets, _XYZ_BITS
+from mixfw.cmd_motion import xyz_targets, _MOVE_BITS
 from mixfw.planner import spm_digits
 from array import array
 p = Parser()
 spm = array("i", bytes(4 * 9))
 for i, s in enumerate((80.0, 93.71234, 400.0)):
     spm_digits(s, spm, 3 * i)
-steps = array("i", bytes(4 * 4))
+steps = array("i", bytes(4 * 5))
 out = []
-for text, pos, relative, travel in json.loads(sys.stdin.read()):
+for text, pos, relative, travel, at in json.loads(sys.stdin.read()):
     b = text.encode()
     line = p.parse(b, len(b))
     target = [None, None, None]
-    got = xyz_targets(line.mant, line.decimals, line.present & _XYZ_BITS, pos, target,
-                      relative, [0, 0, 0], travel, spm, steps)
-    out.append([got, target, list(steps)[:3]])
+    got = xyz_targets(line.mant, line.decimals, line.present & _MOVE_BITS, pos, target,
+                      relative, [0, 0, 0], travel, spm, steps, at)
+    out.append([got, target, list(steps)])
 print(json.dumps(out))
 """
 
@@ -382,14 +382,16 @@ def test_xyz_words_become_the_exact_nanometres_or_a_clear_refusal(mp):
     """X Y Z words (up to the parser's 9 digits, and 9 decimals) to nanometres in one
     viper call, absolute and relative, with the 64-bit build's unsigned words read right:
     the exact value rounded half away from zero, as Line.fixed_at gives it; beyond
-    +-2**30 nm (1,073 mm) the axis is named, as with soft limits outside 0..travel."""
+    +-2**30 nm (1,073 mm) the axis is named, as with soft limits outside 0..travel.
+    An E word within that range comes back in nanometres too (beyond it, Python reads
+    it), and the axes whose steps differ from the queue's position are flagged."""
     import random
     rnd = random.Random(11)
     nm_max = 2 ** 30 - 1
     cases = []
     for _ in range(1500):
         words = []
-        for letter in "XYZ":
+        for letter in "XYZE":
             if rnd.random() < 0.6:
                 digits = rnd.randint(1, 9)
                 mant = rnd.randint(0, 10 ** digits - 1)
@@ -399,11 +401,13 @@ def test_xyz_words_become_the_exact_nanometres_or_a_clear_refusal(mp):
                 words.append(letter + rnd.choice(["", "-"]) + text)
         pos = [rnd.randint(-nm_max, nm_max) // rnd.choice([1, 1000]) for _ in range(3)]
         travel = rnd.choice([None, [250 * 10 ** 6] * 3])
-        cases.append(["G1 " + " ".join(words), pos, rnd.random() < 0.5, travel])
+        at = rnd.choice([None, [rnd.randint(-5, 5) for _ in range(3)]])
+        cases.append(["G1 " + " ".join(words), pos, rnd.random() < 0.5, travel, at])
     got = mp.json(XYZ_CASES, stdin=json.dumps(cases).encode())
     from mixfw.planner import scaled_round, steps_per_nm
     fractions = [steps_per_nm(s) for s in (80.0, 93.71234, 400.0)]
-    for (text, pos, relative, travel), (verdict, target, steps) in zip(cases, got):
+    e_read = 0
+    for (text, pos, relative, travel, at), (verdict, target, steps) in zip(cases, got):
         named = {w[0]: _nm_of_word(w[1:]) for w in text.split()[1:]}
         want = 0
         for a, letter in enumerate("XYZ"):
@@ -419,9 +423,18 @@ def test_xyz_words_become_the_exact_nanometres_or_a_clear_refusal(mp):
                 want = -4 - a
                 break
             want |= 1 << a
-        assert verdict == want, (text, pos, relative, travel)
+        if want >= 0:
+            if "E" in named and abs(named["E"]) <= nm_max:
+                want |= 8
+                assert steps[4] == named["E"], text
+                e_read += 1
+            for a in range(3):
+                if at and steps[a] != at[a]:
+                    want |= 16 << a
+        assert verdict == want, (text, pos, relative, travel, at)
         if verdict >= 0:  # each axis's step at its position (no offsets here)
-            assert steps == [scaled_round(target[a], *fractions[a]) for a in range(3)]
+            assert steps[:3] == [scaled_round(target[a], *fractions[a]) for a in range(3)]
+    assert e_read > 150
 
 
 # --- Marlin's SLOWDOWN (min_segment_time_us, M205 B) ------------------------------

@@ -14,12 +14,17 @@ _F_INDEX = letter_index("F")
 _E_INDEX = letter_index("E")
 _NM_DECIMALS = 6  # axis words are read as exact nanometres
 _X_INDEX = const(23)  # letter_index("X"), then Y and Z
+_E_LETTER = const(4)  # letter_index("E")
 _NM_MAX = const(0x3FFFFFFF)  # a position's nanometres: a 32-bit chip's small ints
-assert (_X_INDEX, _X_INDEX + 1, _X_INDEX + 2) == _AXIS_INDEX[:3]
+assert (_X_INDEX, _X_INDEX + 1, _X_INDEX + 2, _E_LETTER) == _AXIS_INDEX
 _XYZ_BITS = 7 << _X_INDEX
+_MOVE_BITS = _XYZ_BITS | 1 << _E_LETTER  # the words xyz_targets reads
 # xyz_targets's verdicts on a word, for axis a: -_BEYOND - a, -_OUTSIDE - a.
 _BEYOND = const(1)
 _OUTSIDE = const(4)
+# and its bits otherwise, beside the axes named (bits 0 to 2).
+_E_READ = const(8)
+_AXIS_MOVED = const(16)
 # retract_policy: retractions follow the mix and run it exactly backwards, or pull every
 # drive equally (and push them back equally), or take back exactly the steps each drive
 # made in the latest extrusion (and push exactly those back).
@@ -30,24 +35,32 @@ RETRACT_REPLAY = 2
 
 @micropython.viper
 def xyz_targets(mant_buf, dec_buf, named: int, pos, target, relative: int, off,
-                travel, spm_buf, steps_buf) -> int:
+                travel, spm_buf, steps_buf, at) -> int:
     """The X Y Z a G0/G1 line names with a number (bits of letter indexes in named),
     from its parsed words (gcode.Line's mant and decimals), as exact nanometres into
     target: pos's where not named, added to pos's if relative. Further decimals round
     half away from zero, as Line.fixed_at. Then each axis's absolute step at its
     machine position (target + off) into steps_buf (array 'i'), by planner.steps_of_nm
-    with the steps/mm spm_digits put in spm_buf. Returns the axes named (X=1, Y=2,
-    Z=4), or -_BEYOND - a if axis a's word, target or machine position is beyond
-    +-_NM_MAX nanometres (1,073 mm, the chips' small ints), or with soft limits
-    (travel: each axis's in nm; None: off) -_OUTSIDE - a if its machine position is
-    outside 0..travel. In one viper call, where Line.fixed_at, the sums, the checks and
-    scaled_round, per axis, cost the chip about 0.15 ms a line."""
+    with the steps/mm spm_digits put in spm_buf. An E word named goes, as nanometres,
+    into steps_buf[4] where it is within +-_NM_MAX.
+
+    Returns bits: the axes named (X=1, Y=2, Z=4), _E_READ if steps_buf[4] holds E's
+    word, and (_AXIS_MOVED << a) for each axis a whose step differs from at[a] (at:
+    the queue's position, or None). Or, refused, -_BEYOND - a if axis a's word, target
+    or machine position is beyond +-_NM_MAX nanometres (1,073 mm, the chips' small
+    ints), or with soft limits (travel: each axis's in nm; None: off) -_OUTSIDE - a if
+    its machine position is outside 0..travel. In one viper call, where Line.fixed_at,
+    the sums, the checks and scaled_round, per axis, cost the chip about 0.15 ms a
+    line."""
     mant = ptr32(mant_buf)
     dec = ptr8(dec_buf)
     steps = ptr32(steps_buf)
     moved = 0
-    for a in range(3):
+    compare = 1 if at else 0
+    for a in range(4):
         k = _X_INDEX + a
+        if a == 3:
+            k = _E_LETTER
         word = (named >> k) & 1
         if word:
             m = mant[k]
@@ -69,16 +82,23 @@ def xyz_targets(mant_buf, dec_buf, named: int, pos, target, relative: int, off,
             else:
                 while d < 6:
                     if m > _NM_MAX // 10:
+                        if a == 3:
+                            return moved  # E: read in Python (big ints)
                         return 0 - _BEYOND - a
                     m *= 10
                     d += 1
             if neg:
                 m = 0 - m
+            if a == 3:
+                steps[4] = m
+                return moved | _E_READ
             if relative:
                 m += int(pos[a])
             if m > _NM_MAX or m < 0 - _NM_MAX:
                 return 0 - _BEYOND - a
             moved |= 1 << a
+        elif a == 3:
+            return moved
         else:
             m = int(pos[a])
         target[a] = m
@@ -87,7 +107,10 @@ def xyz_targets(mant_buf, dec_buf, named: int, pos, target, relative: int, off,
             return 0 - _BEYOND - a
         if word and travel and (nm < -1 or nm > int(travel[a]) + 1):
             return 0 - _OUTSIDE - a
-        steps[a] = int(steps_of_nm(nm, spm_buf, 3 * a))
+        s = int(steps_of_nm(nm, spm_buf, 3 * a))
+        steps[a] = s
+        if compare and s != int(at[a]):
+            moved |= _AXIS_MOVED << a
     return moved
 
 
@@ -108,7 +131,7 @@ class Motion:
         self.offset_nm = [0, 0, 0]
         # X Y Z's steps/mm for xyz_targets, and the steps it works out, then E's.
         self._xyz_spm = array("i", bytes(4 * 9))
-        self._steps_out = array("i", bytes(4 * 4))
+        self._steps_out = array("i", bytes(4 * 5))
         self._set_steps_per_mm(planner.steps_per_mm)
         self.e_nm = 0  # logical E
         self.e_offset_nm = 0  # filament = logical E + offset (G92 E, G10/G11)
@@ -166,7 +189,8 @@ class Motion:
         self.travel_mm = travel_mm
         self._travel_nm = [nm_from_mm(t) for t in travel_mm]
 
-    @property
+    # A method, not a property: a class with a property makes every attribute stored on
+    # its instances look for a setter first, about 11 us a store on the chip.
     def pos_mm(self):
         """The logical X Y Z E in mm, for reports."""
         n = self.pos_nm
@@ -198,7 +222,7 @@ class Motion:
         # No word named: the word arrays are not read (any array will do).
         spm = self._xyz_spm
         verdict = xyz_targets(spm, spm, 0, self.pos_nm, self._spare_nm, 0, self.offset_nm,
-                              None, spm, self._steps_out)
+                              None, spm, self._steps_out, None)
         if verdict < 0:
             self._refuse_target(self.pos_nm, verdict)
         self._steps_out[3] = self.planner.position_steps[3]
@@ -242,24 +266,27 @@ class Motion:
         # when the line is refused.
         pos = self.pos_nm
         target = self._spare_nm
-        if present & ~line.valued & _XYZ_BITS:
+        valued = line.valued
+        if present & ~valued & _XYZ_BITS:
             for k in _AXIS_INDEX:
                 line.fixed_at(k, _NM_DECIMALS)  # raises for the word with no number
         steps = self._steps_out
-        moved = xyz_targets(line.mant, line.decimals, present & _XYZ_BITS, pos, target,
+        moved = xyz_targets(line.mant, line.decimals, valued & _MOVE_BITS, pos, target,
                             not self.absolute, self.offset_nm,
                             self._travel_nm if self.soft_limits else None,
-                            self._xyz_spm, steps)
+                            self._xyz_spm, steps, self.queue.position_steps)
         if moved < 0:
             self._refuse_target(target, moved)
         target_e_nm = self.e_nm
         if (present >> _E_INDEX) & 1:
-            v = line.fixed_at(_E_INDEX, _NM_DECIMALS)
+            if moved & _E_READ:
+                v = steps[4]
+            else:  # beyond +-1,073 mm, or no number (which this refuses)
+                v = line.fixed_at(_E_INDEX, _NM_DECIMALS)
             target_e_nm = v if self.absolute_e else target_e_nm + v
         steps[3] = self.planner.position_steps[3]
         e_nm = target_e_nm - self.e_nm
-        at = self.queue.position_steps
-        xyz = (steps[0] != at[0]) | (steps[1] != at[1]) << 1 | (steps[2] != at[2]) << 2
+        xyz = (moved >> 4) & 7
         if xyz or e_nm:
             if e_nm:
                 for fn in self.before_extrude:

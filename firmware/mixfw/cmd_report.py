@@ -50,7 +50,7 @@ class Reports:
 
     # M114: logical position and step counts, in Marlin's form.
     def m114(self, line):
-        p = self.motion.pos_mm
+        p = self.motion.pos_mm()
         mem = self.planner.mem
         self.printer.reply("X:%.2f Y:%.2f Z:%.2f E:%.2f Count X:%d Y:%d Z:%d" % (
             p[0], p[1], p[2], p[3], mem[st.S_POS], mem[st.S_POS + 1], mem[st.S_POS + 2]))
