@@ -312,6 +312,42 @@ def test_m302_p1_allows_cold_extrusion(printer):
     assert printer.send("G1 E3")[0].startswith("Error:cold extrusion prevented")
 
 
+def test_the_cold_extrusion_guard_reads_the_sensor_once_a_control_period(mp):
+    """Each extruding line is checked, but against a reading at most a control period
+    old (as Marlin's guard): a fresh reading, four ADC reads and the thermistor's float
+    arithmetic, cost the chip every line. No simulated time passes here, so after the
+    first line's reading no other is taken."""
+    got = mp.json("""
+        import json, sys, simmachine, simtime
+        sys.modules["machine"] = simmachine
+        sys.modules["time"] = simtime
+        import board
+        from mixfw import assemble
+        from plan_only import retire_all
+        p = assemble.build()
+        p.planner.idle = retire_all(p.mem, p.planner.queue)
+        adc = p.thermal.hotend.adc
+        reads = [0]
+        read_u16 = adc.read_u16
+        def counted():
+            reads[0] += 1
+            return read_u16()
+        adc.read_u16 = counted
+        out = []
+        for text in (b"M302 S0", b"M83", b"G1 E0.1 F600", b"G1 E0.1", b"G1 X1 E0.1",
+                     b"G1 X2 E0.1", b"M302 S500", b"G1 E0.1"):
+            try:
+                p.run_line(p.parser.parse(text, len(text)))
+                out.append([text.decode(), reads[0], "ok"])
+            except Exception as e:
+                out.append([text.decode(), reads[0], str(e)[:26]])
+        print(json.dumps(out))
+    """)
+    assert [r[1] for r in got[2:6]] == [4, 4, 4, 4]  # the first extrusion reads: once
+    assert [r[2] for r in got[:6]] == ["ok"] * 6
+    assert got[7] == ["G1 E0.1", 4, "cold extrusion prevented: "]
+
+
 # --- fault injection -----------------------------------------------------------
 
 # (name, heater, fault code, how it is caught, expected words in the halt message)
