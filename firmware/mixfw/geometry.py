@@ -36,7 +36,6 @@ FL_JOIN = const(32)  # the move follows one it may join at speed: work out the j
 
 _IO_HI = const(8)
 _IO_LO = const(9)
-_P_LIMBS = const(0)
 _P_TRUNC = const(1)
 _P_ROUND = const(2)
 _BIAS = const(150)  # float32's exponent bias and its 23 fraction bits
@@ -45,8 +44,8 @@ _ONE = const(0x10000000)  # the cosine's and the sine's fixed point: 2**28
 # a reversal to a stop.
 _STRAIGHT = const(268)
 _V2_MAX = const(0x1FFFFFFF)  # lookahead's V2 range
-assert (_IO_HI, _IO_LO, _P_LIMBS, _P_TRUNC, _P_ROUND) == (
-    ramp.IO_HI, ramp.IO_LO, ramp.P_LIMBS, ramp.P_TRUNC, ramp.P_ROUND)
+assert (_IO_HI, _IO_LO, _P_TRUNC, _P_ROUND) == (
+    ramp.IO_HI, ramp.IO_LO, ramp.P_TRUNC, ramp.P_ROUND)
 assert G_D >= ramp.IO_WORDS
 
 
@@ -87,30 +86,30 @@ def lengths(g_buf, gf_buf, f_buf, flags: int) -> int:
                             ((bits >> 23) & 0xFF) - _BIAS - top + 27, _P_TRUNC))
         g[G_C + i] = c
     g[_G_SIGNS] = flags & 15
-    # Sums of squares, in two limbs: X Y Z, then E.
+    # Sums of squares, in two limbs: X Y Z, then E. Each square c * c (c below 2**27)
+    # in two 30-bit limbs as product() makes them, written out: a call costs the chip
+    # several microseconds, and this runs for every line.
     hi = 0
     lo = 0
-    for i in range(3):
+    dist = g[G_C + 3]  # a move of E alone
+    for i in range(4):
+        if i == 3:
+            if hi or lo:
+                g[_IO_HI] = hi
+                g[_IO_LO] = lo
+                dist = int(isqrt_limbs(g_buf))
+            if dist < 1:
+                dist = 1  # X Y Z below the unit: still a length to divide by
+            g[G_DIST] = dist
         c = g[G_C + i]
         if c:
-            product(g_buf, c, c, 1, 0, _P_LIMBS)
-            lo += g[_IO_LO]
-            hi += g[_IO_HI] + (lo >> 30)
+            c1 = c >> 15
+            c0 = c & 0x7FFF
+            mid = 2 * c1 * c0
+            low = ((mid & 0x7FFF) << 15) + c0 * c0
+            lo += low & 0x3FFFFFFF
+            hi += c1 * c1 + (mid >> 15) + (low >> 30) + (lo >> 30)
             lo = lo & 0x3FFFFFFF
-    dist = g[G_C + 3]  # a move of E alone
-    if hi or lo:
-        g[_IO_HI] = hi
-        g[_IO_LO] = lo
-        dist = int(isqrt_limbs(g_buf))
-    if dist < 1:
-        dist = 1  # X Y Z below the unit: still a length to divide by
-    g[G_DIST] = dist
-    c = g[G_C + 3]
-    if c:
-        product(g_buf, c, c, 1, 0, _P_LIMBS)
-        lo += g[_IO_LO]
-        hi += g[_IO_HI] + (lo >> 30)
-        lo = lo & 0x3FFFFFFF
     g[_IO_HI] = hi
     g[_IO_LO] = lo
     g[G_LEN] = int(isqrt_limbs(g_buf))
@@ -151,18 +150,36 @@ def junction(g_buf, gf_buf, flags: int) -> int:
         diff_hi = 0
         diff_lo = 0
         signs = g[_G_SIGNS] ^ g[_G_PREV_SIGNS]
-        for i in range(4):
-            a = g[G_C + i]
-            b = g[_G_PREV_C + i]
+        # Each product a * b (below 2**28 both) in two 30-bit limbs as product() makes
+        # them, written out as in lengths(): the components', then the lengths'.
+        d_hi = 0
+        d_lo = 0
+        for i in range(5):
+            if i < 4:
+                a = g[G_C + i]
+                b = g[_G_PREV_C + i]
+            else:
+                a = g[G_LEN]
+                b = g[_G_PREV_LEN]
             if a and b:
-                product(g_buf, a, b, 1, 0, _P_LIMBS)
-                if (signs >> i) & 1:
-                    diff_lo += g[_IO_LO]
-                    diff_hi += g[_IO_HI] + (diff_lo >> 30)
+                a1 = a >> 15
+                a0 = a & 0x7FFF
+                b1 = b >> 15
+                b0 = b & 0x7FFF
+                mid = a1 * b0 + a0 * b1
+                low = ((mid & 0x7FFF) << 15) + a0 * b0
+                p_hi = a1 * b1 + (mid >> 15) + (low >> 30)
+                p_lo = low & 0x3FFFFFFF
+                if i == 4:
+                    d_hi = p_hi
+                    d_lo = p_lo
+                elif (signs >> i) & 1:
+                    diff_lo += p_lo
+                    diff_hi += p_hi + (diff_lo >> 30)
                     diff_lo = diff_lo & 0x3FFFFFFF
                 else:
-                    same_lo += g[_IO_LO]
-                    same_hi += g[_IO_HI] + (same_lo >> 30)
+                    same_lo += p_lo
+                    same_hi += p_hi + (same_lo >> 30)
                     same_lo = same_lo & 0x3FFFFFFF
         if diff_hi > same_hi or (diff_hi == same_hi and diff_lo > same_lo):
             sign = 1
@@ -177,9 +194,6 @@ def junction(g_buf, gf_buf, flags: int) -> int:
             hi -= 1
         # Over the product of the lengths (below 2**56), both taken down to 29 bits of
         # it: the cosine to 28 bits, at most ONE.
-        product(g_buf, g[G_LEN], g[_G_PREV_LEN], 1, 0, _P_LIMBS)
-        d_hi = g[_IO_HI]
-        d_lo = g[_IO_LO]
         nb = 30
         a = d_hi
         while a:
