@@ -556,7 +556,7 @@ if sys.stdin.read() == "refuse":
         except PlanError as e:
             refused.append(str(e))
 pl.add_move([1600, 400, 0, 0], 30.0, e_nm=7654321)
-print(json.dumps({"refused": refused, "drive_steps": pl.drive_steps,
+print(json.dumps({"refused": refused, "drive_steps": list(pl.drive_steps),
                   "drive_nm": pl.drive_nm, "drive_rem": pl.drive_rem,
                   "position": pl.position_steps}))
 """

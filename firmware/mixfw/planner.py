@@ -249,6 +249,16 @@ def _ring_room(mem_buf) -> int:
 
 
 @micropython.viper
+def _steps_to(targets_buf, steps_buf, counts_buf):
+    """Each drive's steps from where it is to its target step (arrays 'i')."""
+    t = ptr32(targets_buf)
+    s = ptr32(steps_buf)
+    c = ptr32(counts_buf)
+    for i in range(int(len(counts_buf))):
+        c[i] = t[i] - s[i]
+
+
+@micropython.viper
 def _block_words(mem_buf, slot: int, steps_buf, n: int, flags: int, dir_set: int,
                  dir_clr: int, mix_id: int, weights):
     """A move's words in its slot of the step loop's ring: n, the axes' steps (steps_buf,
@@ -438,12 +448,15 @@ class Planner:
         self.drive_nm = [0] * self.drives
         self.drive_rem = [0] * self.drives
         self.rem_total = 1
-        self.drive_targets = [0] * self.drives
+        self.drive_targets = array("i", bytes(4 * self.drives))
         self.targets_known = False
-        self._counts = [0] * self.drives  # the latest plan's steps per drive
+        self._counts = array("i", bytes(4 * self.drives))  # the latest plan's steps per drive
         self._weights = [0] * self.drives  # the latest block's, from block_weights
         self._given = [0] * self.drives
-        self.drive_steps = [0] * self.drives
+        self.drive_steps = array("i", bytes(4 * self.drives))
+        self._shares_of = None  # the weights _sharing and _share_total are of
+        self._sharing = ()
+        self._share_total = 1
         self.before_sync = []  # fn() each: moves held before the planner are handed over
         self.dir_invert_mask = 0  # DIR pins of motors wired the other way round
         self._dir_set = [0] * 16  # see _dir_words
@@ -553,19 +566,30 @@ class Planner:
         nanometres shared by the weights, in place; the move's steps per drive in
         self._counts."""
         w = weights or self.tool_mix
-        total = sum(w)
-        per_nm = self._per_nm
-        drive_nm = self.drive_nm
-        drive_rem = self.drive_rem
+        if w is not self._shares_of:
+            self._share(w)
+        total = self._share_total
         targets = self.drive_targets
         now_steps = self.drive_steps
         counts = self._counts
+        # A drive with no share in the move stays where it is, and so does its target
+        # step, where it is known: every drive's steps to its target first, in one viper
+        # call, then the drives with a share (a loop over every drive in native code
+        # was a tenth of a line's time on the chips).
+        _steps_to(targets, now_steps, counts)
         now_total = self.rem_total
         rescale = now_total != total
-        # A drive with no share in the move stays where it is, and so does its target
-        # step, where it is known.
         every = not self.targets_known
-        for i in range(self.drives):
+        if every or rescale:
+            drives = range(self.drives)
+        elif e_nm:
+            drives = self._sharing
+        else:
+            return
+        per_nm = self._per_nm
+        drive_nm = self.drive_nm
+        drive_rem = self.drive_rem
+        for i in drives:
             rem = drive_rem[i]
             if rescale and rem:
                 rem = div_round(rem * total, now_total)  # below a nanometre either way
@@ -585,10 +609,15 @@ class Planner:
                 drive_rem[i] = rem
                 targets[i] = target
                 counts[i] = target - now_steps[i]
-            else:
-                counts[i] = targets[i] - now_steps[i]
         self.rem_total = total
         self.targets_known = True
+
+    def _share(self, weights):
+        """The drives with a share in weights, and the shares' total: kept for the
+        moves after, mostly with the same weights (a tuple)."""
+        self._shares_of = weights
+        self._share_total = sum(weights)
+        self._sharing = tuple(i for i in range(self.drives) if weights[i])
 
     def _replay_counts(self, e_nm):
         """Per-drive steps of a retraction (e_nm < 0) that takes back exactly the drive
