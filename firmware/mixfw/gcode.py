@@ -260,15 +260,19 @@ class Parser:
         ln.letter = "G" if code == 71 else ("M" if code == 77 else ("T" if code == 84 else ""))
         ln.number = r[_R_NUMBER]
         ln.key = r[_R_KEY]
-        ln.has_line_number = r[_R_HAS_N] == 1
-        ln.line_number = r[_R_N]
+        # The N word and the text arguments are rare: stored only where they change
+        # (each store costs the chips microseconds, on every line).
+        numbered = r[_R_HAS_N]
+        if numbered or ln.has_line_number:
+            ln.has_line_number = numbered == 1
+            ln.line_number = r[_R_N]
         start = r[_R_ARGS]
         if start >= 0:
             end = start
             while end < n and buf[end] != 59 and buf[end] != 42:
                 end += 1
             ln.args_text = bytes(buf[start:end]).decode().strip()
-        else:
+        elif ln.args_text:
             ln.args_text = ""
         return ln
 
