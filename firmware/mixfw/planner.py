@@ -693,11 +693,10 @@ class Planner:
     # second on the emulated Pico, with cmd_motion's, for about 9.5 kB of heap the
     # machine code takes there (bench/chip_rows.py profile). Native code takes about
     # four times the heap bytecode does: short ones such as this stay bytecode.
-    def _new_slot(self):
+    def _new_slot(self, slot):
         """The slot for the next block, once the ring has room (one slot stays free, so
-        a full ring is not taken for an empty one)."""
+        a full ring is not taken for an empty one), from what _ring_room said."""
         m = self.mem
-        slot = _ring_room(m)
         while slot < 0:
             self.idle()
             slot = _ring_room(m)
@@ -710,7 +709,7 @@ class Planner:
 
     def add_dwell(self, seconds):
         ticks = int(seconds / self.tick_s + 0.5)
-        slot = self._new_slot()
+        slot = self._new_slot(_ring_room(self.mem))
         b = _BLOCK_BASE + slot * _B_WORDS
         m = self.mem
         for i in range(st.B_WORDS):
@@ -776,7 +775,10 @@ class Planner:
             lead = 3
         if n == 0:
             return False  # less than a step: the filament counts toward the next move
-        slot = self._new_slot()
+        # The method only where the ring is full or the step path idle: a call costs.
+        slot = _ring_room(self.mem)
+        if slot < 0 or slot & _RING_IDLE:
+            slot = self._new_slot(slot)
         if e_nm:
             geo[_G_D + 3] = e_nm if e_nm >= 0 else -e_nm
             geo_flags = (neg & 7) | _FL_E_NM | (e_nm < 0) << 3
