@@ -259,30 +259,47 @@ def _steps_to(targets_buf, steps_buf, counts_buf):
 
 
 @micropython.viper
-def _block_words(mem_buf, slot: int, steps_buf, n: int, flags: int, dir_set: int,
-                 dir_clr: int, mix_id: int, weights):
-    """A move's words in its slot of the step loop's ring: n, the axes' steps (steps_buf,
-    array X Y Z E), flags, the DIR words and, for mix_id >= 0, the mix id and its
-    weights (a list of each drive's; the rest 0). The rates are the look-ahead's."""
-    m = ptr32(mem_buf)
-    steps = ptr32(steps_buf)
+def _queue_block(io, slot: int, n: int, flags: int, neg: int, mix_id: int, entry_v2: int,
+                 e_steps: int, given, pos, target):
+    """A planned move into its slot of the step loop's ring, and on to the step loop.
+    Its words: n, the axes' steps (io's steps array, X Y Z E), flags, the DIR words for
+    its signs (neg) and, for mix_id >= 0, the mix id and the block's weights (the rest
+    0). Then its look-ahead words and the records it changes (lookahead.plan_words,
+    recalculate), S_HEAD past it, and the planner's position (pos: X Y Z from target,
+    E plus e_steps) and the drives' (plus given, each drive's steps). io: the
+    planner's arrays (Planner._queue_io). One call where each part was a call or native
+    code, which pays a runtime call for every item it reads or writes."""
+    m = ptr32(io[0])
+    steps = ptr32(io[3])
     b = _BLOCK_BASE + slot * _B_WORDS
     m[b + _B_N] = n
-    m[b + _B_STEPS] = steps[0]
-    m[b + _B_STEPS + 1] = steps[1]
-    m[b + _B_STEPS + 2] = steps[2]
-    m[b + _B_STEPS + 3] = steps[3]
+    for i in range(4):
+        m[b + _B_STEPS + i] = steps[i]
     m[b + _B_FLAGS] = flags
-    m[b + _B_DIR_SET] = dir_set
-    m[b + _B_DIR_CLR] = dir_clr
+    m[b + _B_DIR_SET] = ptr32(io[6])[neg]
+    m[b + _B_DIR_CLR] = ptr32(io[7])[neg]
     m[b + _B_DWELL] = 0
-    if mix_id < 0:
-        return
-    w = b + _B_MIX
-    m[w] = mix_id
-    drives = int(len(weights))
-    for i in range(_MAX_DRIVES):
-        m[w + 1 + i] = int(weights[i]) if i < drives else 0
+    if mix_id >= 0:
+        w = b + _B_MIX
+        m[w] = mix_id
+        weights = ptr32(io[8])
+        drives = int(len(io[8]))
+        for i in range(_MAX_DRIVES):
+            m[w + 1 + i] = weights[i] if i < drives else 0
+    lk = io[1]
+    _plan_words(lk, slot * _L_WORDS, io[2], n, io[5], entry_v2)
+    _recalculate(lk, io[0], slot, io[4])
+    slot += 1  # committed: the step loop may start it
+    if slot >= m[_S_QUEUE]:
+        slot = 0
+    m[_S_HEAD] = slot
+    pos[0] = target[0]
+    pos[1] = target[1]
+    pos[2] = target[2]
+    pos[3] = int(pos[3]) + e_steps
+    drive_steps = ptr32(io[9])
+    for i in range(int(len(io[9]))):
+        drive_steps[i] += int(given[i])
 
 
 @micropython.viper
@@ -451,7 +468,8 @@ class Planner:
         self.drive_targets = array("i", bytes(4 * self.drives))
         self.targets_known = False
         self._counts = array("i", bytes(4 * self.drives))  # the latest plan's steps per drive
-        self._weights = [0] * self.drives  # the latest block's, from block_weights
+        # The latest block's weights, from block_weights.
+        self._weights = array("i", bytes(4 * self.drives))
         self._given = [0] * self.drives
         self.drive_steps = array("i", bytes(4 * self.drives))
         self._shares_of = None  # the weights _sharing and _share_total are of
@@ -459,8 +477,8 @@ class Planner:
         self._share_total = 1
         self.before_sync = []  # fn() each: moves held before the planner are handed over
         self.dir_invert_mask = 0  # DIR pins of motors wired the other way round
-        self._dir_set = [0] * 16  # see _dir_words
-        self._dir_clr = [0] * 16
+        self._dir_set = array("i", bytes(4 * 16))  # see _dir_words
+        self._dir_clr = array("i", bytes(4 * 16))
         self._dir_masks_seen = self._dir_invert_seen = None
         # For retract_policy 2: the latest extrusion as stretches [start, end) of block
         # schedules (weights, start, end), newest last, and what retractions took back
@@ -471,6 +489,11 @@ class Planner:
         # Times the step loop ran dry between two moves with no wait between them
         # (M122): the host or the planner did not keep up, and the axes stopped.
         self.underruns = 0
+        # The arrays _queue_block works with, in one tuple: a viper call's arguments
+        # cost the chip each.
+        self._queue_io = (mem, self.lk, self._plan_f, self._abs_steps, self._hooks,
+                          _RAMP_IO, self._dir_set, self._dir_clr, self._weights,
+                          self.drive_steps)
 
     # --- queue state, shared with the step loop ---
     def busy(self):
@@ -879,25 +902,13 @@ class Planner:
             elif self.keep_extrusion and not replay:
                 self._remember_extrusion(tuple(self._weights), list(given))
             mix_id = self._block_mix_id = (self._block_mix_id + 1) & 0x3FFFFFF
-        m = self.mem
-        _block_words(m, slot, steps, n, flags, self._dir_set[neg], self._dir_clr[neg],
-                     mix_id, self._weights)
         # The floats end here: the look-ahead works on integers (lookahead.plan_words).
         f[_F_ACCEL] = accel
         f[_F_NOMINAL] = speed
         f[_F_NOMINAL2] = nominal2
-        _plan_words(lk, slot * _L_WORDS, f, n, _RAMP_IO, entry_v2)
-        _recalculate(lk, m, slot, self._hooks)
-        slot += 1  # committed: the step loop may start it
-        m[_S_HEAD] = 0 if slot >= self.queue else slot
         # In place, as the drives' plans: a list a line is garbage on the chips.
-        pos[0] = target_steps[0]
-        pos[1] = target_steps[1]
-        pos[2] = target_steps[2]
-        pos[3] += e_steps
-        drive_steps = self.drive_steps
-        for i in range(self.drives):
-            drive_steps[i] += given[i]
+        _queue_block(self._queue_io, slot, n, flags, neg, mix_id, entry_v2, e_steps, given,
+                     pos, target_steps)
         self.joins = not homing_axes
         return True
 
