@@ -582,9 +582,7 @@ class Planner:
         self.rem_total = 1
         self.targets_known = False
 
-    # Bytecode: its loop now runs over the drives with a share in the move only, and the
-    # heap the native code took is worth more elsewhere (about 1 % of a line's time for
-    # 1.2 kB on the emulated Pico).
+    @micropython.native
     def _plan_e(self, e_nm, weights=None):
         """The drives' exact filament and target steps after an E move of e_nm
         nanometres shared by the weights, in place; the move's steps per drive in
@@ -592,7 +590,7 @@ class Planner:
         w = weights or self.tool_mix
         shares = self._shares
         if w is not shares[0]:  # mostly the same weights (a tuple) as the move before
-            shares = self._shares = (w, sum(w), tuple(i for i in range(self.drives) if w[i]))
+            shares = self._shares = (w, sum(w), self._sharing(w))
         total = shares[1]
         targets = self.drive_targets
         now_steps = self.drive_steps
@@ -636,6 +634,12 @@ class Planner:
                 counts[i] = target - now_steps[i]
         self.rem_total = total
         self.targets_known = True
+
+    def _sharing(self, weights):
+        """The drives with a share in weights. Apart from _plan_e: a comprehension's
+        variables are heap cells, made at every call of the native function that holds
+        it."""
+        return tuple(i for i in range(self.drives) if weights[i])
 
     def _replay_counts(self, e_nm):
         """Per-drive steps of a retraction (e_nm < 0) that takes back exactly the drive
