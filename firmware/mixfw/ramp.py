@@ -221,20 +221,6 @@ _FRAC_MAX = const(0x8000000)
 
 
 @micropython.viper
-def _fraction(x: int, c: int) -> int:
-    """(x << FRAC) // c for 0 <= x < c < 2**27, in four digits of 4 bits in machine
-    words: product() takes two limbs and a call more, several times the arithmetic on
-    the chip."""
-    q = 0
-    for _ in range(4):
-        x = x << 4
-        d = x // c
-        x -= d * c
-        q = (q << 4) | d
-    return q
-
-
-@micropython.viper
 def ramp_into(io_buf):
     """The schedule (ACCEL_UNTIL, DECEL_AFTER, RATE_DECEL) of io's record (N, R0, RNOM,
     R1, ACC): planner.ramp_ticks says what it means. Distances are in steps << 28 (the
@@ -250,27 +236,45 @@ def ramp_into(io_buf):
     all_lo = (n & 3) << 28
     # Steps (<< 28) to accelerate from r0 and to decelerate to r1, together:
     # (vn^2 - r0^2 + vn^2 - r1^2) / 2acc, each (vn - r)(vn + r) (below 2**28 and 2**29)
-    # in two 30-bit limbs as product() makes them, and one division. Written out: a
-    # call costs the chip several microseconds, and the look-ahead runs this for most
-    # lines, on curves a dozen times a line.
+    # in two 30-bit limbs as product() makes them, and one division; and r0^2, r1^2,
+    # for where the ramps meet. Written out: a call costs the chip several
+    # microseconds, and the look-ahead runs this for most lines, on curves a dozen
+    # times a line.
     s_hi = 0
     s_lo = 0
-    r = r0
-    for _ in range(2):
-        if vn > r:
+    h0 = 0
+    l0 = 0
+    h1 = 0
+    l1 = 0
+    for k in range(4):
+        r = r0 if k == 0 or k == 2 else r1
+        if k < 2:
+            if vn <= r:
+                continue
             a = vn - r
             b = vn + r
-            a1 = a >> 15
-            a0 = a & 0x7FFF
-            b1 = b >> 15
-            b0 = b & 0x7FFF
-            mid = a1 * b0 + a0 * b1
-            lo = ((mid & 0x7FFF) << 15) + a0 * b0
-            s_hi += a1 * b1 + (mid >> 15) + (lo >> 30)
-            s_lo += lo & _M30
+        else:
+            a = r
+            b = r
+        a1 = a >> 15
+        a0 = a & 0x7FFF
+        b1 = b >> 15
+        b0 = b & 0x7FFF
+        mid = a1 * b0 + a0 * b1
+        lo = ((mid & 0x7FFF) << 15) + a0 * b0
+        hi = a1 * b1 + (mid >> 15) + (lo >> 30)
+        lo &= _M30
+        if k < 2:
+            s_hi += hi
+            s_lo += lo
             s_hi += s_lo >> 30
             s_lo &= _M30
-        r = r1
+        elif k == 2:
+            h0 = hi
+            l0 = lo
+        else:
+            h1 = hi
+            l1 = lo
     if s_hi or s_lo:
         io[_HI] = s_hi
         io[_LO] = s_lo
@@ -283,12 +287,6 @@ def ramp_into(io_buf):
         # The ramps meet below vn: peak^2 = acc n ONE + (r0^2 + r1^2) / 2, with no
         # cruise. Then peak < vn < 2**28, so acc * n < 2**26 here.
         p = acc * n
-        product(io_buf, r0, r0, 1, 0, P_LIMBS)
-        h0 = io[_HI]
-        l0 = io[_LO]
-        product(io_buf, r1, r1, 1, 0, P_LIMBS)
-        h1 = io[_HI]
-        l1 = io[_LO]
         # 2 acc n ONE = p << 29, added a limb at a time: l0 + l1 + 2**29 may pass
         # 2**31, a 32-bit chip's sign bit.
         lo = l0 + l1
@@ -314,16 +312,14 @@ def ramp_into(io_buf):
         if c_lo < 0:
             c_lo = c_lo + _M30 + 1
             c_hi -= 1
-    # Acceleration time in ticks: (vn - r0) / acc, with FRAC fraction bits.
+    # Acceleration time in ticks: (vn - r0) / acc; cruise time: its steps / vn. Each
+    # with FRAC fraction bits: (rem << FRAC) // c, in four digits of 4 bits in machine
+    # words for c below 2**27 (below half a step a tick, the planner's cap, for vn),
+    # where product() would take two limbs and a call more.
     a_int = (vn - r0) // acc
     a_rem = (vn - r0) - a_int * acc
-    if acc < _FRAC_MAX:
-        frac = int(_fraction(a_rem, acc))
-    else:
-        product(io_buf, a_rem, _ONE_FRAC, acc, 0, P_LIMBS)
-        frac = io[_LO]
-    # Cruise time: its steps / vn.
     c_int = 0
+    c_rem = -1  # none: no cruise
     if c_hi or c_lo:
         io[_HI] = c_hi
         io[_LO] = c_lo
@@ -332,11 +328,27 @@ def ramp_into(io_buf):
             c_int = _MAX_TICK
         else:
             c_int = io[_LO]
-            if vn < _FRAC_MAX:  # below half a step a tick, the planner's cap
-                frac += int(_fraction(io[_REM], vn))
-            else:
-                product(io_buf, io[_REM], _ONE_FRAC, vn, 0, P_LIMBS)
-                frac += io[_LO]
+            c_rem = io[_REM]
+    frac = 0
+    for k in range(2):
+        x = a_rem
+        c = acc
+        if k == 1:
+            if c_rem < 0:
+                break
+            x = c_rem
+            c = vn
+        if c < _FRAC_MAX:
+            q = 0
+            for _ in range(4):
+                x = x << 4
+                d = x // c
+                x -= d * c
+                q = (q << 4) | d
+        else:
+            product(io_buf, x, _ONE_FRAC, c, 0, P_LIMBS)
+            q = io[_LO]
+        frac += q
     decel = a_int + c_int
     if frac >= _ONE_FRAC:
         frac -= _ONE_FRAC
@@ -353,7 +365,7 @@ def ramp_into(io_buf):
     r_decel = r1
     if decel_after < _MAX_TICK:
         # acc * late (late below 2**18) in two digits of late in machine words, as
-        # _fraction divides.
+        # the fractions above divide.
         if acc < 0x100000:
             fall = (acc * (late >> 8) + ((acc * (late & 0xFF) + _HALF) >> 8)) >> 8
         else:
