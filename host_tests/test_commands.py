@@ -127,6 +127,17 @@ def test_m92_e_sets_every_drive(session):
     assert steps["e0"] == 200 and steps["e3"] == 100
 
 
+def test_m92_x_keeps_the_position_in_mm_and_later_moves_use_it(session):
+    """The axes stay where they are in millimetres when their steps/mm change: X's
+    step is its position at the new steps/mm, also for moves that leave X alone."""
+    session.send("G1 X10 F6000", "M400")
+    assert session.send("M114")[0].endswith("Count X:800 Y:0 Z:0")
+    session.send("M92 X100", "G1 Y5", "M400")
+    assert session.send("M114")[0] == "X:10.00 Y:5.00 Z:0.00 E:0.00 Count X:800 Y:400 Z:0"
+    session.send("G1 X12", "M400")
+    assert session.send("M114")[0].endswith("Count X:1000 Y:400 Z:0")
+
+
 def test_g4_dwells_in_the_queue(session):
     session.send("G1 X1 F600", "G4 P750", "G1 X2")
     steps = session.finish()

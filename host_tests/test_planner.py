@@ -352,11 +352,11 @@ def test_positions_become_the_same_steps_in_small_ints(mp):
 XYZ_CASES = """
 import sys, json
 from mixfw.gcode import Parser
-from mixfw.cmd_motion import xyz_targets, _MOVE_BITS
+from mixfw.cmd_motion import xyz_targets, _MOVE_BITS, SPM_WORDS
 from mixfw.planner import spm_digits
 from array import array
 p = Parser()
-spm = array("i", bytes(4 * 9))
+spm = array("i", bytes(4 * SPM_WORDS))
 for i, s in enumerate((80.0, 93.71234, 400.0)):
     spm_digits(s, spm, 3 * i)
 steps = array("i", bytes(4 * 5))
@@ -403,6 +403,8 @@ def test_xyz_words_become_the_exact_nanometres_or_a_clear_refusal(mp):
         travel = rnd.choice([None, [250 * 10 ** 6] * 3])
         at = rnd.choice([None, [rnd.randint(-5, 5) for _ in range(3)]])
         cases.append(["G1 " + " ".join(words), pos, rnd.random() < 0.5, travel, at])
+        if rnd.random() < 0.3:  # again: the steps of the same positions, as it keeps them
+            cases.append(cases[-1])
     got = mp.json(XYZ_CASES, stdin=json.dumps(cases).encode())
     from mixfw.planner import scaled_round, steps_per_nm
     fractions = [steps_per_nm(s) for s in (80.0, 93.71234, 400.0)]

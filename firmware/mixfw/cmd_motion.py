@@ -25,6 +25,11 @@ _OUTSIDE = const(4)
 # and its bits otherwise, beside the axes named (bits 0 to 2).
 _E_READ = const(8)
 _AXIS_MOVED = const(16)
+# Words of its steps/mm array after the digits (9): each axis's latest machine position
+# and its step (2 words an axis), and a bit per axis whose pair holds.
+_SPM_LAST = const(9)
+_SPM_HELD = const(15)
+SPM_WORDS = const(16)
 # retract_policy: retractions follow the mix and run it exactly backwards, or pull every
 # drive equally (and push them back equally), or take back exactly the steps each drive
 # made in the latest extrusion (and push exactly those back).
@@ -41,8 +46,10 @@ def xyz_targets(mant_buf, dec_buf, named: int, pos, target, relative: int, off,
     target: pos's where not named, added to pos's if relative. Further decimals round
     half away from zero, as Line.fixed_at. Then each axis's absolute step at its
     machine position (target + off) into steps_buf (array 'i'), by planner.steps_of_nm
-    with the steps/mm spm_digits put in spm_buf. An E word named goes, as nanometres,
-    into steps_buf[4] where it is within +-_NM_MAX.
+    with the steps/mm spm_digits put in spm_buf (SPM_WORDS: the step an axis had at
+    the same position is taken again, as a line mostly leaves Z, and a call costs the
+    chip 15 us). An E word named goes, as nanometres, into steps_buf[4] where it is
+    within +-_NM_MAX.
 
     Returns bits: the axes named (X=1, Y=2, Z=4), _E_READ if steps_buf[4] holds E's
     word, and (_AXIS_MOVED << a) for each axis a whose step differs from at[a] (at:
@@ -55,6 +62,7 @@ def xyz_targets(mant_buf, dec_buf, named: int, pos, target, relative: int, off,
     mant = ptr32(mant_buf)
     dec = ptr8(dec_buf)
     steps = ptr32(steps_buf)
+    spm = ptr32(spm_buf)
     moved = 0
     compare = 1 if at else 0
     for a in range(4):
@@ -107,7 +115,14 @@ def xyz_targets(mant_buf, dec_buf, named: int, pos, target, relative: int, off,
             return 0 - _BEYOND - a
         if word and travel and (nm < -1 or nm > int(travel[a]) + 1):
             return 0 - _OUTSIDE - a
-        s = int(steps_of_nm(nm, spm_buf, 3 * a))
+        last = _SPM_LAST + 2 * a
+        if (spm[_SPM_HELD] >> a) & 1 and spm[last] == nm:
+            s = spm[last + 1]
+        else:
+            s = int(steps_of_nm(nm, spm_buf, 3 * a))
+            spm[last] = nm
+            spm[last + 1] = s
+            spm[_SPM_HELD] |= 1 << a
         steps[a] = s
         if compare and s != int(at[a]):
             moved |= _AXIS_MOVED << a
@@ -130,7 +145,7 @@ class Motion:
         self._spare_nm = [0, 0, 0]  # g1's target, then pos_nm: see g1
         self.offset_nm = [0, 0, 0]
         # X Y Z's steps/mm for xyz_targets, and the steps it works out, then E's.
-        self._xyz_spm = array("i", bytes(4 * 9))
+        self._xyz_spm = array("i", bytes(4 * SPM_WORDS))
         self._steps_out = array("i", bytes(4 * 5))
         self._set_steps_per_mm(planner.steps_per_mm)
         self.e_nm = 0  # logical E
@@ -184,6 +199,7 @@ class Motion:
         self._xyz_per_nm = [steps_per_nm(s) for s in steps_per_mm[:3]]
         for i in range(3):
             spm_digits(steps_per_mm[i], self._xyz_spm, 3 * i)
+        self._xyz_spm[_SPM_HELD] = 0  # the steps it held were of the steps/mm before
 
     def _travel(self, travel_mm):
         self.travel_mm = travel_mm
