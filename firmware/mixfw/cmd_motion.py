@@ -11,14 +11,13 @@ AXIS_LETTERS = "XYZE"
 _AXIS_INDEX = tuple(letter_index(ch) for ch in AXIS_LETTERS)
 _AXIS_BITS = sum(1 << i for i in _AXIS_INDEX)  # in a parsed line's present mask
 _F_INDEX = letter_index("F")
-_E_INDEX = letter_index("E")
 _NM_DECIMALS = 6  # axis words are read as exact nanometres
 _X_INDEX = const(23)  # letter_index("X"), then Y and Z
-_E_LETTER = const(4)  # letter_index("E")
+_E_INDEX = const(4)  # letter_index("E")
 _NM_MAX = const(0x3FFFFFFF)  # a position's nanometres: a 32-bit chip's small ints
-assert (_X_INDEX, _X_INDEX + 1, _X_INDEX + 2, _E_LETTER) == _AXIS_INDEX
+assert (_X_INDEX, _X_INDEX + 1, _X_INDEX + 2, _E_INDEX) == _AXIS_INDEX
 _XYZ_BITS = 7 << _X_INDEX
-_MOVE_BITS = _XYZ_BITS | 1 << _E_LETTER  # the words xyz_targets reads
+_MOVE_BITS = _XYZ_BITS | 1 << _E_INDEX  # the words xyz_targets reads
 # xyz_targets's verdicts on a word, for axis a: -_BEYOND - a, -_OUTSIDE - a.
 _BEYOND = const(1)
 _OUTSIDE = const(4)
@@ -68,7 +67,7 @@ def xyz_targets(mant_buf, dec_buf, named: int, pos, target, relative: int, off,
     for a in range(4):
         k = _X_INDEX + a
         if a == 3:
-            k = _E_LETTER
+            k = _E_INDEX
         word = (named >> k) & 1
         if word:
             m = mant[k]
@@ -144,7 +143,8 @@ class Motion:
         self.pos_nm = [0, 0, 0]
         self._spare_nm = [0, 0, 0]  # g1's target, then pos_nm: see g1
         self.offset_nm = [0, 0, 0]
-        # X Y Z's steps/mm for xyz_targets, and the steps it works out, then E's.
+        # X Y Z's steps/mm for xyz_targets (and the steps it keeps), and the steps it
+        # works out, then E's, then an E word in nanometres (see xyz_targets).
         self._xyz_spm = array("i", bytes(4 * SPM_WORDS))
         self._steps_out = array("i", bytes(4 * 5))
         self._set_steps_per_mm(planner.steps_per_mm)
