@@ -23,7 +23,7 @@ REPEATS = 5
 
 
 @micropython.viper
-def empty(mem: ptr32, out, endstops) -> int:
+def empty(io) -> int:
     return 0
 
 
@@ -35,12 +35,12 @@ def bytecode_module(path, extra):
     return ns
 
 
-def time_calls(fn, mem, out, endstops):
+def time_calls(fn, io):
     simmachine.flush()
     i = 0
     t0 = time.ticks_us()
     while i < CALLS:
-        fn(mem, out, endstops)
+        fn(io)
         i += 1
     return time.ticks_diff(time.ticks_us(), t0) / CALLS
 
@@ -102,7 +102,7 @@ def main_bench():
     for _ in range(REPEATS):
         for case in cases:
             name, fn, printer = case[:3]
-            us = time_calls(fn, printer.mem, printer.out, printer.pins.endstops)
+            us = time_calls(fn, (printer.mem, printer.out, printer.pins.endstops))
             res[name] = min(us, res.get(name, us))
     e = res["empty_viper_us"]
     res["step_loop_ratio"] = res["step_tick_us"] / e

@@ -60,9 +60,10 @@ mem[st.S_PHASE] = phase
 mem[st.S_HEAD] = 1
 ticks = []
 t = 0
+io = (mem, regs, None)
 while mem[st.S_BLOCKS_DONE] == 0:
     t += 1
-    if st.tick(mem, regs, None):
+    if st.tick(io):
         ticks.append(t)
 print(json.dumps(ticks))
 """

@@ -37,13 +37,14 @@ class Replies:
 
 def recording_irq(mem, out, endstops, tick_us, blocks):
     tick = st.tick
+    io = (mem, out, endstops)
 
     def irq(_timer):
         was_active = mem[st.S_ACTIVE]
         tail = mem[st.S_TAIL]
         phase = mem[st.S_PHASE]
         dir_before = mem[st.S_DIR]
-        tick(mem, out, endstops)
+        tick(io)
         if was_active or (not mem[st.S_ACTIVE] and mem[st.S_TAIL] == tail):
             return  # no block started in this tick
         b = st.BLOCK_BASE + tail * st.B_WORDS

@@ -110,8 +110,8 @@ def make_ring(ticks):
 def refill(mem_buf, io, done: int):
     """Channel `done` (0 or 1) has read its segment: arm it with the ready one, chain
     the running channel to it, and fill the freed segment with the next batch. io:
-    (DMA registers, PIO registers, ring, endstops), one tuple because a viper call
-    with more arguments allocates."""
+    (DMA registers, PIO registers, ring, step loop's io (stepper.tick), tail), one
+    tuple because a viper call with more arguments allocates."""
     mem = ptr32(mem_buf)
     regs = ptr32(io[0])
     pio = ptr32(io[1])
@@ -150,7 +150,7 @@ def refill(mem_buf, io, done: int):
         i += 1
     mem[_R_W] = base
     mem[_R_SEG_LV + freed] = mem[_S_LEVELS]
-    w = int(tick(mem_buf, io[2], io[3]))
+    w = int(tick(io[3]))
     mem[_R_SEG_N + freed] = w - base
     mem[_R_SEG_SEQ + freed] = mem[_R_BATCHES]
     mem[_R_READY] = freed
@@ -237,7 +237,8 @@ class Feed:
         for i, dma in enumerate(self.dmas):
             mem[st.R_CH + i] = dma.channel
         mem[st.R_SM] = sm_id
-        io = (self.regs, self.pio_regs, self.ring, pins.endstops, self.tail)
+        self.tick_io = (mem, self.ring, pins.endstops)
+        io = (self.regs, self.pio_regs, self.ring, self.tick_io, self.tail)
 
         # Bound once: the interrupt does no lookups and allocates nothing.
         def irq0(_dma):
@@ -302,7 +303,7 @@ class Feed:
         base = seg * mem[st.R_SEG_WORDS]
         mem[st.R_W] = base
         mem[st.R_SEG_LV + seg] = mem[st.S_LEVELS]
-        mem[st.R_SEG_N + seg] = tick(mem, self.ring, self.pins.endstops) - base
+        mem[st.R_SEG_N + seg] = tick(self.tick_io) - base
         mem[st.R_SEG_SEQ + seg] = mem[st.R_BATCHES]
 
     def start(self, pins=None):
