@@ -114,6 +114,7 @@ def stepping_printer():
     planner measured is another printer whose queue is retired by hand, so what it
     plans never reaches the pins and never waits for them; both share the CPU."""
     if not PRINTERS.get("stepper"):
+        gc.collect()
         printer = assemble.build(files_root=None)
         for line in STEP_SETUP + (STEP_MOVE,):
             printer.run_line(printer.parser.parse(line, len(line)))
@@ -130,7 +131,9 @@ def planned_printer():
         config = Config(dict(board.SETTINGS, trace_records=0), None)
         printer = assemble.build(config, files_root=None)
         printer.planner.idle = retire_one(printer.mem, printer.planner.queue)
-        printer.run_line(printer.parser.parse(b"M302 P1", 7))
+        # The excerpts are relative E (their file's M83 comes before them).
+        for line in (b"M302 P1", b"M83"):
+            printer.run_line(printer.parser.parse(line, len(line)))
         PRINTERS["planned"] = printer
     return PRINTERS["planned"]
 
