@@ -120,8 +120,8 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
         planner.before_sync.append(transitions.flush)
         printer.on_halt.insert(0, motion.queue.drop)
         printer.on_quick_stop.insert(0, motion.queue.drop)
-    mixing = cmd_mixing.Mixing(motion.queue, settings, config, printer.reply,
-                               lambda i: mem[st.S_DRIVE_POS + i])
+    mixing = cmd_mixing.Mixing(planner, settings, config, printer.reply,
+                               lambda i: mem[st.S_DRIVE_POS + i], motion.queue)
     config.before_save.append(mixing.filament_used_mm)
     motion.before_extrude.append(mixing.before_extrude)
     cmd_mixing.register(printer, mixing)

@@ -11,11 +11,14 @@ _MARLIN_LETTERS = "ABCDHI"  # Marlin's letters for drives 0..5 in M165
 
 
 class Mixing:
-    def __init__(self, planner, settings, config, reply, drive_steps):
-        """drive_steps(i): net steps drive i has made since start-up (the step loop's)."""
+    def __init__(self, planner, settings, config, reply, drive_steps, mixes=None):
+        """drive_steps(i): net steps drive i has made since start-up (the step loop's).
+        mixes: where mix changes go (set_mix), the planner or Transitions in front of
+        it; the planner if None."""
         self.drive_steps = drive_steps
         self._counted = [0] * settings["drives"]  # steps already added to the settings
         self.planner = planner
+        self.mixes = mixes or planner
         self.settings = settings
         self.config = config
         self.reply = reply
@@ -70,7 +73,7 @@ class Mixing:
         if mix != self.mix:
             self.mix = mix
             self.mix_id += 1
-            self.planner.set_mix(self.mix_id, mix, tool)
+            self.mixes.set_mix(self.mix_id, mix, tool)
 
     def store(self, tool, weights, save=False):
         """Set a virtual tool's mix (normalised; an all-zero mix is refused)."""
@@ -99,7 +102,7 @@ class Mixing:
         if mix != self.mix:
             self.mix = mix
             self.mix_id += 1
-            self.planner.set_mix(self.mix_id, mix)
+            self.mixes.set_mix(self.mix_id, mix)
 
     def _tool_shares(self, tool):
         return self.tool_mix(self._check_tool(tool))

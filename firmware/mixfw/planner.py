@@ -516,7 +516,9 @@ class Planner:
         m[st.S_TAIL] = m[st.S_HEAD]
         m[st.S_ACTIVE] = 0
         self._irq_on(state)
-        self.position_steps = [m[st.S_POS + i] for i in range(4)]
+        # In place: Transitions holds this list (see set_position_steps).
+        for i in range(4):
+            self.position_steps[i] = m[st.S_POS + i]
         for i in range(self.drives):
             self.drive_steps[i] = m[st.S_DRIVE_POS + i]
         self._drive_pos_from_steps()
@@ -708,7 +710,9 @@ class Planner:
     def set_position_steps(self, steps):
         """Redefine where the axes are (G92, homing) once the queue is empty."""
         self.synchronize()
-        self.position_steps = list(steps)
+        # In place: Transitions ends its queue at this list while no move waits.
+        for i in range(4):
+            self.position_steps[i] = steps[i]
 
     # --- adding blocks ---
     # The methods every G1 line runs with much to do are native code: 35 % more lines a

@@ -30,16 +30,19 @@ class Transitions:
         self.pending_printing_nm = 0
         self.mix_id = planner.mix_id
         self.tool_mix = planner.tool_mix
+        # Where the queued moves end, as X Y Z steps (cmd_motion compares a line's
+        # targets with it): the last waiting move's target, or the planner's own
+        # position (a list the planner keeps in place) when none waits. A plain
+        # attribute: a property, or __getattr__, makes MicroPython look up every store
+        # on the instance in its class first (11 us a store on the chip).
+        self.position_steps = planner.position_steps
 
-    def __getattr__(self, name):
-        # Everything else (synchronize, drive_steps_per_mm, ...) is the planner's.
-        return getattr(self.planner, name)
+    def synchronize(self):
+        self.planner.synchronize()
 
-    @property
-    def position_steps(self):
-        if self.pending:
-            return list(self.pending[-1][1]) + [self.planner.position_steps[3]]
-        return self.planner.position_steps
+    def _ended(self):
+        """No move waits: the queue ends where the planner's does."""
+        self.position_steps = self.planner.position_steps
 
     @staticmethod
     def _printing_nm(move):
@@ -48,9 +51,11 @@ class Transitions:
     def add_move(self, target_steps, feed_mm_s, dir_masks=None, e_nm=0, mix=None,
                  replay=False):
         start = self.position_steps[:3]
-        move = [start, list(target_steps[:3]), e_nm, feed_mm_s, dir_masks,
+        target = list(target_steps[:3])
+        move = [start, target, e_nm, feed_mm_s, dir_masks,
                 mix or (self.mix_id, self.tool_mix), replay]
         self.pending.append(move)
+        self.position_steps = target
         self.pending_printing_nm += self._printing_nm(move)
         # A move is released once L0 of printing extrusion follows it.
         while self.pending and (self.pending_printing_nm - self._printing_nm(self.pending[0])
@@ -60,6 +65,8 @@ class Transitions:
 
     def _release(self):
         move = self.pending.pop(0)
+        if not self.pending:
+            self._ended()
         self.pending_printing_nm -= self._printing_nm(move)
         p = self.planner
         mix_id, weights = move[5]
@@ -74,6 +81,7 @@ class Transitions:
         """A halt: waiting moves are dropped with the queue."""
         self.pending = []
         self.pending_printing_nm = 0
+        self._ended()
 
     def set_mix(self, mix_id, weights, tool=-1):
         """A mix change: it reaches back over the last L0 of printing extrusion, the
