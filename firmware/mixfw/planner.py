@@ -72,6 +72,8 @@ assert (_G_D, _G_C, _G_DIST, _GF_ACCEL_JD, _FL_E_NM, _FL_JOIN) == (
 
 # Largest schedule period the step loop's mixer takes: its products stay below 2**30.
 MAX_PERIOD = 20000
+_MAX_PERIOD = const(20000)  # for viper, which folds only constants
+assert MAX_PERIOD == _MAX_PERIOD
 
 # Filament is counted in integers, never summed in floats: a chip's 32-bit float
 # would drift by steps over a print. E in nanometres, and steps/mm in millionths, so a
@@ -197,36 +199,50 @@ def steps_of_nm(x: int, spm_buf, at: int) -> int:
     return lo
 
 
-@micropython.native
+@micropython.viper
+def _whole_weights(counts_buf, weights_buf, steps_buf) -> int:
+    """block_weights' common case, in one viper call (in native code each item read or
+    written was a runtime call, and each gcd a bytecode one): abs(counts) into steps,
+    and the weights as the steps over their gcd. Returns 0 if that period is longer
+    than the mixer takes (nothing written to weights then)."""
+    c = ptr32(counts_buf)
+    s = ptr32(steps_buf)
+    w = ptr32(weights_buf)
+    n = int(len(counts_buf))
+    g = 0
+    total = 0
+    for i in range(n):
+        x = c[i]
+        if x < 0 or x > _CAP:  # negative: a 64-bit port's ptr32 reads it zero-extended
+            x = (0 - x) & _CAP
+        s[i] = x
+        total += x
+        a = x
+        while a:  # g = gcd(x, g)
+            t = g % a
+            g = a
+            a = t
+    if g and total // g > _MAX_PERIOD:
+        return 0
+    for i in range(n):
+        w[i] = s[i] // g if g else 0
+    return 1
+
+
 def block_weights(counts, weights, steps):
     """Mixer weights that make the step loop give each drive exactly abs(counts[i])
     steps in a block (one whole period of the schedule); a block runs every drive the
-    same way. Written into weights, and abs(counts) into steps (lists as long as
+    same way. Written into weights, and abs(counts) into steps (arrays 'i' as long as
     counts, made once: lists a line are garbage on the chips). Returns the steps given:
     steps, or when they are too many for the mixer's integer range they are scaled,
     and the steps the schedule then gives are worked out with the mixer itself."""
+    if _whole_weights(counts, weights, steps):
+        return steps
     n = len(counts)
-    g = 0
-    for i in range(n):
-        c = counts[i]
-        if c < 0:
-            c = -c
-        steps[i] = c
-        if c:
-            g = _gcd(c, g)
-    if not g:
-        for i in range(n):
-            weights[i] = 0
-        return steps
-    total = sum(steps)
-    if total // g <= MAX_PERIOD:
-        for i in range(n):
-            weights[i] = steps[i] // g
-        return steps
     scaled = normalize(steps, n)
     for i in range(n):
         weights[i] = scaled[i]
-    return schedule_counts(scaled, total)
+    return schedule_counts(scaled, sum(steps))
 
 
 @micropython.viper
@@ -470,7 +486,7 @@ class Planner:
         self._counts = array("i", bytes(4 * self.drives))  # the latest plan's steps per drive
         # The latest block's weights, from block_weights.
         self._weights = array("i", bytes(4 * self.drives))
-        self._given = [0] * self.drives
+        self._given = array("i", bytes(4 * self.drives))
         self.drive_steps = array("i", bytes(4 * self.drives))
         # The latest weights _plan_e took, their total and the drives with a share.
         self._shares = (None, 1, ())
