@@ -121,9 +121,9 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
         printer.on_halt.insert(0, motion.queue.drop)
         printer.on_quick_stop.insert(0, motion.queue.drop)
     mixing = cmd_mixing.Mixing(planner, settings, config, printer.reply,
-                               lambda i: mem[st.S_DRIVE_POS + i], motion.queue)
+                               lambda i: mem[st.S_DRIVE_POS + i], motion.queue,
+                               motion.before_extrude)
     config.before_save.append(mixing.filament_used_mm)
-    motion.before_extrude.append(mixing.before_extrude)
     cmd_mixing.register(printer, mixing)
     thermal = Thermal(machine, pin_map, settings, printer)
     cmd_thermal.register(printer, thermal, motion)
