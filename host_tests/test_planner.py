@@ -364,10 +364,11 @@ out = []
 for text, pos, relative, travel, at in json.loads(sys.stdin.read()):
     b = text.encode()
     line = p.parse(b, len(b))
-    target = [None, None, None]
-    got = xyz_targets(line.mant, line.decimals, line.present & _MOVE_BITS, pos, target,
-                      relative, [0, 0, 0], travel, spm, steps, at)
-    out.append([got, target, list(steps)])
+    target = array("i", bytes(12))
+    got = xyz_targets(line.mant, line.decimals, line.present & _MOVE_BITS, array("i", pos),
+                      target, relative, array("i", bytes(12)), travel and array("i", travel),
+                      spm, steps, at)
+    out.append([got, list(target), list(steps)])
 print(json.dumps(out))
 """
 

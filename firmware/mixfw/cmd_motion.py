@@ -38,8 +38,8 @@ RETRACT_REPLAY = 2
 
 
 @micropython.viper
-def xyz_targets(mant_buf, dec_buf, named: int, pos, target, relative: int, off,
-                travel, spm_buf, steps_buf, at) -> int:
+def xyz_targets(mant_buf, dec_buf, named: int, pos_buf, target_buf, relative: int, off_buf,
+                travel_buf, spm_buf, steps_buf, at) -> int:
     """The X Y Z a G0/G1 line names with a number (bits of letter indexes in named),
     from its parsed words (gcode.Line's mant and decimals), as exact nanometres into
     target: pos's where not named, added to pos's if relative. Further decimals round
@@ -55,13 +55,22 @@ def xyz_targets(mant_buf, dec_buf, named: int, pos, target, relative: int, off,
     the queue's position, or None). Or, refused, -_BEYOND - a if axis a's word, target
     or machine position is beyond +-_NM_MAX nanometres (1,073 mm, the chips' small
     ints), or with soft limits (travel: each axis's in nm; None: off) -_OUTSIDE - a if
-    its machine position is outside 0..travel. In one viper call, where Line.fixed_at,
-    the sums, the checks and scaled_round, per axis, cost the chip about 0.15 ms a
-    line."""
+    its machine position is outside 0..travel. pos, target, off and travel are arrays
+    'i' of X Y Z nanometres, read and written as words. In one viper call, where
+    Line.fixed_at, the sums, the checks and scaled_round, per axis, cost the chip about
+    0.15 ms a line."""
     mant = ptr32(mant_buf)
     dec = ptr8(dec_buf)
     steps = ptr32(steps_buf)
     spm = ptr32(spm_buf)
+    pos = ptr32(pos_buf)
+    target = ptr32(target_buf)
+    off = ptr32(off_buf)
+    travel = ptr32(spm_buf)  # read only with soft limits on
+    soft = 0
+    if travel_buf:
+        travel = ptr32(travel_buf)
+        soft = 1
     moved = 0
     compare = 1 if at else 0
     for a in range(4):
@@ -100,19 +109,27 @@ def xyz_targets(mant_buf, dec_buf, named: int, pos, target, relative: int, off,
                 steps[4] = m
                 return moved | _E_READ
             if relative:
-                m += int(pos[a])
+                p = pos[a]
+                if p > _NM_MAX:  # negative: a 64-bit port's ptr32 reads it zero-extended
+                    p = 0 - ((0 - p) & _NM_MAX)
+                m += p
             if m > _NM_MAX or m < 0 - _NM_MAX:
                 return 0 - _BEYOND - a
             moved |= 1 << a
         elif a == 3:
             return moved
         else:
-            m = int(pos[a])
+            m = pos[a]
+            if m > _NM_MAX:
+                m = 0 - ((0 - m) & _NM_MAX)
         target[a] = m
-        nm = m + int(off[a])  # the machine's position
+        o = off[a]
+        if o > _NM_MAX:
+            o = 0 - ((0 - o) & _NM_MAX)
+        nm = m + o  # the machine's position
         if nm > _NM_MAX or nm < 0 - _NM_MAX:
             return 0 - _BEYOND - a
-        if word and travel and (nm < -1 or nm > int(travel[a]) + 1):
+        if word and soft and (nm < -1 or nm > travel[a] + 1):
             return 0 - _OUTSIDE - a
         last = _SPM_LAST + 2 * a
         if (spm[_SPM_HELD] >> a) & 1 and spm[last] == nm:
@@ -140,9 +157,10 @@ class Motion:
         # Logical X Y Z as G-code sees it, and their G92 offsets (machine = logical +
         # offset), in integers (nanometres) as E is: relative moves add up over a whole
         # print, and a chip's 32-bit floats would drift.
-        self.pos_nm = [0, 0, 0]
-        self._spare_nm = [0, 0, 0]  # g1's target, then pos_nm: see g1
-        self.offset_nm = [0, 0, 0]
+        # Arrays, which xyz_targets reads as words (list items are a call each).
+        self.pos_nm = array("i", bytes(12))
+        self._spare_nm = array("i", bytes(12))  # g1's target, then pos_nm: see g1
+        self.offset_nm = array("i", bytes(12))
         # X Y Z's steps/mm for xyz_targets (and the steps it keeps), and the steps it
         # works out, then E's, then an E word in nanometres (see xyz_targets).
         self._xyz_spm = array("i", bytes(4 * SPM_WORDS))
@@ -203,7 +221,8 @@ class Motion:
 
     def _travel(self, travel_mm):
         self.travel_mm = travel_mm
-        self._travel_nm = [nm_from_mm(t) for t in travel_mm]
+        # Positions stay within +-_NM_MAX: a longer travel is as good as that.
+        self._travel_nm = array("i", [min(nm_from_mm(t), _NM_MAX) for t in travel_mm])
 
     # A method, not a property: a class with a property makes every attribute stored on
     # its instances look for a setter first, about 11 us a store on the chip.
@@ -277,8 +296,8 @@ class Motion:
             self.feed_mm_s = f / 60.0
         if not present & _AXIS_BITS:
             return None
-        # The target goes in a list made once, which then becomes pos_nm, and pos_nm
-        # the spare: a list a line is garbage on the chips. pos_nm stays as it was
+        # The target goes in an array made once, which then becomes pos_nm, and pos_nm
+        # the spare: an array a line would be garbage on the chips. pos_nm stays as it was
         # when the line is refused.
         pos = self.pos_nm
         target = self._spare_nm
