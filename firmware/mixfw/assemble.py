@@ -100,7 +100,7 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
             mem[st.S_REG_SET + i] = word
     printer = Printer(settings["line_buffer_bytes"], machine.idle, RAW_COMMANDS)
     planner = Planner(mem, settings, printer.idle, machine.disable_irq, machine.enable_irq,
-                      lk)
+                      lk, feed.irq_mask() if feed else None)
     planner.dir_invert_mask = pins.dir_invert_mask
     motion = cmd_motion.Motion(planner, pins, settings, printer.reply)
     motion.feed = feed

@@ -173,7 +173,8 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int):
 @micropython.viper
 def _write(lk_buf, mem_buf, slot: int, x2: int, hooks):
     """The slot's record for its entry and this exit (V2), unless the step loop has
-    started it. hooks: (irq_off, irq_on, io array for ramp)."""
+    started it. hooks: (irq_off, irq_on, io array for ramp, NVIC mask words: see
+    planner.Planner)."""
     lk = ptr32(lk_buf)
     mem = ptr32(mem_buf)
     at = slot * L_WORDS
@@ -259,9 +260,23 @@ def _write(lk_buf, mem_buf, slot: int, x2: int, hooks):
         lk[at + _L_R0] = r0
         lk[at + L_RN] = r_nom
         lk[at + _L_R1] = r1
-    state = hooks[0]()
+    # The step loop must not start the block half written: its interrupt held back,
+    # in the NVIC where one IRQ runs it (ISER reads which are enabled), else all.
+    mask = ptr32(hooks[3])
+    bit = mask[2]
+    was = 0
+    state = hooks  # any object, until irq_off's state
+    if bit:
+        was = ptr32(mask[1])[0] & bit
+        ptr32(mask[0])[0] = bit
+    else:
+        state = hooks[0]()
     if slot == mem[_S_TAIL] and mem[_S_ACTIVE]:
-        hooks[1](state)
+        if bit:
+            if was:
+                ptr32(mask[1])[0] = bit
+        else:
+            hooks[1](state)
         return  # the step loop has it: too late to change
     mem[b + _B_RATE_INIT] = r0
     mem[b + _B_RATE_NOM] = r_nom
@@ -270,7 +285,11 @@ def _write(lk_buf, mem_buf, slot: int, x2: int, hooks):
     mem[b + _B_ACCEL_UNTIL] = lk[at + _L_UNTIL]
     mem[b + _B_DECEL_AFTER] = lk[at + _L_AFTER]
     mem[b + _B_RATE_DECEL] = lk[at + _L_RATE_DECEL]
-    hooks[1](state)
+    if bit:
+        if was:
+            ptr32(mask[1])[0] = bit
+    else:
+        hooks[1](state)
     lk[at + L_EXIT] = x2
 
 

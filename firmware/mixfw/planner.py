@@ -417,7 +417,11 @@ def lk_words(queue_blocks):
 
 
 class Planner:
-    def __init__(self, mem, settings, idle, irq_off, irq_on, lk=None):
+    def __init__(self, mem, settings, idle, irq_off, irq_on, lk=None, irq_mask=None):
+        """irq_off, irq_on: mask every interrupt and restore (machine.disable_irq,
+        enable_irq). irq_mask: where one IRQ alone runs the step loop (step_backend
+        pio_dma), its (ICER, ISER, bit) in the NVIC as piodma.Feed.irq_mask gives them:
+        the look-ahead's record writes then mask that IRQ only."""
         self.mem = mem
         self.idle = idle
         self._irq_off = irq_off
@@ -458,7 +462,8 @@ class Planner:
         self._plan_f[lookahead.F_TICK_ONE] = self.tick_s * st.ONE
         self._plan_f[lookahead.F_TICK_S] = self.tick_s
         self.lk = lk or heap.zeros(lk_words(q))
-        self._hooks = (irq_off, irq_on, _RAMP_IO)
+        # The last: irq_mask, or a bit of 0 for irq_off and irq_on.
+        self._hooks = (irq_off, irq_on, _RAMP_IO, irq_mask or array("i", bytes(12)))
         # The latest block is a move the next one may join at speed (geometry.junction
         # has its direction); False after a stop.
         self.joins = False
