@@ -100,7 +100,7 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
             mem[st.S_REG_SET + i] = word
     printer = Printer(settings["line_buffer_bytes"], machine.idle, RAW_COMMANDS)
     planner = Planner(mem, settings, printer.idle, machine.disable_irq, machine.enable_irq,
-                      lk, feed.irq_mask() if feed else None)
+                      lk, feed.irq if feed else None)
     planner.dir_invert_mask = pins.dir_invert_mask
     motion = cmd_motion.Motion(planner, pins, settings, printer.reply)
     motion.feed = feed
@@ -121,8 +121,7 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
         printer.on_halt.insert(0, motion.queue.drop)
         printer.on_quick_stop.insert(0, motion.queue.drop)
     mixing = cmd_mixing.Mixing(planner, settings, config, printer.reply,
-                               lambda i: mem[st.S_DRIVE_POS + i], motion.queue,
-                               motion.before_extrude)
+                               lambda i: mem[st.S_DRIVE_POS + i], motion.queue, motion)
     config.before_save.append(mixing.filament_used_mm)
     cmd_mixing.register(printer, mixing)
     thermal = Thermal(machine, pin_map, settings, printer)

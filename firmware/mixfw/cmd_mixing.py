@@ -11,19 +11,18 @@ _MARLIN_LETTERS = "ABCDHI"  # Marlin's letters for drives 0..5 in M165
 
 
 class Mixing:
-    def __init__(self, planner, settings, config, reply, drive_steps, mixes=None,
-                 extrude_hooks=None):
+    def __init__(self, planner, settings, config, reply, drive_steps, queue=None,
+                 motion=None):
         """drive_steps(i): net steps drive i has made since start-up (the step loop's).
-        mixes: where mix changes go (set_mix), the planner or Transitions in front of
-        it; the planner if None. extrude_hooks: motion's list of what runs before each
-        move that extrudes: before_extrude is in it while a gradient is on (a call
-        costs every extruding line about 15 us on the chips)."""
-        self.extrude_hooks = extrude_hooks if extrude_hooks is not None else []
-        self._hook = self.before_extrude  # one bound method, found in the list again
+        queue: where mix changes go (set_mix), as Motion's: the planner or Transitions
+        in front of it; the planner if None. motion: before_extrude is in its list of
+        that name while a gradient is on (a call costs every extruding line about 15 us
+        on the chips)."""
+        self.motion = motion
         self.drive_steps = drive_steps
         self._counted = [0] * settings["drives"]  # steps already added to the settings
         self.planner = planner
-        self.mixes = mixes or planner
+        self.queue = queue or planner
         self.settings = settings
         self.config = config
         self.reply = reply
@@ -78,7 +77,7 @@ class Mixing:
         if mix != self.mix:
             self.mix = mix
             self.mix_id += 1
-            self.mixes.set_mix(self.mix_id, mix, tool)
+            self.queue.set_mix(self.mix_id, mix, tool)
 
     def store(self, tool, weights, save=False):
         """Set a virtual tool's mix (normalised; an all-zero mix is refused)."""
@@ -107,7 +106,7 @@ class Mixing:
         if mix != self.mix:
             self.mix = mix
             self.mix_id += 1
-            self.mixes.set_mix(self.mix_id, mix)
+            self.queue.set_mix(self.mix_id, mix)
 
     def _tool_shares(self, tool):
         return self.tool_mix(self._check_tool(tool))
@@ -169,12 +168,12 @@ class Mixing:
         self._after_gradient_change()
 
     def _after_gradient_change(self):
-        hooks = self.extrude_hooks
+        hooks = self.motion.before_extrude if self.motion else []
         on = self.gradient is not None and self.gradient_on
-        if on and self._hook not in hooks:
-            hooks.append(self._hook)
-        elif not on and self._hook in hooks:
-            hooks.remove(self._hook)
+        if on and self.before_extrude not in hooks:
+            hooks.append(self.before_extrude)
+        elif not on and self.before_extrude in hooks:
+            hooks.remove(self.before_extrude)
         if not self.gradient_on:
             self.mix = None
             self._activate(self.active)

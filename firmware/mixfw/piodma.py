@@ -184,30 +184,25 @@ class Feed:
         # hold them when the ring no longer does.
         self.tail = array("i", bytes(4 * _TAIL_WORDS))
         self.dmas = [rp2.DMA(), rp2.DMA()]
+        # What the planner needs to hold the refill back while it rewrites a queued
+        # block's record (lookahead._write): (ICER, ISER, bit) of the DMA's IRQ in the
+        # NVIC, as words of an array 'i'; None on the simulated chip (no NVIC: the
+        # planner then masks every interrupt, as for the timer). Masking only the IRQ
+        # that runs the step loop is enough: it is the only code besides the main loop
+        # that reads the block records. A refill it holds back runs as soon as the
+        # mask is lifted, tens of us later, and the ring is two batches (4 ms) ahead
+        # of the pins, so no step is late or lost. It costs the chip about 1 us, where
+        # machine.disable_irq() and enable_irq() cost 6 us a record (up to 13 records
+        # a line on curves). MicroPython's rp2.DMA takes DMA_IRQ_0: IRQ 11 on the
+        # RP2040, 10 on the RP2350. ICER and ISER are at 0xE000E180 and 0xE000E100 on
+        # ARMv6-M and ARMv8-M alike: above 2**31, so stored as negative words.
+        self.irq = None if getattr(rp2, "dma_register_bank", None) else array(
+            "i", [0xE000E180 - (1 << 32), 0xE000E100 - (1 << 32),
+                  1 << (11 if settings["chip"] == "rp2040" else 10)])
         self.pins = None
         self.sm = None
         self.running = False
         self.watch = None  # (endstop Pin, level it reads when triggered) while homing
-
-    def irq_mask(self):
-        """What the planner needs to hold this feed's refill back while it rewrites a
-        queued block's record (lookahead._write): (ICER, ISER, bit) of the DMA's IRQ
-        in the NVIC, as words of an array 'i', or None on the simulated chip (no NVIC;
-        the planner then masks every interrupt, as it does for the timer).
-
-        Masking only the IRQ that runs the step loop is enough: it is the only code
-        besides the main loop that reads the block records. A refill it holds back
-        runs as soon as the mask is lifted, a few tens of us later, and the ring keeps
-        two batches (4 ms) ahead of the pins, so no step is late or lost. It costs the
-        chip about 1 us, where machine.disable_irq() and enable_irq() cost 6 us a
-        record (up to 13 records a line on curves)."""
-        if getattr(self.rp2, "dma_register_bank", None):
-            return None
-        # MicroPython's rp2.DMA takes DMA_IRQ_0: IRQ 11 on the RP2040, 10 on the
-        # RP2350. The NVIC's ICER and ISER (0xE000E180, 0xE000E100 on ARMv6-M and
-        # ARMv8-M alike) as 32-bit words: above 2**31, so stored as negatives.
-        irq = 11 if self.settings["chip"] == "rp2040" else 10
-        return array("i", [0xE000E180 - (1 << 32), 0xE000E100 - (1 << 32), 1 << irq])
 
     def _setup(self, pins):
         """The step loop's words for the ring, and the IRQ handlers."""
@@ -257,8 +252,9 @@ class Feed:
         for i, dma in enumerate(self.dmas):
             mem[st.R_CH + i] = dma.channel
         mem[st.R_SM] = sm_id
-        self.tick_io = (mem, self.ring, pins.endstops)
-        io = (self.regs, self.pio_regs, self.ring, self.tick_io, self.tail)
+        # The step loop's own io (stepper.tick) is io[3].
+        io = self.io = (self.regs, self.pio_regs, self.ring, (mem, self.ring, pins.endstops),
+                        self.tail)
 
         # Bound once: the interrupt does no lookups and allocates nothing.
         def irq0(_dma):
@@ -323,7 +319,7 @@ class Feed:
         base = seg * mem[st.R_SEG_WORDS]
         mem[st.R_W] = base
         mem[st.R_SEG_LV + seg] = mem[st.S_LEVELS]
-        mem[st.R_SEG_N + seg] = tick(self.tick_io) - base
+        mem[st.R_SEG_N + seg] = tick(self.io[3]) - base
         mem[st.R_SEG_SEQ + seg] = mem[st.R_BATCHES]
 
     def start(self, pins=None):

@@ -200,11 +200,14 @@ def steps_of_nm(x: int, spm_buf, at: int) -> int:
 
 
 @micropython.viper
-def _whole_weights(counts_buf, weights_buf, steps_buf) -> int:
-    """block_weights' common case, in one viper call (in native code each item read or
-    written was a runtime call, and each gcd a bytecode one): abs(counts) into steps,
-    and the weights as the steps over their gcd. Returns 0 if that period is longer
-    than the mixer takes (nothing written to weights then)."""
+def block_weights(counts_buf, weights_buf, steps_buf) -> int:
+    """Mixer weights that make the step loop give each drive exactly abs(counts[i])
+    steps in a block (one whole period of the schedule); a block runs every drive the
+    same way: abs(counts) into steps, and the weights as the steps over their gcd
+    (arrays 'i' as long as counts, made once). Returns 0 if that period is longer
+    than the mixer takes (nothing written to weights then: add_move scales them). In
+    one viper call, where native code paid a runtime call for every item read or
+    written, and a bytecode call for every gcd."""
     c = ptr32(counts_buf)
     s = ptr32(steps_buf)
     w = ptr32(weights_buf)
@@ -227,22 +230,6 @@ def _whole_weights(counts_buf, weights_buf, steps_buf) -> int:
     for i in range(n):
         w[i] = s[i] // g if g else 0
     return 1
-
-
-def block_weights(counts, weights, steps):
-    """Mixer weights that make the step loop give each drive exactly abs(counts[i])
-    steps in a block (one whole period of the schedule); a block runs every drive the
-    same way. Written into weights, and abs(counts) into steps (arrays 'i' as long as
-    counts, made once: lists a line are garbage on the chips). Returns the steps given:
-    steps, or when they are too many for the mixer's integer range they are scaled,
-    and the steps the schedule then gives are worked out with the mixer itself."""
-    if _whole_weights(counts, weights, steps):
-        return steps
-    n = len(counts)
-    scaled = normalize(steps, n)
-    for i in range(n):
-        weights[i] = scaled[i]
-    return schedule_counts(scaled, sum(steps))
 
 
 @micropython.viper
@@ -417,11 +404,11 @@ def lk_words(queue_blocks):
 
 
 class Planner:
-    def __init__(self, mem, settings, idle, irq_off, irq_on, lk=None, irq_mask=None):
+    def __init__(self, mem, settings, idle, irq_off, irq_on, lk=None, irq=None):
         """irq_off, irq_on: mask every interrupt and restore (machine.disable_irq,
-        enable_irq). irq_mask: where one IRQ alone runs the step loop (step_backend
-        pio_dma), its (ICER, ISER, bit) in the NVIC as piodma.Feed.irq_mask gives them:
-        the look-ahead's record writes then mask that IRQ only."""
+        enable_irq). irq: where one IRQ alone runs the step loop (step_backend
+        pio_dma), its (ICER, ISER, bit) in the NVIC, as piodma.Feed.irq has them: the
+        look-ahead's record writes then mask that IRQ only."""
         self.mem = mem
         self.idle = idle
         self._irq_off = irq_off
@@ -462,8 +449,8 @@ class Planner:
         self._plan_f[lookahead.F_TICK_ONE] = self.tick_s * st.ONE
         self._plan_f[lookahead.F_TICK_S] = self.tick_s
         self.lk = lk or heap.zeros(lk_words(q))
-        # The last: irq_mask, or a bit of 0 for irq_off and irq_on.
-        self._hooks = (irq_off, irq_on, _RAMP_IO, irq_mask or array("i", bytes(12)))
+        # The last: irq, or a bit of 0 for irq_off and irq_on.
+        self._hooks = (irq_off, irq_on, _RAMP_IO, irq or array("i", bytes(12)))
         # The latest block is a move the next one may join at speed (geometry.junction
         # has its direction); False after a stop.
         self.joins = False
@@ -919,7 +906,9 @@ class Planner:
         if e_steps:
             # Exact per-drive counts as the block's mix; a fresh id, so the step loop
             # starts its schedule anew and gives each drive exactly its count.
-            given = block_weights(counts, self._weights, self._given)
+            given = self._given
+            if not block_weights(counts, self._weights, given):
+                given = self._scaled(given)
             if e_steps < 0:
                 for i in range(self.drives):
                     given[i] = -given[i]
@@ -952,6 +941,14 @@ class Planner:
             added = self.add_move(point, feed_mm_s, dir_masks, piece_nm, mix, replay,
                                   homing_axes) or added
         return added
+
+    def _scaled(self, steps):
+        """add_move's weights for steps too many for the mixer's integers: scaled, and
+        the steps the schedule then gives, worked out with the mixer itself."""
+        scaled = normalize(steps, self.drives)
+        for i in range(self.drives):
+            self._weights[i] = scaled[i]
+        return list(schedule_counts(scaled, sum(steps)))
 
     def _dir_words(self, dir_masks, inv):
         """The DIR pins a block sets and clears, for each of the 16 patterns of its X Y Z

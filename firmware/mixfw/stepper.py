@@ -237,7 +237,7 @@ def _start(mem_buf, b: int) -> int:
 @micropython.viper
 def tick(io) -> int:
     """One timer tick. Returns 1 if a step was taken. io: (mem, out, endstops), made
-    once (tick_io): the step loop's array, where it writes (see the module's comment),
+    once: the step loop's array, where it writes (see the module's comment),
     and the endstops' reader.
 
     A stepping tick has the mixer and the pin writes inline, because a viper call

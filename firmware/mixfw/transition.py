@@ -40,10 +40,6 @@ class Transitions:
     def synchronize(self):
         self.planner.synchronize()
 
-    def _ended(self):
-        """No move waits: the queue ends where the planner's does."""
-        self.position_steps = self.planner.position_steps
-
     @staticmethod
     def _printing_nm(move):
         return move[2] if move[2] > 0 and move[0] != move[1] else 0
@@ -65,8 +61,8 @@ class Transitions:
 
     def _release(self):
         move = self.pending.pop(0)
-        if not self.pending:
-            self._ended()
+        if not self.pending:  # the queue ends where the planner's does
+            self.position_steps = self.planner.position_steps
         self.pending_printing_nm -= self._printing_nm(move)
         p = self.planner
         mix_id, weights = move[5]
@@ -81,7 +77,7 @@ class Transitions:
         """A halt: waiting moves are dropped with the queue."""
         self.pending = []
         self.pending_printing_nm = 0
-        self._ended()
+        self.position_steps = self.planner.position_steps
 
     def set_mix(self, mix_id, weights, tool=-1):
         """A mix change: it reaches back over the last L0 of printing extrusion, the
