@@ -86,7 +86,8 @@ PLANNER_TICK_US = 50
 NOTES = {
     "chip_planner_lines_per_s": (
         "G1 lines per second parsed and planned by the firmware on the emulated Pico "
-        "(board %s): lines %d-%d of the example (289 G1 of 301, read into RAM first) "
+        "(board %s): lines %d-%d of the example (289 G1 of 301, read into RAM first; "
+        "relative E, after M83, as in the file) "
         "through printer.parser.parse and printer.run_line into the planner, the queue "
         "retired by hand one block per wait as boards/sim/plan_only.py's retire_one "
         "does (full look-ahead), WHILE the step path runs a six-drive mixed move of "
