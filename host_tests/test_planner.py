@@ -303,6 +303,52 @@ def test_positions_become_the_same_steps_as_by_the_full_product(mp):
         assert a == b and c == d, case
 
 
+BLOCK_WEIGHTS = """
+import sys, json
+from array import array
+from mixfw.planner import block_weights
+out = []
+for counts in json.loads(sys.stdin.read()):
+    n = len(counts)
+    weights = array("i", [7] * n)
+    steps = array("i", [7] * n)
+    fits = block_weights(array("i", counts), weights, steps)
+    out.append([fits, list(steps), list(weights)])
+print(json.dumps(out))
+"""
+
+
+def test_block_weights_are_the_steps_over_their_gcd(mp):
+    """The mixer weights of a block (planner.block_weights, viper): each drive's
+    steps, of either sign, over their gcd, so one period of the schedule is the whole
+    block; 0 (and the weights untouched) where that period is longer than the
+    mixer's integers take, as for counts a 64-bit port reads zero-extended."""
+    import math
+    import random
+    from mixfw.planner import MAX_PERIOD
+    rnd = random.Random(25)
+    cases = [[0] * 6, [5], [-5, 0, 0], [12, -18, 30], [MAX_PERIOD, 0], [MAX_PERIOD + 1, 0],
+             [10001, 10000], [-20000, 1], [3, 0, 0, 0, 0, -3]]
+    for _ in range(400):
+        n = rnd.randint(1, 6)
+        scale = rnd.choice([1, 7, 120])
+        cases.append([rnd.choice([-1, 1]) * scale * rnd.randint(0, 40) *
+                      rnd.choice([0, 1, 1]) for _ in range(n)])
+        cases.append([rnd.randint(-30000, 30000) for _ in range(n)])
+    got = mp.json(BLOCK_WEIGHTS, stdin=json.dumps(cases).encode())
+    for counts, (fits, steps, weights) in zip(cases, got):
+        want = [abs(c) for c in counts]
+        assert steps == want, counts
+        g = 0
+        for c in want:
+            g = math.gcd(g, c)
+        if g and sum(want) // g > MAX_PERIOD:
+            assert (fits, weights) == (0, [7] * len(counts)), counts
+        else:
+            assert fits == 1, counts
+            assert weights == [c // g if g else 0 for c in want], counts
+
+
 STEPS_OF_NM = """
 import sys, json
 from array import array
