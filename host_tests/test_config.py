@@ -95,7 +95,7 @@ class Commands:
         self.parser = Parser(cmd_config.RAW_COMMANDS)
         cmd_config.register(self, config)
 
-    def register(self, name, fn, help_text):
+    def register(self, name, fn):
         self.handlers[name] = fn
 
     def reply(self, text):

@@ -631,9 +631,9 @@ def text(line):
 
 p = Printer(96, lambda: None, (("M", 117), ("M", 118)))
 for name in ("G0", "G1", "G4", "G28", "G90", "G91", "G92", "M104", "M106", "M114", "M163", "T"):
-    p.register(name, words, "fuzz", guarded=True)
-p.register("M117", text, "fuzz")
-p.register("M118", text, "fuzz")
+    p.register(name, words, guarded=True)
+p.register("M117", text)
+p.register("M118", text)
 p.add_channel(Feed(sys.stdin.buffer.read()))
 p.serve()
 sys.stdout.write("//done\\n")

@@ -38,7 +38,7 @@ class Faults:
 
 def install(printer):
     f = Faults(printer)
-    printer.register("M7101", f.m7101, "simulation: the step timer's callback raises")
-    printer.register("M7102", f.m7102, "simulation: hang the main loop S<ms>")
-    printer.register("M7103", f.m7103, "simulation: DMA IRQs S<us> late, every P-th")
+    printer.register("M7101", f.m7101)  # simulation: the step timer's callback raises
+    printer.register("M7102", f.m7102)  # simulation: hang the main loop S<ms>
+    printer.register("M7103", f.m7103)  # simulation: DMA IRQs S<us> late, every P-th
     return f

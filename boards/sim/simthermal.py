@@ -156,5 +156,6 @@ def install(simmachine, board, printer=None):
     world = World(simmachine, board.PINS, board.SETTINGS)
     simmachine.add_world_hook(world.advance)
     if printer is not None:
-        printer.register("M7100", world.m7100, "simulation: inject a thermal fault H<n> F<code>")
+        # simulation: inject a thermal fault H<n> F<code>
+        printer.register("M7100", world.m7100)
     return world

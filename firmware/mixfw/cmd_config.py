@@ -135,16 +135,16 @@ class ConfigCommands:
 
 def register(printer, config):
     c = ConfigCommands(printer, config)
-    printer.register("M503", c.m503, "print the configuration as M926 lines")
-    printer.register("M925", c.m925, "print one option: I<option>")
-    printer.register("M926", c.m926, "set an option: I<option> V<value> (no V: default)")
-    printer.register("M502", c.m502, "every option to its default")
-    printer.register("M501", c.m501, "load the saved configuration")
-    printer.register("M500", c.m500, "save the configuration")
-    printer.register("M930", c.m930, "apply the configuration")
-    printer.register("M92", c.m92, "steps per mm: X Y Z E")
-    printer.register("M201", c.m201, "maximum acceleration mm/s^2: X Y Z E")
-    printer.register("M203", c.m203, "maximum speed mm/s: X Y Z E")
-    printer.register("M204", c.m204, "acceleration mm/s^2: P print, R retract")
-    printer.register("M205", c.m205, "junction deviation J<mm>, min move time B<us>")
+    printer.register("M503", c.m503)  # print the configuration as M926 lines
+    printer.register("M925", c.m925)  # print one option: I<option>
+    printer.register("M926", c.m926)  # set an option: I<option> V<value> (no V: default)
+    printer.register("M502", c.m502)  # every option to its default
+    printer.register("M501", c.m501)  # load the saved configuration
+    printer.register("M500", c.m500)  # save the configuration
+    printer.register("M930", c.m930)  # apply the configuration
+    printer.register("M92", c.m92)  # steps per mm: X Y Z E
+    printer.register("M201", c.m201)  # maximum acceleration mm/s^2: X Y Z E
+    printer.register("M203", c.m203)  # maximum speed mm/s: X Y Z E
+    printer.register("M204", c.m204)  # acceleration mm/s^2: P print, R retract
+    printer.register("M205", c.m205)  # junction deviation J<mm>, min move time B<us>
     return c

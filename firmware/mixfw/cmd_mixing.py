@@ -304,12 +304,13 @@ RAW_COMMANDS = (("M", 567), ("M", 168), ("M", 169))
 
 
 def register(printer, mixing):
-    printer.register("M163", mixing.m163, "set a drive's weight: S<drive> P<weight>")
-    printer.register("M164", mixing.m164, "store the weights as virtual tool S<tool> [P1 save]")
-    printer.register("M165", mixing.m165, "whole mix A B C D H I; R reports every tool")
-    printer.register("M567", mixing.m567, "a tool's mix: P<tool> E<w0>:<w1>:...")
-    printer.register("M167", mixing.m167, "filament used per drive; R clears")
-    printer.register("M168", mixing.m168, "palette: mixtures over the drives, w0:w1,...")
-    printer.register("M166", mixing.m166, "Z gradient A<z0> Z<z1> I<tool0> J<tool1> S T")
-    printer.register("M169", mixing.m169, "gradient of stops along Z or E")
-    printer.register("T", mixing.t, "select virtual tool")
+    printer.register("M163", mixing.m163)  # set a drive's weight: S<drive> P<weight>
+    # store the weights as virtual tool S<tool> [P1 save]
+    printer.register("M164", mixing.m164)
+    printer.register("M165", mixing.m165)  # whole mix A B C D H I; R reports every tool
+    printer.register("M567", mixing.m567)  # a tool's mix: P<tool> E<w0>:<w1>:...
+    printer.register("M167", mixing.m167)  # filament used per drive; R clears
+    printer.register("M168", mixing.m168)  # palette: mixtures over the drives, w0:w1,...
+    printer.register("M166", mixing.m166)  # Z gradient A<z0> Z<z1> I<tool0> J<tool1> S T
+    printer.register("M169", mixing.m169)  # gradient of stops along Z or E
+    printer.register("T", mixing.t)  # select virtual tool

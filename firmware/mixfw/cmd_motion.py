@@ -530,25 +530,25 @@ class Motion:
 
 def register(printer, motion):
     m = motion
-    for name, fn, text in (
-        ("G0", m.g1, "rapid move (same as G1)"),
-        ("G1", m.g1, "straight move X Y Z E F"),
-        ("G4", m.g4, "dwell P<ms> or S<s>"),
-        ("G28", m.g28, "home axes to min endstops"),
-        ("G90", m.g90, "absolute coordinates"),
-        ("G91", m.g91, "relative coordinates"),
-        ("G92", m.g92, "set position"),
-        ("G20", m.g20, "inch units (refused)"),
-        ("G21", m.g21, "millimetre units"),
-        ("M82", m.m82, "absolute E"),
-        ("M83", m.m83, "relative E"),
-        ("M400", m.m400, "wait for moves to finish"),
-        ("M17", m.m17, "enable drivers"),
-        ("G10", m.g10, "firmware retraction"),
-        ("G11", m.g11, "firmware unretraction"),
-        ("M18", m.m18, "disable drivers"),
-        ("M84", m.m18, "disable drivers"),
+    for name, fn in (
+        ("G0", m.g1),  # rapid move (same as G1)
+        ("G1", m.g1),  # straight move X Y Z E F
+        ("G4", m.g4),  # dwell P<ms> or S<s>
+        ("G28", m.g28),  # home axes to min endstops
+        ("G90", m.g90),  # absolute coordinates
+        ("G91", m.g91),  # relative coordinates
+        ("G92", m.g92),  # set position
+        ("G20", m.g20),  # inch units (refused)
+        ("G21", m.g21),  # millimetre units
+        ("M82", m.m82),  # absolute E
+        ("M83", m.m83),  # relative E
+        ("M400", m.m400),  # wait for moves to finish
+        ("M17", m.m17),  # enable drivers
+        ("G10", m.g10),  # firmware retraction
+        ("G11", m.g11),  # firmware unretraction
+        ("M18", m.m18),  # disable drivers
+        ("M84", m.m18),  # disable drivers
     ):
-        printer.register(name, fn, text, guarded=name in ("G0", "G1", "G4", "G10", "G11", "G28", "M17"))
-    printer.register("M119", m.m119, "endstop states")
-    printer.register("M211", m.m211, "soft limits S0/S1")
+        printer.register(name, fn, guarded=name in ("G0", "G1", "G4", "G10", "G11", "G28", "M17"))
+    printer.register("M119", m.m119)  # endstop states
+    printer.register("M211", m.m211)  # soft limits S0/S1

@@ -97,8 +97,9 @@ class Reports:
 
 
 def register(printer, reports):
-    printer.register("M114", reports.m114, "report position")
-    printer.register("M115", reports.m115, "firmware info")
-    printer.register("M122", reports.m122, "diagnostics: underruns, free heap")
-    printer.register("M117", reports.m117, "status message: M117 <text>")
-    printer.register("M118", reports.m118, "send text to the host: M118 [A1] [E1] [Pn] <text>")
+    printer.register("M114", reports.m114)  # report position
+    printer.register("M115", reports.m115)  # firmware info
+    printer.register("M122", reports.m122)  # diagnostics: underruns, free heap
+    printer.register("M117", reports.m117)  # status message: M117 <text>
+    # send text to the host: M118 [A1] [E1] [Pn] <text>
+    printer.register("M118", reports.m118)

@@ -148,20 +148,20 @@ class ThermalCommands:
 
 def register(printer, thermal, motion):
     c = ThermalCommands(printer, thermal)
-    for name, fn, text, guarded in (
-        ("M104", c.m104, "set hot end temperature S<C>", True),
-        ("M109", c.m109, "set hot end temperature S<C> and wait", True),
-        ("M140", c.m140, "set bed temperature S<C>", True),
-        ("M190", c.m190, "set bed temperature S<C> and wait", True),
-        ("M116", c.m116, "wait for every heater to reach its target", True),
-        ("M105", c.m105, "report temperatures", False),
-        ("M155", c.m155, "report temperatures every S<s> seconds (S0: stop)", False),
-        ("M106", c.m106, "part fan on S<0-255>", False),
-        ("M107", c.m107, "part fan off", False),
-        ("M302", c.m302, "cold extrusion: P1 allow, P0 refuse, S<C> minimum", False),
-        ("M922", c.m922, "re-arm heaters after a thermal fault", False),
+    for name, fn, guarded in (
+        ("M104", c.m104, True),  # set hot end temperature S<C>
+        ("M109", c.m109, True),  # set hot end temperature S<C> and wait
+        ("M140", c.m140, True),  # set bed temperature S<C>
+        ("M190", c.m190, True),  # set bed temperature S<C> and wait
+        ("M116", c.m116, True),  # wait for every heater to reach its target
+        ("M105", c.m105, False),  # report temperatures
+        ("M155", c.m155, False),  # report temperatures every S<s> seconds (S0: stop)
+        ("M106", c.m106, False),  # part fan on S<0-255>
+        ("M107", c.m107, False),  # part fan off
+        ("M302", c.m302, False),  # cold extrusion: P1 allow, P0 refuse, S<C> minimum
+        ("M922", c.m922, False),  # re-arm heaters after a thermal fault
     ):
-        printer.register(name, fn, text, guarded)
+        printer.register(name, fn, guarded)
     motion.extrusion_guards.append(c.check_extrusion)
     printer.add_background(c.autoreport)
     return c

@@ -164,26 +164,26 @@ class Printer:
         self.failed = False
         self.sink = None  # M28 upload: takes each received line's text instead of running it
         self.job = None  # a file being printed: next_line() -> bytes or None, .paused
-        for name, fn, text in (
-            ("M110", self.m110, "set the line number: M110 N<n>"),
-            ("M112", self.m112, "emergency stop"),
-            ("M108", self.m108, "end a heating wait"),
-            ("M410", self.m410, "quick stop: drop the queued moves, heaters stay on"),
-            ("M876", self.m876, "answer a host prompt: S<choice>"),
-            ("M113", self.m113, "busy keep-alive interval S<s> (0: none)"),
-            ("M999", self.m999, "clear a halt and resume"),
-            ("M997", self.m997, "stop serving and restart into the REPL (for an update)"),
-            ("M932", self.m932, "refuse commands after the first error"),
-            ("M933", self.m933, "leave refuse-after-error mode"),
+        for name, fn in (
+            ("M110", self.m110),  # set the line number: M110 N<n>
+            ("M112", self.m112),  # emergency stop
+            ("M108", self.m108),  # end a heating wait
+            ("M410", self.m410),  # quick stop: drop the queued moves, heaters stay on
+            ("M876", self.m876),  # answer a host prompt: S<choice>
+            ("M113", self.m113),  # busy keep-alive interval S<s> (0: none)
+            ("M999", self.m999),  # clear a halt and resume
+            ("M997", self.m997),  # stop serving and restart into the REPL (for an update)
+            ("M932", self.m932),  # refuse commands after the first error
+            ("M933", self.m933),  # leave refuse-after-error mode
         ):
-            self.register(name, fn, text)
+            self.register(name, fn)
 
     # --- registration and replies ---
-    def register(self, name, handler, help_text, guarded=False):
+    def register(self, name, handler, guarded=False):
         """name like "G1" or "M163"; "T" takes every tool number. guarded: refused
-        while the printer is halted (moves, heating). help_text documents the command
-        where it is registered; nothing prints it, so it is not kept (a table of them
-        would hold 1-2 KB of RAM)."""
+        while the printer is halted (moves, heating). Each command's help is a comment
+        where it is registered: nothing prints it, and as strings the texts held about
+        3.5 KB of a chip's heap for good (a .mpy file's constants load into RAM)."""
         letter = name[0]
         number = int(name[1:]) if len(name) > 1 else -1
         key = command_key(letter, number)
