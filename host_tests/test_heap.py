@@ -1,5 +1,10 @@
 """The heap's big blocks (mixfw/heap.py) on the unix port: the step loop's arrays each
-take one block, and build() takes them from a reserve held while the modules load."""
+take one block, and build() takes them from a reserve held while the modules load; and
+a G-code line takes nothing from the heap on its way to the planner."""
+import json
+import math
+
+from mixstep import paths
 
 HEAP = """
 import gc, json, sys
@@ -38,3 +43,87 @@ def test_arrays_take_one_block_each_from_the_reserve_held_while_the_modules_load
     assert got["one"] < 4 * 5000 + 256 < got["two"]
     assert got["held"] == [got["need"]] and got["left"] == 0
     assert got["arrays"] + 2048 <= got["need"]
+
+
+# Whether a call takes anything from the heap, even what it gives back at once: a
+# bytecode function whose locals and stack pass 11 words gets its frame from the heap
+# at every call, and frees it on return, so gc.mem_alloc() never shows it, and
+# micropython.heap_lock() makes the VM take the frame from the C stack instead. With
+# gc.threshold(1) any allocation collects first, and the garbage left before the call
+# is then gone. On a chip's fragmented heap one such allocation costs up to hundreds
+# of microseconds.
+PROBE = """
+import gc
+def _garbage():
+    bytearray(8000)
+def allocates(fn, a, b):
+    gc.collect()
+    _garbage()
+    before = gc.mem_alloc()
+    gc.threshold(1)
+    fn(a, b)
+    gc.threshold(-1)
+    return gc.mem_alloc() < before - 4000
+def _small(a, b):
+    return a
+def _wide(a, b):  # a frame of more than 11 words
+    c = d = e = f = g = h = i = j = k = l = a
+    return c
+for _ in range(3):  # the probe's own first calls
+    allocates(_small, 7, 2)
+assert not allocates(_small, 7, 2) and allocates(_wide, 7, 2)
+"""
+
+PLAN_LINES = PROBE + """
+import json, sys
+import simmachine
+sys.modules["machine"] = simmachine
+import board
+from mixfw import assemble
+from plan_only import retire_one
+simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%%d" %% i for i in range(6)])
+printer = assemble.build(files_root=None)
+printer.planner.idle = retire_one(printer.mem, printer.planner.queue)
+parse = printer.parser.parse
+for raw in (b"M302 P1", b"M83"):
+    printer.run_line(parse(raw, len(raw)))
+buf = bytearray(256)
+def plan(raw, n):
+    printer.run_line(parse(raw, n))
+out = []
+for raw in json.loads(%r):
+    n = len(raw)
+    buf[:n] = raw.encode()
+    out.append([allocates(parse, buf, n), allocates(plan, buf, n)])
+print(json.dumps(out))
+"""
+
+
+FILLED = 64  # lines: more moves than the simulated board's queue holds
+
+
+def test_a_planned_g1_line_takes_nothing_from_the_heap_not_even_a_frame(mp):
+    """The example's perimeter and infill moves, planned against a full queue: the
+    parse of every line, and every G1 line that changes neither the feed rate nor has
+    filament over an eighth of its path (those work out new float limits), take
+    nothing from the heap. The first moves are left out: while the queue fills,
+    SLOWDOWN works out slower speeds in floats."""
+    lines = paths.EXAMPLE_GCODE.read_text().splitlines()[2999:3300]
+    lines = [raw for raw in lines if raw[:4] not in ("M109", "M190", "M116")]
+    got = mp.json(PLAN_LINES % json.dumps(lines))
+    assert [raw for raw, (parsed, _) in zip(lines, got) if parsed] == []
+    at = {"X": 0.0, "Y": 0.0}
+    plain = []
+    feed_before = True
+    for number, (raw, (_, planned)) in enumerate(zip(lines, got)):
+        words = {w[0]: float(w[1:]) for w in raw.split(";")[0].split()[1:]}
+        if raw.startswith("G1 "):
+            path = math.hypot(words.get("X", at["X"]) - at["X"],
+                              words.get("Y", at["Y"]) - at["Y"])
+            if (number >= FILLED and "F" not in words and not feed_before and "E" in words
+                    and 8 * abs(words["E"]) <= path):
+                plain.append((raw, planned))
+            feed_before = "F" in words
+            at.update({k: v for k, v in words.items() if k in at})
+    assert len(plain) > 150
+    assert [raw for raw, planned in plain if planned] == []

@@ -120,10 +120,15 @@ _E_TWICE = const(9)
 
 
 @micropython.viper
-def _scan(buf: ptr8, n: int, mant: ptr32, decimals: ptr8, raw: ptr32, r: ptr32) -> int:
+def _scan(buf: ptr8, n: int, words) -> int:
     """Words of buf[:n] into mant/decimals (only those present are written) and the
-    result words r. raw: a count, then the keys of the commands whose arguments are
-    text. Returns 0, or an _E_ code with r[_R_AT] naming the letter or character."""
+    result words r, with words = (mant, decimals, raw, r). raw: a count, then the keys
+    of the commands whose arguments are text. Returns 0, or an _E_ code with r[_R_AT]
+    naming the letter or character."""
+    mant = ptr32(words[0])
+    decimals = ptr8(words[1])
+    raw = ptr32(words[2])
+    r = ptr32(words[3])
     present = 0
     valued = 0
     r[_R_LETTER] = 0
@@ -246,12 +251,17 @@ class Parser:
         keys = [command_key(l, n) for l, n in raw_commands]
         self.raw = array("i", [len(keys)] + keys)
         self.result = array("i", bytes(4 * _R_WORDS))
+        self._words = (self.line.mant, self.line.decimals, self.raw, self.result)
 
     def parse(self, buf, n):
         """Parse buf[:n] into self.line. Raises GcodeError naming the problem."""
+        # At most 11 words of locals and stack, here and in every function a line
+        # calls: MicroPython gives a bytecode function with more its frame from the
+        # heap at every call, and on a chip's fragmented heap that costs up to
+        # hundreds of microseconds. The rare parts are methods of their own.
         ln = self.line
         r = self.result
-        err = _scan(buf, n, ln.mant, ln.decimals, self.raw, r)
+        err = _scan(buf, n, self._words)
         if err:
             raise GcodeError(self._reason(err))
         ln.present = r[_R_PRESENT]
@@ -262,19 +272,24 @@ class Parser:
         ln.key = r[_R_KEY]
         # The N word and the text arguments are rare: stored only where they change
         # (each store costs the chips microseconds, on every line).
-        numbered = r[_R_HAS_N]
-        if numbered or ln.has_line_number:
-            ln.has_line_number = numbered == 1
+        if r[_R_HAS_N] or ln.has_line_number:
+            ln.has_line_number = r[_R_HAS_N] == 1
             ln.line_number = r[_R_N]
-        start = r[_R_ARGS]
-        if start >= 0:
-            end = start
-            while end < n and buf[end] != 59 and buf[end] != 42:
-                end += 1
-            ln.args_text = bytes(buf[start:end]).decode().strip()
-        elif ln.args_text:
-            ln.args_text = ""
+        if r[_R_ARGS] >= 0 or ln.args_text:
+            self.args_text(buf, n)
         return ln
+
+    def args_text(self, buf, n):
+        """The text after a raw-argument command, up to a comment or checksum."""
+        ln = self.line
+        start = self.result[_R_ARGS]
+        if start < 0:
+            ln.args_text = ""
+            return
+        end = start
+        while end < n and buf[end] != 59 and buf[end] != 42:
+            end += 1
+        ln.args_text = bytes(buf[start:end]).decode().strip()
 
     def command_of_failed(self):
         """After parse() raised: the command_key of the line's command, if its command
