@@ -17,7 +17,6 @@
 # stepper's S_HEAD/S_TAIL/S_ACTIVE/S_POS words (plan_only.retire_one).
 import sys
 import gc
-import io
 import json
 import os
 import time
@@ -224,9 +223,10 @@ def serve():
                     gc.collect()
                     res["timed"] = plan(words[1], False, 2)
             except Exception as e:  # said with its traceback and the heap left
-                trace = io.StringIO()
-                sys.print_exception(e, trace)
-                res = {"failed": trace.getvalue(), "mem_free": gc.mem_free()}
+                res = None  # the heap may be too full for the answer: the traceback first
+                gc.collect()
+                sys.print_exception(e)
+                res = {"failed": repr(e), "mem_free": gc.mem_free()}
             gc.collect()
             print("bench:", end="")  # one line, with no copy of the answer made for it
             json.dump(res, sys.stdout)

@@ -4,29 +4,37 @@
 #               planned against a full look-ahead queue, as while printing;
 #   retire_all: every queued block at once, the cheapest look-ahead.
 # Homing ends at once: every endstop is hit as the block is retired.
+from mixfw.compat import const
 from mixfw import stepper as st
+
+# The words as constants, which the compiler folds: a closure over more than five
+# names allocates its cells' list at every call on MicroPython (the waits run once a
+# line), and a multi-block allocation on a chip's fragmented heap can cost hundreds of
+# microseconds; module attributes would be lookups by name.
+_S_HEAD = const(0)
+_S_TAIL = const(1)
+_S_ACTIVE = const(2)
+_S_HOME_STOP = const(27)
+assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _S_HOME_STOP) == (
+    st.S_HEAD, st.S_TAIL, st.S_ACTIVE, st.S_HOME_STOP)
 
 
 def retire_one(mem, queue_blocks):
-    # The words in locals: module attributes are lookups by name, which would charge a
-    # bench with tens of microseconds a line of what no firmware does.
-    tail_at, head_at, active_at, stop_at = st.S_TAIL, st.S_HEAD, st.S_ACTIVE, st.S_HOME_STOP
-
     def wait():
-        tail = mem[tail_at]
-        if tail != mem[head_at]:
+        tail = mem[_S_TAIL]
+        if tail != mem[_S_HEAD]:
             tail += 1
-            mem[tail_at] = 0 if tail >= queue_blocks else tail
-        mem[active_at] = 0
-        mem[stop_at] = 7
+            mem[_S_TAIL] = 0 if tail >= queue_blocks else tail
+        mem[_S_ACTIVE] = 0
+        mem[_S_HOME_STOP] = 7
 
     return wait
 
 
 def retire_all(mem, queue_blocks):
     def wait():
-        mem[st.S_TAIL] = mem[st.S_HEAD]
-        mem[st.S_ACTIVE] = 0
-        mem[st.S_HOME_STOP] = 7
+        mem[_S_TAIL] = mem[_S_HEAD]
+        mem[_S_ACTIVE] = 0
+        mem[_S_HOME_STOP] = 7
 
     return wait
