@@ -4,6 +4,8 @@ a G-code line takes nothing from the heap on its way to the planner."""
 import json
 import math
 
+import pytest
+
 from mixstep import paths
 
 HEAP = """
@@ -87,30 +89,81 @@ printer.planner.idle = retire_one(printer.mem, printer.planner.queue)
 parse = printer.parser.parse
 for raw in (b"M302 P1", b"M83"):
     printer.run_line(parse(raw, len(raw)))
+class Host:  # a console whose bytes are the line probed; the answers go nowhere
+    def __init__(self):
+        self.line = bytearray(257)
+        self.n = self.at = self.errors = 0
+    def readinto(self, mv, block=False):
+        k = 0
+        while self.at < self.n and k < len(mv):
+            mv[k] = self.line[self.at]
+            self.at += 1
+            k += 1
+        return k
+    def write(self, text):
+        if text.startswith("Error") or text.startswith("Resend"):
+            self.errors += 1
+host = Host()
+printer.add_channel(host)
+channel = printer.channels[0]
 buf = bytearray(256)
-def plan(raw, n):
-    printer.run_line(parse(raw, n))
+def serve(a, b):  # one line, as Printer.serve takes it from a host
+    printer.pump_all()
+    printer.answer(channel, channel.next_line())
+def run_job_line(a, b):  # one line, as Printer.serve takes it from the file printed
+    printer.run_job_line()
+way, root, lines = json.loads(%r)
+if way == "file":
+    from mixfw.files import Files
+    files = Files(root, printer)
+    files.select("part.gcode")
+    files.start()
+    serve = run_job_line
 out = []
-for raw in json.loads(%r):
+for raw in lines:
     n = len(raw)
     buf[:n] = raw.encode()
-    out.append([allocates(parse, buf, n), allocates(plan, buf, n)])
-print(json.dumps(out))
+    host.line[:n + 1] = buf[:n] + b"\\n"
+    host.n = n + 1
+    host.at = 0
+    out.append([allocates(printer.parser.parse, buf, n), allocates(serve, 0, 0)])
+x_steps = printer.planner.position_steps[0]
+print(json.dumps([out, host.errors, x_steps]))
 """
 
 
 FILLED = 64  # lines: more moves than the simulated board's queue holds
 
 
-def test_a_planned_g1_line_takes_nothing_from_the_heap_not_even_a_frame(mp):
-    """The example's perimeter and infill moves, planned against a full queue: the
-    parse of every line, and every G1 line that changes neither the feed rate nor has
-    filament over an eighth of its path (those work out new float limits), take
-    nothing from the heap. The first moves are left out: while the queue fills,
-    SLOWDOWN works out slower speeds in floats."""
+def numbered(lines):
+    """The lines as a host prints a file: comments off, each with a line number and
+    checksum, from N1 (a channel starts at N0)."""
+    out = []
+    for number, raw in enumerate(lines, 1):
+        text = "N%d %s" % (number, raw.split(";")[0].strip())
+        checksum = 0
+        for c in text.encode():
+            checksum ^= c
+        out.append("%s*%d" % (text, checksum))
+    return out
+
+
+@pytest.mark.parametrize("way", ["host", "numbered", "file"])
+def test_a_g1_line_takes_nothing_from_the_heap_not_even_a_frame(mp, tmp_path, way):
+    """The example's perimeter and infill moves, sent by a host or printed from a file,
+    planned against a full queue: the parse of every line, and every G1 line that
+    changes neither the feed rate nor has filament over an eighth of its path (those
+    work out new float limits), from its bytes' arrival to its `ok`, take nothing from
+    the heap. The first moves are left out: while the queue fills, SLOWDOWN works out
+    slower speeds in floats."""
     lines = paths.EXAMPLE_GCODE.read_text().splitlines()[2999:3300]
     lines = [raw for raw in lines if raw[:4] not in ("M109", "M190", "M116")]
-    got = mp.json(PLAN_LINES % json.dumps(lines))
+    (tmp_path / "part.gcode").write_text("\n".join(lines) + "\n")
+    sent = numbered(lines) if way == "numbered" else lines
+    got, errors, x_steps = mp.json(PLAN_LINES % json.dumps([way, str(tmp_path), sent]))
+    # Every line was taken and planned: the last move's X is where the planner is.
+    last_x = [w for raw in lines if raw.startswith("G1 ") for w in raw.split() if w[0] == "X"][-1]
+    assert errors == 0 and x_steps == round(float(last_x[1:]) * 80)
     assert [raw for raw, (parsed, _) in zip(lines, got) if parsed] == []
     at = {"X": 0.0, "Y": 0.0}
     plain = []

@@ -752,6 +752,7 @@ def test_fuzz_intake_parser_and_protocol(mp):
 
     run()
     assert COUNTS["fuzz"] >= 10000
+    COUNTS["fuzz_core_ran"] = 1
 
 
 # The whole firmware: only commands whose virtual time is bounded (no dwell, homing,
@@ -827,5 +828,7 @@ def test_zz_counts():
     # Runs last (file order): the numbers asked for in the closing note.
     print("hostile lines sent: %d, fuzz lines: %d, M112 stop times (us): %s"
           % (COUNTS["hostile"], COUNTS["fuzz"], COUNTS.get("m112_stop_us")))
-    if COUNTS["fuzz"]:
+    # Only in the worker that ran the core's fuzzing (pytest-xdist spreads the tests):
+    # the whole firmware's fuzzing counts its lines too.
+    if COUNTS.get("fuzz_core_ran"):
         assert COUNTS["fuzz"] >= 10000

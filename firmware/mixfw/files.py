@@ -1,6 +1,9 @@
 # G-code files on the board's flash filesystem: listing, selecting, printing
 # (a job the printer core runs a line at a time between console lines) and uploading.
 import os
+from mixfw.intake import Intake
+
+_CHUNK_BYTES = 256  # read from the file at a time
 
 
 class FileError(ValueError):
@@ -16,28 +19,60 @@ def _check_name(name):
 
 
 class Job:
-    """A file being printed, read a line at a time."""
+    """A file being printed, read a line at a time into an Intake, as a console's lines
+    are: in chunks into buffers made once (a bytes object a line would be garbage on
+    the chips), with the same comment stripping and the same limit on a line's words."""
 
-    def __init__(self, path, name, announce):
+    def __init__(self, path, name, announce, line_bytes):
         self.name = name
         self.f = open(path, "rb")
         self.size = os.stat(path)[6]
-        self.pos = 0
+        self.pos = 0  # bytes handed to the intake: the end of the line being run
         self.line = 0
         self.paused = True
         self.announce = announce
+        self.intake = Intake(line_bytes)
+        self.chunk = bytearray(_CHUNK_BYTES)
+        self.at = self.end = 0  # chunk[at:end] is yet to go to the intake
 
     def next_line(self):
-        data = self.f.readline()
-        if not data:
-            return None
-        self.pos += len(data)
+        """The next line into self.intake: its status (intake.LINE_OK, or a fault such as
+        a line too long), or 0 at the end of the file. The caller takes the line."""
+        # In small methods: a bytecode function whose locals and stack pass 11 words
+        # takes its frame from the heap at every call (see printer.answer).
+        status = self.intake.next_line()
+        while not status:
+            if not self._feed():
+                return self._last_line()
+            status = self.intake.next_line()
         self.line += 1
-        return data
+        return status
+
+    def _feed(self):
+        """More of the file into the intake, up to a line's end; False at the file's."""
+        if self.at >= self.end:
+            self.end = self.f.readinto(self.chunk) or 0
+            self.at = 0
+            if not self.end:
+                return False
+        end = min(self.end, self.at + self.intake.room())
+        at = self.intake.put(self.chunk, self.at, end)
+        self.pos += at - self.at
+        self.at = at
+        return True
+
+    def _last_line(self):
+        """At the end of the file: a last line with no newline, or 0."""
+        if not (self.intake.n or self.intake.fault):
+            return 0
+        self.intake.put(b"\n", 0, 1)
+        return self.next_line()
 
     def seek(self, pos):
         self.f.seek(pos)
         self.pos = pos
+        self.at = self.end = 0
+        self.intake.clear()
 
     def done(self):
         self.paused = True  # the file stays open: M26 rewinds it for another print
@@ -67,7 +102,7 @@ class Files:
     def select(self, name):
         path = self.path(name)
         try:
-            job = Job(path, name, self.printer.broadcast)
+            job = Job(path, name, self.printer.broadcast, self.printer.line_bytes)
         except OSError:
             raise FileError("open failed, File: %s." % name)
         self.cancel()

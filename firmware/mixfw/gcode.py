@@ -16,6 +16,10 @@ class GcodeError(ValueError):
     """Bad input: the line is answered with `Error:` and the reason, then the stream goes on."""
 
 
+class WordsError(GcodeError):
+    """The parser's: the line's words are malformed."""
+
+
 def command_key(letter, number):
     """The command table's key of G1, M163, ...; _scan works it out the same way."""
     return ord(letter) * 10000 + number
@@ -263,7 +267,7 @@ class Parser:
         r = self.result
         err = _scan(buf, n, self._words)
         if err:
-            raise GcodeError(self._reason(err))
+            raise WordsError(self._reason(err))
         ln.present = r[_R_PRESENT]
         ln.valued = r[_R_VALUED]
         code = r[_R_LETTER]

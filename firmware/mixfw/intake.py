@@ -137,6 +137,13 @@ class Intake:
         or 0. The line is buf[:n] until take() is called."""
         return _take(self.ring, self.st, self.buf, self.size)
 
+    def clear(self):
+        """Forget every byte, as if none had come."""
+        self.take()
+        self.st[_HEAD] = 0
+        self.st[_COUNT] = 0
+        self.st[_SCAN_N] = 0
+
     def take(self):
         """Forget the line just returned so the next one starts empty."""
         st = self.st

@@ -11,7 +11,7 @@
 # is room, so nothing is ever dropped.
 import time
 from mixfw.compat import micropython, ptr8
-from mixfw.gcode import Parser, GcodeError, command_key
+from mixfw.gcode import Parser, GcodeError, WordsError, command_key
 from mixfw.intake import Intake, LINE_OK, LINE_CUT
 
 BUSY_EVERY_MS = 2000
@@ -50,6 +50,17 @@ def _after_line_number(buf, i, n):
     return _skip_blanks(buf, i, n)
 
 
+def _numbered(buf, n):
+    """Does the line start with an N word (after blanks)?"""
+    i = _skip_blanks(buf, 0, n)
+    return i < n and buf[i] in (78, 110)
+
+
+def _m110(buf, n):
+    """Is the line's command (after an optional N word) M110?"""
+    return _is_command(buf, _after_line_number(buf, 0, n), n, 110)
+
+
 def _is_command(buf, i, n, number):
     """Is there an M<number> word at i (blanks allowed after M, as the parser does)?"""
     if i >= n or buf[i] not in (77, 109):
@@ -72,20 +83,54 @@ def _checksum(buf: ptr8, n: int) -> int:
     return cs
 
 
-# Commands acted on as soon as their line arrives, before the lines queued ahead of
-# them; when their turn comes they do nothing more.
-EMERGENCY = (112, 108, 410, 876)
+def _number(buf, i, n):
+    """The unsigned number buf[i:n] is, blanks around it allowed, or -1. Read in place:
+    a bytes object a line would be garbage on the chips."""
+    i = _skip_blanks(buf, i, n)
+    while n > i and buf[n - 1] in (32, 9, 13):
+        n -= 1
+    if i >= n:
+        return -1
+    value = 0
+    while i < n:
+        c = buf[i] - 48
+        if not 0 <= c <= 9:
+            return -1
+        value = value * 10 + c
+        i += 1
+    return value
+
+
+def _line_number_at(buf, i, n):
+    """The line number after an N at i (blanks, a sign, digits), or None."""
+    i = _skip_blanks(buf, i, n)
+    start = i + 1 if i < n and buf[i] == 45 else i
+    end = start
+    while end < n and 48 <= buf[end] <= 57:
+        end += 1
+    if end == start:
+        return None
+    value = _number(buf, start, end)
+    return -value if start > i else value
 
 
 def _emergency(scan, n):
     """The M number if this line starts (after an optional N<number>) with an emergency
-    command, else 0."""
+    command, else 0: M112, M108, M410 and M876, acted on as soon as their line arrives,
+    before the lines queued ahead of them (when their turn comes they do nothing
+    more). Written out, not a loop over them: a loop's iterator takes this function's
+    frame past what MicroPython keeps off the heap, and this runs for every line."""
     i = _after_line_number(scan, 0, n)
     if i >= n or scan[i] not in (77, 109):
         return 0  # not an M command: most lines, told at the first letter
-    for number in EMERGENCY:
-        if _is_command(scan, i, n, number):
-            return number
+    if _is_command(scan, i, n, 112):
+        return 112
+    if _is_command(scan, i, n, 108):
+        return 108
+    if _is_command(scan, i, n, 410):
+        return 410
+    if _is_command(scan, i, n, 876):
+        return 876
     return 0
 
 
@@ -103,15 +148,21 @@ class Channel:
 
     def pump(self, printer, block=False):
         """Move waiting bytes into the ring. Returns the count read."""
-        intake = self.intake
-        free = intake.room()
+        free = self.intake.room()
         if free <= 0 or not self.open:
             return 0
-        mv = self.chunk_mv if free >= 64 else self.chunk_mv[:free]
-        n = self.console.readinto(mv, block)
+        n = self.console.readinto(self.chunk_mv if free >= 64 else self.chunk_mv[:free],
+                                  block)
         if n < 0:
             self.open = False
             return 0
+        if n:
+            self._into_ring(printer, n)
+        return n
+
+    def _into_ring(self, printer, n):
+        """chunk[:n] into the ring; an emergency command acts as its line ends."""
+        intake = self.intake
         at = 0
         while at < n:
             at = intake.put(self.chunk, at, n)
@@ -119,7 +170,6 @@ class Channel:
                 number = _emergency(intake.scan, intake.end_scan())
                 if number:
                     printer.emergency(number)
-        return n
 
     def next_line(self):
         """Feed ring bytes to the intake until a line ends: its status, or 0."""
@@ -163,7 +213,7 @@ class Printer:
         self.refuse_after_error = False
         self.failed = False
         self.sink = None  # M28 upload: takes each received line's text instead of running it
-        self.job = None  # a file being printed: next_line() -> bytes or None, .paused
+        self.job = None  # a file being printed: next_line() -> its intake's status, .paused
         for name, fn in (
             ("M110", self.m110),  # set the line number: M110 N<n>
             ("M112", self.m112),  # emergency stop
@@ -224,13 +274,17 @@ class Printer:
             self._run_background()
 
     def pump_all(self):
+        if self.listeners:
+            self._accept()
+        for ch in self.channels:
+            ch.pump(self)
+
+    def _accept(self):
         for lst in self.listeners:
             if len(self.channels) < self.max_channels:
                 console = lst.accept()
                 if console is not None:
                     self.add_channel(console)
-        for ch in self.channels:
-            ch.pump(self)
 
     def idle(self):
         """Let time pass inside a command: the step loop runs, background tasks run,
@@ -286,7 +340,7 @@ class Printer:
             self.halt("emergency stop (M112)")
 
     def emergency(self, number):
-        """An emergency command has just arrived (see EMERGENCY)."""
+        """An emergency command has just arrived (see _emergency)."""
         if number == 112:
             self.emergency_stop()
         elif number == 108:
@@ -316,51 +370,47 @@ class Printer:
         """Check a line's number and checksum before anything else looks at it.
         Returns the parsed line, or None for a repeat of a line already executed."""
         star = buf.find(b"*", 0, n)  # in C, as _checksum is viper
+        if star < 0 and not _numbered(buf, n):
+            return self.parser.parse(buf, n)
+        return self._check_numbered(ch, buf, n, star)
+
+    def _check_numbered(self, ch, buf, n, star):
+        """_check_protocol's lines with an N word or a checksum (star: where its * is,
+        or -1), as hosts send every line of a print."""
         if star >= 0:
-            cs = _checksum(buf, star)
-            digits = bytes(buf[star + 1:n]).strip()
-            if not digits or not digits.isdigit() or int(digits) != cs:
+            if _number(buf, star + 1, n) != _checksum(buf, star):
                 raise Resend("checksum mismatch, Last Line: %d" % ch.last_n)
-        end = star if star >= 0 else n
-        i = _skip_blanks(buf, 0, end)
-        numbered = i < end and buf[i] in (78, 110)
-        if numbered and not _is_command(buf, _after_line_number(buf, 0, end), end, 110):
-            if star < 0:
-                raise Resend("No Checksum with line number, Last Line: %d" % ch.last_n)
-            number = self._line_number(buf, i + 1, end)
-            if number <= ch.last_n:
-                return None
-            if number != ch.last_n + 1:
-                raise Resend("Line Number is not Last Line Number+1, Last Line: %d"
-                             % ch.last_n)
-            # Taken now: a line that arrived intact uses up its number even if it is bad
-            # G-code, so the host does not send it again.
-            ch.last_n = number
-        elif star >= 0 and not numbered:
+            n = star  # the words end at the *
+        i = _skip_blanks(buf, 0, n)
+        if not (i < n and buf[i] in (78, 110)):
             raise Resend("No Line Number with checksum, Last Line: %d" % ch.last_n)
-        return self._parse(buf, end)
-
-    def _parse(self, buf, end):
-        """The parsed line. Bad words after a command we don't know are not an error:
-        the command is answered as unknown, since its arguments may be free text."""
-        try:
-            return self.parser.parse(buf, end)
-        except GcodeError:
-            key = self.parser.command_of_failed()
-            if not key or key in self.commands or (
-                    key // 10000 == 84 and _ANY_TOOL in self.commands):
-                raise
-            self.reply('echo:Unknown command: "%s%d"' % (chr(key // 10000), key % 10000))
+        if _m110(buf, n):  # M110 sets the number: its own N is not checked
+            return self.parser.parse(buf, n)
+        if star < 0:
+            raise Resend("No Checksum with line number, Last Line: %d" % ch.last_n)
+        i = _line_number_at(buf, i + 1, n)
+        if i is None:
+            raise Resend("malformed line number, Last Line: %d" % ch.last_n)
+        if i <= ch.last_n:
             return None
+        if i != ch.last_n + 1:
+            raise Resend("Line Number is not Last Line Number+1, Last Line: %d" % ch.last_n)
+        # Taken now: a line that arrived intact uses up its number even if it is bad
+        # G-code, so the host does not send it again.
+        ch.last_n = i
+        return self.parser.parse(buf, n)
 
-    def _line_number(self, buf, i, end):
-        i = _skip_blanks(buf, i, end)
-        j = i + 1 if i < end and buf[i] == 45 else i
-        while j < end and 48 <= buf[j] <= 57:
-            j += 1
-        if j == i or (j == i + 1 and buf[i] == 45):
-            raise Resend("malformed line number, Last Line: %d" % self.current.last_n)
-        return int(bytes(buf[i:j]))
+    def _answered_unknown(self):
+        """After the parser's WordsError: if the line's command is one we don't know,
+        say so. Bad words after a command we don't know are not an error: its arguments
+        may be free text. (Caught where the line's other errors are: a handler of its
+        own would take the line's every parse a frame from the heap.)"""
+        key = self.parser.command_of_failed()
+        if not key or key in self.commands or (
+                key // 10000 == 84 and _ANY_TOOL in self.commands):
+            return False
+        self.reply('echo:Unknown command: "%s%d"' % (chr(key // 10000), key % 10000))
+        return True
 
     def run_line(self, line):
         """Run a parsed line; returns text to follow `ok` or None."""
@@ -384,41 +434,57 @@ class Printer:
                command_key("M", 999), command_key("M", 110), command_key("M", 105),
                command_key("M", 114), command_key("M", 115), command_key("M", 27))
 
+    # The functions every line runs keep their locals, stack and exception handlers
+    # within 11 words: MicroPython gives a bytecode function with more its frame from
+    # the heap at every call, up to hundreds of microseconds on a chip's fragmented
+    # heap (test_heap probes it). Hence the small methods below.
     def answer(self, ch, status):
-        intake = ch.intake
-        self.current = ch
-        self._cmd_halt_count = self.halt_count
-        self._cmd_stop_count = self.stop_count
-        self._busy_at_ms = time.ticks_ms()
-        suffix = None
-        try:
-            if status != LINE_OK:
-                raise GcodeError(intake.error_text(status))
-            if self.sink is not None:
-                suffix = self._to_sink(ch, intake.buf, intake.n)
-            else:
-                line = self._check_protocol(ch, intake.buf, intake.n)
-                if line is not None:
-                    suffix = self.run_line(line)
-        except Resend as e:
-            self.reply("Error:%s" % e)
-            self.reply("Resend: %d" % (ch.last_n + 1))
-        except Stopped as e:
-            self.reply("echo:command stopped: %s" % e)
-        except Halted as e:
-            self.reply("Error:command stopped: %s" % e)
-        except ValueError as e:  # GcodeError, MixError, PlanError: bad input
-            self.reply("Error:%s" % e)
-            self.failed = True
-        except Exception as e:  # a bug must not take the printer down with it
-            self.reply("Error:internal error in this command: %r" % e)
-            self.failed = True
-        intake.take()
+        suffix = self._run_answer(ch, status)
+        ch.intake.take()
         if suffix:
             ch.write("ok " + suffix + "\n")
         else:
             ch.write("ok\n")
         self.current = None
+
+    @micropython.native  # a handler with `as e` takes more words than bytecode keeps off the heap
+    def _run_answer(self, ch, status):
+        """The line's text to follow `ok`, or None; errors answered as the host expects."""
+        try:
+            return self._answer(ch, status)
+        except Exception as e:
+            self._answer_error(ch, e)
+
+    def _answer(self, ch, status):
+        intake = ch.intake
+        self.current = ch
+        self._cmd_halt_count = self.halt_count
+        self._cmd_stop_count = self.stop_count
+        self._busy_at_ms = time.ticks_ms()
+        if status != LINE_OK:
+            raise GcodeError(intake.error_text(status))
+        if self.sink is not None:
+            return self._to_sink(ch, intake.buf, intake.n)
+        line = self._check_protocol(ch, intake.buf, intake.n)
+        if line is not None:
+            return self.run_line(line)
+
+    def _answer_error(self, ch, e):
+        if isinstance(e, Resend):
+            self.reply("Error:%s" % e)
+            self.reply("Resend: %d" % (ch.last_n + 1))
+        elif isinstance(e, Stopped):
+            self.reply("echo:command stopped: %s" % e)
+        elif isinstance(e, Halted):
+            self.reply("Error:command stopped: %s" % e)
+        elif isinstance(e, WordsError) and self._answered_unknown():
+            pass
+        elif isinstance(e, ValueError):  # GcodeError, MixError, PlanError: bad input
+            self.reply("Error:%s" % e)
+            self.failed = True
+        else:  # a bug must not take the printer down with it
+            self.reply("Error:internal error in this command: %r" % e)
+            self.failed = True
 
     def _to_sink(self, ch, buf, n):
         """While uploading (M28): store the line's text; only M29 runs."""
@@ -444,21 +510,32 @@ class Printer:
         """Run the next line of the file being printed. Its replies go to every host;
         an error pauses the print (M24 resumes after the failed line)."""
         job = self.job
-        data = job.next_line()
-        if data is None:
+        status = job.next_line()
+        if not status:
             self.job = None
             job.done()
             return
         self._cmd_halt_count = self.halt_count
         self._cmd_stop_count = self.stop_count
+        self._run_job_words(job, status)
+        job.intake.take()
+
+    @micropython.native  # a handler with `as e` takes more words than bytecode keeps off the heap
+    def _run_job_words(self, job, status):
         try:
-            line = self.parser.parse(data, len(data))
-            self.run_line(line)
-        except Halted:
-            pass
-        except Exception as e:
+            self._run_words(job.intake, status)
+        except Exception as e:  # one clause: the native emitter refuses a second's `as`
+            self._job_error(job, e)
+
+    def _job_error(self, job, e):
+        if not isinstance(e, Halted):
             self.broadcast("Error:%s (file %s, line %d)" % (e, job.name, job.line))
             job.paused = True
+
+    def _run_words(self, intake, status):
+        if status != LINE_OK:
+            raise GcodeError(intake.error_text(status))
+        self.run_line(self.parser.parse(intake.buf, intake.n))
 
     # --- the main loop ---
     def serve(self):
