@@ -3,7 +3,6 @@
 import os
 from mixfw.intake import Intake
 
-_CHUNK_BYTES = 256  # read from the file at a time
 
 
 class FileError(ValueError):
@@ -32,7 +31,7 @@ class Job:
         self.paused = True
         self.announce = announce
         self.intake = Intake(line_bytes)
-        self.chunk = bytearray(_CHUNK_BYTES)
+        self.chunk = bytearray(256)  # read from the file at a time
         self.at = self.end = 0  # chunk[at:end] is yet to go to the intake
 
     def next_line(self):
@@ -42,13 +41,15 @@ class Job:
         # takes its frame from the heap at every call (see printer.answer).
         status = self.intake.next_line()
         while not status:
-            if not self._feed():
-                return self._last_line()
+            if not self.feed():
+                if not (self.intake.n or self.intake.fault):
+                    return 0
+                self.intake.put(b"\n", 0, 1)  # a last line with no newline
             status = self.intake.next_line()
         self.line += 1
         return status
 
-    def _feed(self):
+    def feed(self):
         """More of the file into the intake, up to a line's end; False at the file's."""
         if self.at >= self.end:
             self.end = self.f.readinto(self.chunk) or 0
@@ -61,18 +62,11 @@ class Job:
         self.at = at
         return True
 
-    def _last_line(self):
-        """At the end of the file: a last line with no newline, or 0."""
-        if not (self.intake.n or self.intake.fault):
-            return 0
-        self.intake.put(b"\n", 0, 1)
-        return self.next_line()
-
     def seek(self, pos):
         self.f.seek(pos)
         self.pos = pos
         self.at = self.end = 0
-        self.intake.clear()
+        self.intake.reset()
 
     def done(self):
         self.paused = True  # the file stays open: M26 rewinds it for another print

@@ -137,7 +137,7 @@ class Intake:
         or 0. The line is buf[:n] until take() is called."""
         return _take(self.ring, self.st, self.buf, self.size)
 
-    def clear(self):
+    def reset(self):
         """Forget every byte, as if none had come."""
         self.take()
         self.st[_HEAD] = 0

@@ -101,7 +101,7 @@ def _number(buf, i, n):
     return value
 
 
-def _line_number_at(buf, i, n):
+def _line_number(buf, i, n):
     """The line number after an N at i (blanks, a sign, digits), or None."""
     i = _skip_blanks(buf, i, n)
     start = i + 1 if i < n and buf[i] == 45 else i
@@ -157,10 +157,10 @@ class Channel:
             self.open = False
             return 0
         if n:
-            self._into_ring(printer, n)
+            self.put(printer, n)
         return n
 
-    def _into_ring(self, printer, n):
+    def put(self, printer, n):
         """chunk[:n] into the ring; an emergency command acts as its line ends."""
         intake = self.intake
         at = 0
@@ -275,11 +275,11 @@ class Printer:
 
     def pump_all(self):
         if self.listeners:
-            self._accept()
+            self.accept()
         for ch in self.channels:
             ch.pump(self)
 
-    def _accept(self):
+    def accept(self):
         for lst in self.listeners:
             if len(self.channels) < self.max_channels:
                 console = lst.accept()
@@ -374,21 +374,21 @@ class Printer:
             return self.parser.parse(buf, n)
         return self._check_numbered(ch, buf, n, star)
 
-    def _check_numbered(self, ch, buf, n, star):
-        """_check_protocol's lines with an N word or a checksum (star: where its * is,
+    def _check_numbered(self, ch, buf, n, at):
+        """_check_protocol's lines with an N word or a checksum (at: where its * is,
         or -1), as hosts send every line of a print."""
-        if star >= 0:
-            if _number(buf, star + 1, n) != _checksum(buf, star):
+        if at >= 0:
+            if _number(buf, at + 1, n) != _checksum(buf, at):
                 raise Resend("checksum mismatch, Last Line: %d" % ch.last_n)
-            n = star  # the words end at the *
+            n = at  # the words end at the *
         i = _skip_blanks(buf, 0, n)
         if not (i < n and buf[i] in (78, 110)):
             raise Resend("No Line Number with checksum, Last Line: %d" % ch.last_n)
         if _m110(buf, n):  # M110 sets the number: its own N is not checked
             return self.parser.parse(buf, n)
-        if star < 0:
+        if at < 0:
             raise Resend("No Checksum with line number, Last Line: %d" % ch.last_n)
-        i = _line_number_at(buf, i + 1, n)
+        i = _line_number(buf, i + 1, n)
         if i is None:
             raise Resend("malformed line number, Last Line: %d" % ch.last_n)
         if i <= ch.last_n:
@@ -400,11 +400,9 @@ class Printer:
         ch.last_n = i
         return self.parser.parse(buf, n)
 
-    def _answered_unknown(self):
+    def _unknown(self):
         """After the parser's WordsError: if the line's command is one we don't know,
-        say so. Bad words after a command we don't know are not an error: its arguments
-        may be free text. (Caught where the line's other errors are: a handler of its
-        own would take the line's every parse a frame from the heap.)"""
+        say so."""
         key = self.parser.command_of_failed()
         if not key or key in self.commands or (
                 key // 10000 == 84 and _ANY_TOOL in self.commands):
@@ -437,25 +435,12 @@ class Printer:
     # The functions every line runs keep their locals, stack and exception handlers
     # within 11 words: MicroPython gives a bytecode function with more its frame from
     # the heap at every call, up to hundreds of microseconds on a chip's fragmented
-    # heap (test_heap probes it). Hence the small methods below.
+    # heap (test_heap probes it). A handler of `except ... as` takes too many words, so
+    # a line's errors are caught in serve(), whose frame is made once; and there are
+    # few new names: past the edge of the interned names' sixth pool, a seventh takes
+    # 7.8 kB of a Pico's heap.
     def answer(self, ch, status):
-        suffix = self._run_answer(ch, status)
-        ch.intake.take()
-        if suffix:
-            ch.write("ok " + suffix + "\n")
-        else:
-            ch.write("ok\n")
-        self.current = None
-
-    @micropython.native  # a handler with `as e` takes more words than bytecode keeps off the heap
-    def _run_answer(self, ch, status):
-        """The line's text to follow `ok`, or None; errors answered as the host expects."""
-        try:
-            return self._answer(ch, status)
-        except Exception as e:
-            self._answer_error(ch, e)
-
-    def _answer(self, ch, status):
+        """Run ch's line and answer `ok`; an error is raised for report()."""
         intake = ch.intake
         self.current = ch
         self._cmd_halt_count = self.halt_count
@@ -464,27 +449,40 @@ class Printer:
         if status != LINE_OK:
             raise GcodeError(intake.error_text(status))
         if self.sink is not None:
-            return self._to_sink(ch, intake.buf, intake.n)
-        line = self._check_protocol(ch, intake.buf, intake.n)
-        if line is not None:
-            return self.run_line(line)
+            suffix = self._to_sink(ch, intake.buf, intake.n)
+        else:
+            suffix = self._check_protocol(ch, intake.buf, intake.n)
+            if suffix is not None:
+                suffix = self.run_line(suffix)
+        self.done(ch, suffix)
 
-    def _answer_error(self, ch, e):
-        if isinstance(e, Resend):
-            self.reply("Error:%s" % e)
+    def done(self, ch, text):
+        """ch's line has run: `ok`, with text after it if any."""
+        ch.intake.take()
+        if text:
+            ch.write("ok " + text + "\n")
+        else:
+            ch.write("ok\n")
+        self.current = None
+
+    def report(self, ch, err):
+        """answer() raised err: tell the host as it expects, then `ok`."""
+        if isinstance(err, Resend):
+            self.reply("Error:%s" % err)
             self.reply("Resend: %d" % (ch.last_n + 1))
-        elif isinstance(e, Stopped):
-            self.reply("echo:command stopped: %s" % e)
-        elif isinstance(e, Halted):
-            self.reply("Error:command stopped: %s" % e)
-        elif isinstance(e, WordsError) and self._answered_unknown():
-            pass
-        elif isinstance(e, ValueError):  # GcodeError, MixError, PlanError: bad input
-            self.reply("Error:%s" % e)
+        elif isinstance(err, Stopped):
+            self.reply("echo:command stopped: %s" % err)
+        elif isinstance(err, Halted):
+            self.reply("Error:command stopped: %s" % err)
+        elif isinstance(err, WordsError) and self._unknown():
+            pass  # bad words after a command we don't know: its arguments may be text
+        elif isinstance(err, ValueError):  # GcodeError, MixError, PlanError: bad input
+            self.reply("Error:%s" % err)
             self.failed = True
         else:  # a bug must not take the printer down with it
-            self.reply("Error:internal error in this command: %r" % e)
+            self.reply("Error:internal error in this command: %r" % err)
             self.failed = True
+        self.done(ch, None)
 
     def _to_sink(self, ch, buf, n):
         """While uploading (M28): store the line's text; only M29 runs."""
@@ -507,8 +505,9 @@ class Printer:
         return None
 
     def run_job_line(self):
-        """Run the next line of the file being printed. Its replies go to every host;
-        an error pauses the print (M24 resumes after the failed line)."""
+        """Run the next line of the file being printed; an error is raised for serve(),
+        which reports it to every host and pauses the print (M24 resumes after the
+        failed line)."""
         job = self.job
         status = job.next_line()
         if not status:
@@ -517,25 +516,11 @@ class Printer:
             return
         self._cmd_halt_count = self.halt_count
         self._cmd_stop_count = self.stop_count
-        self._run_job_words(job, status)
-        job.intake.take()
-
-    @micropython.native  # a handler with `as e` takes more words than bytecode keeps off the heap
-    def _run_job_words(self, job, status):
-        try:
-            self._run_words(job.intake, status)
-        except Exception as e:  # one clause: the native emitter refuses a second's `as`
-            self._job_error(job, e)
-
-    def _job_error(self, job, e):
-        if not isinstance(e, Halted):
-            self.broadcast("Error:%s (file %s, line %d)" % (e, job.name, job.line))
-            job.paused = True
-
-    def _run_words(self, intake, status):
+        intake = job.intake
         if status != LINE_OK:
             raise GcodeError(intake.error_text(status))
         self.run_line(self.parser.parse(intake.buf, intake.n))
+        intake.take()
 
     # --- the main loop ---
     def serve(self):
@@ -548,13 +533,23 @@ class Printer:
             for ch in self.channels:
                 status = ch.next_line()
                 if status:
-                    self.answer(ch, status)
+                    try:
+                        self.answer(ch, status)
+                    except Exception as err:
+                        self.report(ch, err)
                     did = True
             if did:
                 self._background_if_due()
                 continue
-            if self.job is not None and not self.job.paused:
-                self.run_job_line()
+            job = self.job
+            if job is not None and not job.paused:
+                try:
+                    self.run_job_line()
+                except Exception as err:
+                    job.intake.take()
+                    if not isinstance(err, Halted):
+                        self.broadcast("Error:%s (file %s, line %d)" % (err, job.name, job.line))
+                        job.paused = True
                 self._background_if_due()
                 continue
             # Plain loops, no list or generator to allocate: this runs on every idle
@@ -568,7 +563,8 @@ class Printer:
                 lockstep = lockstep and ch.lockstep
             if closed is not None:
                 if closed.intake.n or closed.intake.fault:  # a last line with no newline
-                    self.answer(closed, LINE_CUT)
+                    self.current = closed
+                    self.report(closed, GcodeError(closed.intake.error_text(LINE_CUT)))
                 self.channels.remove(closed)
                 continue
             if self.channels and not self.listeners and lockstep:
