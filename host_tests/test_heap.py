@@ -180,3 +180,25 @@ def test_a_g1_line_takes_nothing_from_the_heap_not_even_a_frame(mp, tmp_path, wa
             at.update({k: v for k, v in words.items() if k in at})
     assert len(plain) > 150
     assert [raw for raw, planned in plain if planned] == []
+
+
+BACKGROUND = PROBE + """
+import json, sys
+import simmachine
+sys.modules["machine"] = simmachine
+import board
+from mixfw import assemble
+simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(6)])
+printer = assemble.build(files_root=None)
+def turn(a, b):
+    printer._run_background()
+turn(0, 0)  # the first control period
+print(json.dumps([allocates(turn, 0, 0) for _ in range(5)]))
+"""
+
+
+def test_the_main_loops_background_takes_nothing_from_the_heap_between_control_periods(mp):
+    """The background tasks run at every turn of the main loop and of every wait, and
+    between lines at least every 10 ms: between two control periods they take
+    nothing from the heap (the control period's own floats are left out)."""
+    assert mp.json(BACKGROUND) == [False] * 5

@@ -285,8 +285,14 @@ class Thermal:
             self.fan.freq(int(_setting(settings, "fan_pwm_hz", 1)))
 
     def background(self, now_ms):
-        if time.ticks_diff(now_ms, self.next_ms) < 0:
-            return
+        # Runs at every turn of the main loop and of every wait: the control period's
+        # work is a method of its own, as a bytecode function whose locals and stack
+        # pass 11 words takes its frame from the heap at every call (printer.answer).
+        if time.ticks_diff(now_ms, self.next_ms) >= 0:
+            self.control(now_ms)
+
+    def control(self, now_ms):
+        """A control period: every heater's PID, and its checks."""
         dt_s = time.ticks_diff(now_ms, self.last_ms) / 1000.0
         self.last_ms = now_ms
         self.next_ms = time.ticks_add(now_ms, self.period_ms)
