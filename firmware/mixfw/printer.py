@@ -451,6 +451,8 @@ class Printer:
         if self.sink is not None:
             suffix = self._to_sink(ch, intake.buf, intake.n)
         else:
+            # The parsed line, then the text its handler gives: one local for both
+            # keeps the frame within 11 words.
             suffix = self._check_protocol(ch, intake.buf, intake.n)
             if suffix is not None:
                 suffix = self.run_line(suffix)
