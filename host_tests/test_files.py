@@ -81,3 +81,37 @@ def test_bad_file_commands_get_errors(tmp_path):
     assert p.send("M29")[0].startswith("Error:not writing a file")
     assert p.send("M30 nothing.gcode")[0] == "Error:Deletion failed, File: nothing.gcode."
     p.finish()
+
+
+def test_a_file_without_a_last_newline_prints_whole_and_m26_prints_it_again(tmp_path):
+    """The file is read in chunks through the console's intake: a last line with no
+    newline still runs, a line whose words pass the line buffer is refused by name
+    and pauses the print, and M26 S0 rewinds for a second print."""
+    files = tmp_path / "flash"
+    files.mkdir()
+    long_words = "G1 X1 " + " ".join("Y%d" % i for i in range(40))
+    (files / "job.gcode").write_text("M83\nG91\n; a comment " + "x" * 300 + "\n"
+                                     + long_words + "\nG1 X10 F3000\nG1 X5")
+    p = SimPrinter(files_dir=files)
+
+    def print_it():
+        p.send("M24")
+        while True:
+            replies = p.send("M27")
+            if any("Done printing file" in r for r in replies) or replies[0] == "Not SD printing":
+                return
+            if any(r.startswith("Error:") for r in replies):
+                return replies
+
+    p.send("M23 job.gcode")
+    errors = print_it()
+    assert errors and "line longer than" in " ".join(errors) and "line 4" in " ".join(errors)
+    assert print_it() is None  # M24 resumes after the refused line, to the file's end
+    p.send("M400")
+    assert p.send("M114")[0].startswith("X:15.00")
+    assert p.send("M26 S0") == ["ok"]
+    print_it()
+    print_it()
+    p.send("M400")
+    assert p.send("M114")[0].startswith("X:30.00")
+    p.finish()
