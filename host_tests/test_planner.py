@@ -581,6 +581,42 @@ def test_the_root_of_two_limbs_is_the_integer_square_root(mp):
     assert mp.json(ISQRT, stdin=json.dumps(values).encode()) == [isqrt(v) for v in values]
 
 
+# --- long division of two limbs (ramp.div_limbs) -----------------------------------
+
+DIV = """
+import sys, json
+from array import array
+from mixfw import ramp
+w = array("i", bytes(4 * ramp.IO_WORDS))
+out = []
+for v, c in json.loads(sys.stdin.read()):
+    w[ramp.IO_HI] = v >> 30
+    w[ramp.IO_LO] = v & 0x3FFFFFFF
+    ramp.div_limbs(w, c)
+    out.append([w[ramp.IO_HI], w[ramp.IO_LO], w[ramp.IO_HI + 2]])
+print(json.dumps(out))
+"""
+
+
+def test_two_limbs_over_a_word_give_the_exact_quotient_and_remainder(mp):
+    """Every divisor's bit length up to 29 bits, against every dividend's up to 60:
+    where a digit's estimate from the divisor's top bits is furthest off (a divisor
+    just above a power of two, a dividend of all ones) and where it is exact."""
+    import random
+    rnd = random.Random(29)
+    pairs = []
+    for cb in range(1, 30):
+        divisors = [1 << (cb - 1), (1 << cb) - 1, (1 << (cb - 1)) + 1]
+        divisors += [rnd.getrandbits(cb) | (1 << (cb - 1)) for _ in range(6)]
+        for c in divisors:
+            for vb in (0, 1, cb, 30, 31, 45, 59, 60):
+                pairs.append([rnd.getrandbits(vb) if vb else 0, c])
+            pairs.append([(1 << 60) - 1, c])
+            pairs.append([c * ((1 << 30) - 1) + c - 1, c])
+    got = mp.json(DIV, stdin=json.dumps(pairs).encode())
+    assert got == [[(v // c) >> 30, (v // c) & 0x3FFFFFFF, v % c] for v, c in pairs]
+
+
 # --- a move refused leaves the drives' filament as it was --------------------------
 
 REFUSED = """
