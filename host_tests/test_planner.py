@@ -617,6 +617,69 @@ def test_two_limbs_over_a_word_give_the_exact_quotient_and_remainder(mp):
     assert got == [[(v // c) >> 30, (v // c) & 0x3FFFFFFF, v % c] for v, c in pairs]
 
 
+# --- a * b // c scaled (ramp.product) ----------------------------------------------
+
+PRODUCT = """
+import sys, json
+from array import array
+from mixfw import ramp
+w = array("i", bytes(4 * ramp.IO_WORDS))
+out = []
+for a, b, c, s, how in json.loads(sys.stdin.read()):
+    x = ramp.product(w, a, b, c, s, how)
+    out.append([x, w[ramp.IO_HI], w[ramp.IO_LO]])
+print(json.dumps(out))
+"""
+
+
+def _product_model(a, b, c, s, how):
+    """ramp.product as its docstring and P_* say, in Python's integers: [returned,
+    hi, lo], with hi and lo only where the mode leaves them."""
+    cap = (1 << 30) - 1
+    v = a * b // c if c > 1 else a * b
+    if how == 0:  # P_LIMBS
+        return [0, v >> 30, v & cap]
+    if how == 3:  # P_TOP: v to s bits, truncated, and t with v = (hi, lo) 2**t
+        u = s - v.bit_length()
+        x = v << u if u >= 0 else v >> -u
+        return [-u, x >> 30, x & cap]
+    if how == 2:  # P_ROUND
+        s += 1
+    x = v << s if s >= 0 else v >> -s
+    if x >> 31:
+        return [cap, None, None]
+    if how == 2:
+        x = (x >> 1) + (x & 1)
+    return [min(x, cap), None, None]
+
+
+def test_a_product_over_a_divisor_scaled_is_exact_in_every_mode(mp):
+    """Each mode (P_LIMBS, P_TRUNC, P_ROUND, P_TOP) for products of every size below
+    2**60, no divisor and divisors up to 2**29, and scales on both sides of where the
+    result passes 2**31 and is capped."""
+    import random
+    rnd = random.Random(60)
+    cases = []
+    for how in range(4):
+        for _ in range(400):
+            a = rnd.getrandbits(rnd.randint(0, 30))
+            b = rnd.getrandbits(rnd.randint(0, 30))
+            c = rnd.choice([1, 1, rnd.getrandbits(rnd.randint(1, 29)) | 1])
+            bits = (a * b // c).bit_length()
+            if how == 3:
+                s = rnd.randint(1, 30)
+            else:
+                s = rnd.randint(-bits - 2, 33 - bits) if bits else rnd.randint(-5, 5)
+            cases.append([a, b, c, s, how])
+        cases += [[0, 5, 1, 3, how], [1, 1, 1, 30, how], [1 << 29, 2, 1, 0, how],
+                  [(1 << 30) - 1, (1 << 30) - 1, 1, -29, how]]
+    got = mp.json(PRODUCT, stdin=json.dumps(cases).encode())
+    for case, (x, hi, lo) in zip(cases, got):
+        want = _product_model(*case)
+        assert [x, hi if want[1] is not None else None,
+                lo if want[2] is not None else None] == want, case
+
+
 # --- a move refused leaves the drives' filament as it was --------------------------
 
 REFUSED = """

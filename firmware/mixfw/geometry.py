@@ -64,10 +64,13 @@ def lengths(g_buf, gf_buf, f_buf, flags: int) -> int:
     for i in range(4):
         a = g[G_D + i]
         if a:
-            nb = 0
-            while a:
-                a = a >> 1
-                nb += 1
+            nb = 1  # bits(a), halving the bits searched: five turns
+            b = 16
+            while b:
+                if a >> b:
+                    a = a >> b
+                    nb += b
+                b = b >> 1
             k = GF_SCALE + i
             if i == 3 and (flags & FL_E_NM):
                 k = GF_E_NM
@@ -82,8 +85,28 @@ def lengths(g_buf, gf_buf, f_buf, flags: int) -> int:
             if i == 3 and (flags & FL_E_NM):
                 k = GF_E_NM
             bits = gf[k]
-            c = int(product(g_buf, a, (bits & 0x7FFFFF) | 0x800000, 1,
-                            ((bits >> 23) & 0xFF) - _BIAS - top + 27, _P_TRUNC))
+            # a * mantissa (below 2**30 and 2**24) in two 30-bit limbs, as product()
+            # makes them, then shifted right u bits: below 2**27 by the choice of top.
+            # Written out, as the squares below: a call costs the chip several
+            # microseconds, and this runs for every axis of every line.
+            m = (bits & 0x7FFFFF) | 0x800000
+            u = top - 27 - ((bits >> 23) & 0xFF) + _BIAS
+            a1 = a >> 15
+            a0 = a & 0x7FFF
+            m1 = m >> 15
+            m0 = m & 0x7FFF
+            mid = a1 * m0 + a0 * m1
+            lo = ((mid & 0x7FFF) << 15) + a0 * m0
+            hi = a1 * m1 + (mid >> 15) + (lo >> 30)
+            lo = lo & 0x3FFFFFFF
+            if u <= 0:
+                c = lo << (0 - u)  # the product itself below 2**27: hi is 0
+            elif u >= 60:
+                c = 0
+            elif u >= 30:
+                c = hi >> (u - 30)
+            else:
+                c = (hi << (30 - u)) | (lo >> u)
         g[G_C + i] = c
     g[_G_SIGNS] = flags & 15
     # Sums of squares, in two limbs: X Y Z, then E. Each square c * c (c below 2**27)
@@ -114,11 +137,14 @@ def lengths(g_buf, gf_buf, f_buf, flags: int) -> int:
     g[_IO_LO] = lo
     g[G_LEN] = int(isqrt_limbs(g_buf))
     # G_DIST as a float32: 24 bits of it, and the unit's exponent.
-    nb = 0
+    nb = 1  # bits(dist), dist >= 1
     a = dist
-    while a:
-        a = a >> 1
-        nb += 1
+    b = 16
+    while b:
+        if a >> b:
+            a = a >> b
+            nb += b
+        b = b >> 1
     if nb > 24:
         mant = dist >> (nb - 24)
     else:
@@ -194,10 +220,15 @@ def junction(g_buf, gf_buf, flags: int) -> int:
             hi -= 1
         # Over the product of the lengths (below 2**56), both taken down to 29 bits of
         # it: the cosine to 28 bits, at most ONE.
-        nb = 30
+        nb = 30  # 30 + bits(d_hi), halving the bits searched: five turns
         a = d_hi
-        while a:
-            a = a >> 1
+        b = 16
+        while b:
+            if a >> b:
+                a = a >> b
+                nb += b
+            b = b >> 1
+        if a:
             nb += 1
         k = nb - 29  # both lengths have 25 bits or more: k > 20
         if k >= 30:

@@ -128,9 +128,16 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int):
     lk[at + L_MAX_ENTRY] = entry_v2 if entry_v2 < x else x
     # k = TICK_ONE n / mm as km 2**ke, km of 26 bits: n taken to 29 bits and TICK_ONE's
     # mantissa to 30 first, so the quotient has 33 bits or more.
-    ns = 0
-    while (n << ns) < 0x10000000:
-        ns += 1
+    ns = 28  # 29 - bits(n), at least 0: halving the bits searched, five turns
+    a = n
+    b = 16
+    while b:
+        if a >> b:
+            a = a >> b
+            ns -= b
+        b = b >> 1
+    if ns < 0:
+        ns = 0
     ke = int(product(w_buf, w[_W_M + F_TICK_ONE] << 6, n << ns, m_mm, 26, _P_TOP))
     ke += w[_W_E + F_TICK_ONE] - _BIAS - 6 - ns - e_mm
     km = w[_LO]

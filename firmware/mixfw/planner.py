@@ -300,9 +300,12 @@ def _queue_block(io, slot: int, n: int, flags: int, neg: int, mix_id: int, entry
     pos[1] = target[1]
     pos[2] = target[2]
     pos[3] = int(pos[3]) + e_steps
+    # given, an array 'i': a 64-bit port's ptr32 reads a negative count zero-extended,
+    # and the sum's low 32 bits, all the word keeps, are the same.
     drive_steps = ptr32(io[9])
+    steps_given = ptr32(given)
     for i in range(int(len(io[9]))):
-        drive_steps[i] += int(given[i])
+        drive_steps[i] += steps_given[i]
 
 
 @micropython.viper
@@ -944,11 +947,14 @@ class Planner:
 
     def _scaled(self, steps):
         """add_move's weights for steps too many for the mixer's integers: scaled, and
-        the steps the schedule then gives, worked out with the mixer itself."""
+        the steps the schedule then gives, worked out with the mixer itself, into
+        self._given (an array, as _queue_block reads it)."""
         scaled = normalize(steps, self.drives)
+        got = schedule_counts(scaled, sum(steps))
         for i in range(self.drives):
             self._weights[i] = scaled[i]
-        return list(schedule_counts(scaled, sum(steps)))
+            self._given[i] = got[i]
+        return self._given
 
     def _dir_words(self, dir_masks, inv):
         """The DIR pins a block sets and clears, for each of the 16 patterns of its X Y Z

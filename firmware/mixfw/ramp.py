@@ -173,30 +173,59 @@ def product(w_buf, a: int, b: int, c: int, s: int, how: int) -> int:
         w[_HI] = hi
         w[_LO] = lo
         return 0
-    # n: the bit length
+    if how != P_TOP:
+        # x * 2**s, truncated (rounded: to s + 1 bits, then halved), is capped where
+        # it reaches 2**31: the shift's overflow tells that, with no bit length.
+        if how == P_ROUND:
+            s += 1
+        if s >= 0:
+            if hi:
+                if s or hi > 1:
+                    return CAP
+                x = (hi << 30) | lo
+            elif lo:
+                if s >= 31 or lo >> (31 - s):
+                    return CAP
+                x = lo << s
+            else:
+                return 0
+        elif s > -30:
+            if hi >> (1 - s):
+                return CAP
+            x = (hi << (30 + s)) | (lo >> (0 - s))
+        elif s > -60:
+            x = hi >> (-30 - s)
+        else:
+            return 0
+        if how == P_ROUND:
+            x = (x >> 1) + (x & 1)
+        if x > CAP:
+            return CAP
+        return x
+    # P_TOP: n, the bit length, by halving the bits searched
     x = hi
     n = 30
     if not x:
         x = lo
         n = 0
-    b = 16  # halving the bits searched: five turns
-    while b:
-        if x >> b:
-            x = x >> b
-            n += b
-        b = b >> 1
+    if x >> 16:
+        x = x >> 16
+        n += 16
+    if x >> 8:
+        x = x >> 8
+        n += 8
+    if x >> 4:
+        x = x >> 4
+        n += 4
+    if x >> 2:
+        x = x >> 2
+        n += 2
+    if x >> 1:
+        x = x >> 1
+        n += 1
     if x:
         n += 1
-    if how == P_TOP:
-        u = s - n
-    else:
-        if how == P_ROUND:
-            s += 1
-        if not n:
-            return 0
-        if n + s > 31:
-            return CAP
-        u = s
+    u = s - n
     # (hi, lo) <<= u, or >>= -u, truncating (a left shift stays below 2**60)
     if u >= 30:
         hi = lo << (u - 30)
@@ -214,19 +243,9 @@ def product(w_buf, a: int, b: int, c: int, s: int, how: int) -> int:
         r = 0 - u
         lo = ((hi & ((1 << r) - 1)) << (30 - r)) | (lo >> r)
         hi = hi >> r
-    if how == P_TOP:
-        w[_HI] = hi
-        w[_LO] = lo
-        return 0 - u
-    x = lo
-    if how == P_ROUND:
-        # below 2**31 before the halving: hi is at most 1
-        x = (hi << 29) + (x >> 1) + (x & 1)
-    elif hi:
-        return CAP
-    if x > CAP:
-        return CAP
-    return x
+    w[_HI] = hi
+    w[_LO] = lo
+    return 0 - u
 
 
 _FRAC_MAX = const(0x8000000)
