@@ -36,6 +36,7 @@ L_DWELL = const(17)
 _L_V0 = const(18)  # the V2 whose rate _L_RATE_V0 is (-1: none): an entry's rate, kept
 _L_RATE_V0 = const(19)  # as the entry mostly stays when the block is rewritten
 L_WORDS = const(20)
+assert L_WORDS == 20  # plan_words clears each word by name
 SHIFT_BIAS = const(64)
 _SHIFT_BIAS = const(SHIFT_BIAS)
 
@@ -76,7 +77,11 @@ F_WORDS = const(6)
 _W_M = const(11)  # F_WORDS mantissas (with the hidden bit; 0 for 0)
 _W_E = const(17)  # and their exponent fields: x = m * 2**(field - _BIAS)
 _BIAS = const(150)  # float32's exponent bias and its 23 fraction bits
-W_WORDS = const(23)
+# The latest nominal speed's V2 and the float32 bits of the square it came from: most
+# lines keep the feed rate of the line before.
+_W_N2_BITS = const(23)
+_W_N2_V2 = const(24)
+W_WORDS = const(25)
 _CAP = const(0x3FFFFFFF)
 _HI = const(8)
 _LO = const(9)
@@ -99,10 +104,28 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int):
     lk = ptr32(lk_buf)
     w = ptr32(w_buf)
     f = ptr32(f_buf)
-    for i in range(L_WORDS):
-        lk[at + i] = 0
+    # Every word: those worked out below, then the rest (a loop turn costs the chip
+    # about as much as a store).
+    lk[at + L_GAIN] = 0
+    lk[at + L_MAX_ENTRY] = 0
+    lk[at + L_NOMINAL] = 0
+    lk[at + L_K2] = 0
+    lk[at + L_K_SHIFT] = 0
+    lk[at + L_RATE_NOM] = 0
+    lk[at + L_FLOOR] = 0
+    lk[at + L_ACC] = 0
+    lk[at + _L_BACK] = 0
+    lk[at + L_ENTRY] = 0
+    lk[at + L_EXIT] = 0
+    lk[at + _L_R0] = 0
     lk[at + L_RN] = -1  # no schedule worked out yet
+    lk[at + _L_R1] = 0
+    lk[at + _L_UNTIL] = 0
+    lk[at + _L_AFTER] = 0
+    lk[at + _L_RATE_DECEL] = 0
+    lk[at + L_DWELL] = 0
     lk[at + _L_V0] = -1
+    lk[at + _L_RATE_V0] = 0
     if n <= 0:
         lk[at + L_DWELL] = 1
         return
@@ -121,9 +144,13 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int):
     # GAIN = 2 V2_SCALE a mm (V2_SCALE = 2**6)
     x = int(product(w_buf, m_a, m_mm, 1, e_a + e_mm + 7, _P_ROUND))
     lk[at + L_GAIN] = x if x < _V2_MAX else _V2_MAX
-    x = int(product(w_buf, w[_W_M + F_NOMINAL2], 1, 1,
-                    w[_W_E + F_NOMINAL2] - _BIAS + 6, _P_ROUND))
-    x = x if x < _V2_MAX else _V2_MAX
+    bits = f[F_NOMINAL2]
+    if bits != w[_W_N2_BITS]:
+        x = int(product(w_buf, w[_W_M + F_NOMINAL2], 1, 1,
+                        w[_W_E + F_NOMINAL2] - _BIAS + 6, _P_ROUND))
+        w[_W_N2_V2] = x if x < _V2_MAX else _V2_MAX
+        w[_W_N2_BITS] = bits
+    x = w[_W_N2_V2]
     lk[at + L_NOMINAL] = x
     lk[at + L_MAX_ENTRY] = entry_v2 if entry_v2 < x else x
     # k = TICK_ONE n / mm as km 2**ke, km of 26 bits: n taken to 29 bits and TICK_ONE's

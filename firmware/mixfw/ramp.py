@@ -369,7 +369,9 @@ def ramp_into(io_buf):
                 break
             x = c_rem
             c = vn
-        if c < _FRAC_MAX:
+        if c < 0x8000:  # x < c: x << FRAC below 2**31, one division
+            q = (x << _FRAC) // c
+        elif c < _FRAC_MAX:
             q = 0
             for _ in range(4):
                 x = x << 4
