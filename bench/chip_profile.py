@@ -12,18 +12,19 @@ import gc
 import time
 from mixfw import cmd_motion, planner as planner_mod, lookahead
 
-# (label, owner, attribute): owner is a name looked up in `targets` below.
+# (label, owner, attribute): owner is a name looked up in `targets` below. The methods
+# the firmware calls from their class (Planner._plan_e(self, ...)) are wrapped there.
 TIMED = (
     ("parse", "parser", "parse"),
     ("g1", "commands", "G1"),
     ("motion.xyz_targets", "cmd_motion", "xyz_targets"),
-    ("motion._queue", "motion", "_queue"),
+    ("motion._queue", "motion_class", "_queue"),
     ("before_extrude", "before_extrude", 0),
     ("planner.add_move", "planner", "add_move"),
-    ("planner._plan_e", "planner", "_plan_e"),
+    ("planner._plan_e", "planner_class", "_plan_e"),
     ("block_weights", "planner_mod", "block_weights"),
     ("planner._xyz_steps", "planner_mod", "_xyz_steps"),
-    ("planner._new_slot", "planner", "_new_slot"),
+    ("planner._new_slot", "planner_class", "_new_slot"),
     ("planner._queue_block", "planner_mod", "_queue_block"),
     ("planner._remember_extrusion", "planner", "_remember_extrusion"),
     ("geometry.lengths", "planner_mod", "_lengths"),
@@ -52,6 +53,7 @@ def _targets(printer):
     motion = printer.motion
     return {"parser": printer.parser, "commands": printer.commands, "motion": motion,
             "before_extrude": motion.before_extrude, "planner": printer.planner,
+            "planner_class": type(printer.planner), "motion_class": type(motion),
             "planner_mod": planner_mod, "lookahead": lookahead, "cmd_motion": cmd_motion}
 
 
