@@ -12,7 +12,7 @@
 # the same integers.
 from mixfw.compat import const, micropython, ptr32
 from mixfw import ramp
-from mixfw.ramp import isqrt_limbs, product
+from mixfw.ramp import div_limbs, isqrt_limbs, product
 
 # Words of the geometry array g (array 'i', G_WORDS): first ramp.py's io words, which
 # product() and isqrt_limbs() use as scratch, then these.
@@ -239,7 +239,11 @@ def junction(g_buf, gf_buf, flags: int) -> int:
             num = (hi << (30 - k)) | (lo >> k)
         cos = _ONE
         if num < den:
-            cos = int(product(g_buf, num, _ONE, den, 0, _P_TRUNC))
+            # num * ONE // den, below ONE: num shifted into two limbs, one division.
+            g[_IO_HI] = num >> 2
+            g[_IO_LO] = (num & 3) << 28
+            div_limbs(g_buf, den)
+            cos = g[_IO_LO]
         if cos > _ONE - _STRAIGHT:
             if not sign:
                 v2 = _V2_MAX  # straight on
