@@ -176,23 +176,32 @@ def _scan(buf: ptr8, n: int, words) -> int:
         digits = 0
         has_number = 0
         seen_dot = 0
+        # The whole digits, then the decimals: a loop each, as a check per digit costs
+        # the chip about as much as the digit itself.
         while i < n:
             c = buf[i]
-            if c >= 48 and c <= 57:
-                has_number = 1
-                if digits < _MAX_DIGITS:
-                    if m != 0 or c != 48 or seen_dot:
-                        digits += 1
-                    m = m * 10 + c - 48
-                    if seen_dot:
-                        d += 1
-                elif not seen_dot:
-                    return _E_TOO_LONG
-            elif c == 46 and not seen_dot:
-                seen_dot = 1
-            else:
+            if c < 48 or c > 57:
                 break
+            has_number = 1
+            if digits >= _MAX_DIGITS:
+                return _E_TOO_LONG
+            if m != 0 or c != 48:  # leading zeros are no digits of the mantissa
+                digits += 1
+            m = m * 10 + c - 48
             i += 1
+        if i < n and buf[i] == 46:
+            seen_dot = 1
+            i += 1
+            while i < n:
+                c = buf[i]
+                if c < 48 or c > 57:
+                    break
+                has_number = 1
+                if digits < _MAX_DIGITS:  # decimals past those are read and dropped
+                    digits += 1
+                    m = m * 10 + c - 48
+                    d += 1
+                i += 1
         if i < n:
             # Only a blank, a comment, a checksum or the next letter may follow.
             c = buf[i]
@@ -257,6 +266,7 @@ class Parser:
         self.result = array("i", bytes(4 * _R_WORDS))
         self._words = (self.line.mant, self.line.decimals, self.raw, self.result)
 
+    @micropython.native
     def parse(self, buf, n):
         """Parse buf[:n] into self.line. Raises GcodeError naming the problem."""
         # At most 11 words of locals and stack, here and in every function a line
