@@ -113,6 +113,14 @@ def serve(a, b):  # one line, as Printer.serve takes it from a host
 def run_job_line(a, b):  # one line, as Printer.serve takes it from the file printed
     printer.run_job_line()
 way, root, lines = json.loads(%r)
+if way == "long":
+    # Past a metre of filament on every drive: positions in nm beyond small ints.
+    for tool in (b"T0", b"T1", b"T2"):
+        printer.run_line(parse(tool, 2))
+        for _ in range(8):
+            printer.run_line(parse(b"G1 E150 F6000", 13))
+    for raw in (b"T0", b"G92 E0"):
+        printer.run_line(parse(raw, len(raw)))
 if way == "file":
     from mixfw.files import Files
     files = Files(root, printer)
@@ -148,9 +156,11 @@ def numbered(lines):
     return out
 
 
-@pytest.mark.parametrize("way", ["host", "numbered", "file"])
+@pytest.mark.parametrize("way", ["host", "numbered", "file", "long"])
 def test_a_g1_line_takes_nothing_from_the_heap_not_even_a_frame(mp, tmp_path, way):
     """The example's perimeter and infill moves, sent by a host or printed from a file,
+    also after 1.2 m of filament on each of the three tools' drives (long: beyond the
+    chips' small ints in nm, see Planner._rebase),
     planned against a full queue: the parse of every line, and every G1 line that
     changes neither the feed rate nor has filament over an eighth of its path (those
     work out new float limits), from its bytes' arrival to its `ok`, take nothing from

@@ -680,6 +680,52 @@ def test_a_product_over_a_divisor_scaled_is_exact_in_every_mode(mp):
                 lo if want[2] is not None else None] == want, case
 
 
+# --- metres of filament: each drive's base (Planner._rebase) ------------------------
+
+LONG_PRINT = """
+import sys, json
+import simmachine
+sys.modules["machine"] = simmachine
+import board
+from mixfw import assemble
+from plan_only import retire_all
+simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(6)])
+printer = assemble.build(files_root=None)
+pl = printer.planner
+pl.idle = retire_all(printer.mem, pl.queue)
+if sys.stdin.read() == "no base":
+    for pq in pl._per_nm:  # a drive's filament never leaves low..high: no base
+        pq[3] = -(1 << 62)
+        pq[4] = 1 << 62
+lines = [b"M302 P1", b"M83", b"M567 P6 E0.1:0.15:0.2:0.25:0.12:0.18"]
+for turn in range(9):
+    # a metre on one drive, then a mix over all six with a remainder, then a
+    # retraction past the base's low edge and back
+    lines += [b"T%d" % (turn % 3)] + [b"G1 E150.0003 F6000"] * 6
+    lines += [b"T6", b"G1 X%d E47.123457 F3000" % (turn % 2), b"G1 E-160.5", b"G1 E160.5"]
+out = []
+for raw in lines:
+    printer.run_line(printer.parser.parse(raw, len(raw)))
+    out.append(list(pl.drive_steps))
+print(json.dumps({"steps": out, "rem": pl.drive_rem,
+                  "nm": [pq[5] + nm for pq, nm in zip(pl._per_nm, pl.drive_nm)],
+                  "bases": [pq[5] for pq in pl._per_nm]}))
+"""
+
+
+def test_metres_of_filament_give_each_drive_the_same_steps_with_a_base_as_without(mp):
+    """Each drive's filament in nm passes the chips' small ints within a metre or so; the
+    planner keeps a base of whole steps under it. Single-drive and mixed extrusion with
+    remainders, retractions past the base's low edge: every drive's step after every
+    line, and its exact filament, are those worked out with no base."""
+    based = mp.json(LONG_PRINT, stdin=b"")
+    plain = mp.json(LONG_PRINT, stdin=b"no base")
+    assert all(b > 0 for b in based.pop("bases")[:3])
+    assert not any(plain.pop("bases"))
+    assert based == plain
+    assert max(plain["nm"]) > 2 << 30
+
+
 # --- a move refused leaves the drives' filament as it was --------------------------
 
 REFUSED = """

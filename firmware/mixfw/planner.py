@@ -50,6 +50,12 @@ _S_QUEUE = const(26)
 _R_PENDING = const(93)
 assert (_S_QUEUE, _R_PENDING, _MAX_DRIVES) == (st.S_QUEUE, st.R_PENDING, MAX_DRIVES)
 _RING_IDLE = const(0x10000)  # see _ring_room
+# A drive's filament past its base (Planner._rebase), in nm: the base moves up once it
+# passes _NM_HIGH, leaving _NM_KEEP to _NM_KEEP + q, and back down below _NM_LOW. A
+# move's filament is far below _NM_LOW (max_extrude_mm).
+_NM_LOW = const(0x8000000)
+_NM_KEEP = const(0x10000000)
+_NM_HIGH = const(0x30000000)
 _F_MM = const(0)
 _F_ACCEL = const(1)
 _F_NOMINAL = const(2)
@@ -578,22 +584,50 @@ class Planner:
 
     def _set_spm_fixed(self):
         self._spm_fixed = [spm_fixed(v) for v in self.drive_steps_per_mm]
-        self._per_nm = [steps_per_nm(v) for v in self.drive_steps_per_mm]
+        # Per drive: [p, q, base steps, low, high, base nm], p/q its steps per nm (see
+        # _rebase for the rest), set by _drive_pos_from_steps.
+        self._per_nm = [list(steps_per_nm(v)) + [0, 0, 0, 0]
+                        for v in self.drive_steps_per_mm]
         # The longest extrusion that goes in one block (see add_move), worked out here
         # once: a big-int product per move costs the chips more than the rest of it.
         limit = NM_PER_MM * SPM_SCALE * (MAX_PERIOD - 2 * MAX_DRIVES)
         self._one_piece_nm = -(-limit // max(self._spm_fixed))
 
     def _nm_of_steps(self, i, steps):
-        p, q = self._per_nm[i]
-        return scaled_round(steps, q, p)
+        pq = self._per_nm[i]
+        return scaled_round(steps, pq[1], pq[0])
 
     def _drive_pos_from_steps(self):
         for i in range(self.drives):
-            self.drive_nm[i] = self._nm_of_steps(i, self.drive_steps[i])
+            pq = self._per_nm[i]
+            pq[2] = pq[5] = 0  # no base: the whole filament in drive_nm first
+            self.drive_nm[i] = self._rebase(i, self._nm_of_steps(i, self.drive_steps[i]))
             self.drive_rem[i] = 0
         self.rem_total = 1
         self.targets_known = False
+
+    def _rebase(self, i, x):
+        """Drive i's filament is its base plus x nm (drive_nm) plus the remainder; its
+        target step is the base's steps plus that of the rest. The base is a whole
+        number of q nm (p/q: its steps per nm), so its steps are exact, and it takes
+        all but _NM_KEEP to _NM_KEEP + q of the filament once it passes _NM_HIGH: a
+        print's metres of filament would be big ints on the chips, which every line's
+        arithmetic then allocates. Returns the nm past the new base: at least _NM_LOW
+        while there is a base, so that the rest's rounding (half away from zero) is
+        the whole filament's. Called where x leaves low..high (words 3 and 4)."""
+        pq = self._per_nm[i]
+        p, q, base_steps, low, high, base_nm = pq
+        k = 0
+        if q <= _NM_HIGH - _NM_KEEP:
+            if base_nm + x < _NM_KEEP:
+                k = -(base_nm // q)  # the whole base back
+            else:
+                k = (x - _NM_KEEP) // q
+        pq[2] = base_steps + k * p
+        pq[5] = base_nm = base_nm + k * q
+        pq[3] = _NM_LOW if base_nm else -_CAP - 1
+        pq[4] = _NM_HIGH if q <= _NM_HIGH - _NM_KEEP else _CAP
+        return x - k * q
 
     @micropython.native
     def _plan_e(self, e_nm, weights=None):
@@ -634,13 +668,15 @@ class Planner:
                 num = e_nm * w[i] + rem
                 nm = drive_nm[i] + num // total
                 rem = num % total
-                p, q = per_nm[i]
-                # (nm + rem / total) * p / q, rounded: with no remainder (every
-                # one-drive tool) all in small ints.
+                pq = per_nm[i]
+                if not pq[3] <= nm < pq[4]:
+                    nm = Planner._rebase(self, i, nm)
+                # (nm + rem / total) * p / q, rounded, past the base's steps: with no
+                # remainder (every one-drive tool) all in small ints.
                 if rem:
-                    target = scaled_round(nm * total + rem, p, q * total)
+                    target = scaled_round(nm * total + rem, pq[0], pq[1] * total) + pq[2]
                 else:
-                    target = scaled_round(nm, p, q)
+                    target = scaled_round(nm, pq[0], pq[1]) + pq[2]
                 drive_nm[i] = nm
                 drive_rem[i] = rem
                 targets[i] = target
