@@ -205,137 +205,17 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int):
 
 
 @micropython.viper
-def _write(lk_buf, mem_buf, slot: int, x2: int, hooks):
-    """The slot's record for its entry and this exit (V2), unless the step loop has
-    started it. hooks: (irq_off, irq_on, io array for ramp, NVIC mask words: see
-    planner.Planner)."""
-    lk = ptr32(lk_buf)
-    mem = ptr32(mem_buf)
-    at = slot * L_WORDS
-    if lk[at + L_DWELL]:
-        return
-    io_buf = hooks[2]
-    v02 = lk[at + L_ENTRY]
-    vn2 = lk[at + L_NOMINAL]
-    gain = lk[at + L_GAIN]
-    if (vn2 - v02) + (vn2 - x2) > gain:
-        # The nominal speed is never reached: accelerate to where the ramps meet.
-        vn2 = (v02 + x2 + gain) >> 1
-        if vn2 < v02:
-            vn2 = v02
-        elif vn2 > v02 + gain:
-            vn2 = v02 + gain
-    # The step loop's rates for V2 vn2, v02 and x2, within the floor and the nominal
-    # rate: rate = isqrt(V2 * K2) scaled by 2**K_SHIFT. In one loop, as a call for each
-    # costs the chip about 6 us, and a record has three.
-    io = ptr32(io_buf)
-    rate_nom = lk[at + L_RATE_NOM]
-    nominal = lk[at + L_NOMINAL]
-    floor = lk[at + L_FLOOR]
-    k2 = lk[at + L_K2]
-    shift = lk[at + L_K_SHIFT] - _SHIFT_BIAS
-    r_nom = 0
-    r0 = 0
-    r1 = 0
-    for j in range(3):
-        x = vn2 if j == 0 else (v02 if j == 1 else x2)
-        if j == 1 and x == lk[at + _L_V0]:
-            r = lk[at + _L_RATE_V0]  # the entry's rate, mostly the same as before
-        elif x >= nominal:
-            r = rate_nom
-        elif x <= 0:
-            r = floor  # a stop: the root below would take 30 turns to say 0
-        else:
-            # x * K2 (below 2**29 and 2**26) in two 30-bit limbs, as product() gives
-            # them.
-            a1 = x >> 15
-            a0 = x & 0x7FFF
-            b1 = k2 >> 15
-            b0 = k2 & 0x7FFF
-            mid = a1 * b0 + a0 * b1
-            lo = ((mid & 0x7FFF) << 15) + a0 * b0
-            io[_HI] = a1 * b1 + (mid >> 15) + (lo >> 30)
-            io[_LO] = lo & _CAP
-            r = int(isqrt_limbs(io_buf))
-            if shift >= 0:
-                r = r << shift
-            else:
-                r = r >> (0 - shift)
-            if r > rate_nom:
-                r = rate_nom
-            if r < floor:
-                r = floor
-        if j == 0:
-            r_nom = r
-        elif j == 1:
-            r0 = r
-        else:
-            r1 = r
-    if v02 != lk[at + _L_V0]:
-        lk[at + _L_V0] = v02
-        lk[at + _L_RATE_V0] = r0
-    if r0 > r_nom:
-        r0 = r_nom
-    if r1 > r_nom:
-        r1 = r_nom
-    b = _BLOCK_BASE + slot * _B_WORDS
-    # The look-ahead rewrites every waiting block for each new one, mostly with the
-    # same rates: the schedule is worked out again only when they change.
-    if lk[at + _L_R0] != r0 or lk[at + L_RN] != r_nom or lk[at + _L_R1] != r1:
-        io[0] = mem[b + _B_N]  # ramp.IO_N .. IO_ACC, checked in planner.py
-        io[1] = r0
-        io[2] = r_nom
-        io[3] = r1
-        io[4] = lk[at + L_ACC]
-        ramp_into(io_buf)
-        lk[at + _L_UNTIL] = io[5]
-        lk[at + _L_AFTER] = io[6]
-        lk[at + _L_RATE_DECEL] = io[7]
-        lk[at + _L_R0] = r0
-        lk[at + L_RN] = r_nom
-        lk[at + _L_R1] = r1
-    # The step loop must not start the block half written: its interrupt held back,
-    # in the NVIC where one IRQ runs it (ISER reads which are enabled), else all.
-    mask = ptr32(hooks[3])
-    bit = mask[2]
-    was = 0
-    state = hooks  # any object, until irq_off's state
-    if bit:
-        was = ptr32(mask[1])[0] & bit
-        ptr32(mask[0])[0] = bit
-    else:
-        state = hooks[0]()
-    if slot == mem[_S_TAIL] and mem[_S_ACTIVE]:
-        if bit:
-            if was:
-                ptr32(mask[1])[0] = bit
-        else:
-            hooks[1](state)
-        return  # the step loop has it: too late to change
-    mem[b + _B_RATE_INIT] = r0
-    mem[b + _B_RATE_NOM] = r_nom
-    mem[b + _B_RATE_FINAL] = r1
-    mem[b + _B_ACCEL] = lk[at + L_ACC]
-    mem[b + _B_ACCEL_UNTIL] = lk[at + _L_UNTIL]
-    mem[b + _B_DECEL_AFTER] = lk[at + _L_AFTER]
-    mem[b + _B_RATE_DECEL] = lk[at + _L_RATE_DECEL]
-    if bit:
-        if was:
-            ptr32(mask[1])[0] = bit
-    else:
-        hooks[1](state)
-    lk[at + L_EXIT] = x2
-
-
-@micropython.viper
 def recalculate(lk_buf, mem_buf, newest: int, hooks):
     """Bring the look-ahead up to date after `newest` was queued (it stops at its end)
     and rewrite the records of the blocks not yet started whose entry or exit changed.
+    hooks: (irq_off, irq_on, io array for ramp, NVIC mask words: see planner.Planner).
 
     BACK of a slot, the fastest it may enter and still stop by the end of the queue,
     only grows as blocks are queued. The backward pass stops at the first block whose
     BACK stays the same (Grbl's and Marlin's optimal marker): the plan before it stands,
-    and the forward pass starts there."""
+    and the forward pass starts there. A record is written here, not in a function of
+    its own: on curves a line rewrites a dozen, and the call with its arrays' lookups
+    cost the chip about 14 us a record."""
     lk = ptr32(lk_buf)
     mem = ptr32(mem_buf)
     q = mem[_S_QUEUE]
@@ -380,6 +260,10 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
             v0 = handed_over
     else:
         v0 = lk[at + L_ENTRY]
+    io_buf = hooks[2]
+    io = ptr32(io_buf)
+    mask = ptr32(hooks[3])
+    bit = mask[2]
     while True:
         at = k * L_WORDS
         nk = k + 1
@@ -393,9 +277,114 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
             if v1 > reach:
                 v1 = reach
         # A record is a function of its entry and exit: rewrite changed ones.
-        if k == newest or v0 != lk[at + L_ENTRY] or v1 != lk[at + L_EXIT]:
+        if (k == newest or v0 != lk[at + L_ENTRY] or v1 != lk[at + L_EXIT]) and (
+                lk[at + L_DWELL] == 0):
             lk[at + L_ENTRY] = v0
-            _write(lk_buf, mem_buf, k, v1, hooks)
+            v02 = v0
+            vn2 = lk[at + L_NOMINAL]
+            gain = lk[at + L_GAIN]
+            if (vn2 - v02) + (vn2 - v1) > gain:
+                # The nominal speed is never reached: accelerate to where the ramps
+                # meet.
+                vn2 = (v02 + v1 + gain) >> 1
+                if vn2 < v02:
+                    vn2 = v02
+                elif vn2 > v02 + gain:
+                    vn2 = v02 + gain
+            # The step loop's rates for V2 vn2, v02 and v1, within the floor and the
+            # nominal rate: rate = isqrt(V2 * K2) scaled by 2**K_SHIFT. In one loop, as a
+            # call for each costs the chip about 6 us, and a record has three.
+            rate_nom = lk[at + L_RATE_NOM]
+            nominal = lk[at + L_NOMINAL]
+            floor = lk[at + L_FLOOR]
+            k2 = lk[at + L_K2]
+            shift = lk[at + L_K_SHIFT] - _SHIFT_BIAS
+            r_nom = 0
+            r0 = 0
+            r1 = 0
+            for j in range(3):
+                x = vn2 if j == 0 else (v02 if j == 1 else v1)
+                if j == 1 and x == lk[at + _L_V0]:
+                    r = lk[at + _L_RATE_V0]  # the entry's rate, mostly as before
+                elif x >= nominal:
+                    r = rate_nom
+                elif x <= 0:
+                    r = floor  # a stop: the root below would take 30 turns to say 0
+                else:
+                    # x * K2 (below 2**29 and 2**26) in two 30-bit limbs, as product()
+                    # gives them.
+                    a1 = x >> 15
+                    a0 = x & 0x7FFF
+                    b1 = k2 >> 15
+                    b0 = k2 & 0x7FFF
+                    mid = a1 * b0 + a0 * b1
+                    lo = ((mid & 0x7FFF) << 15) + a0 * b0
+                    io[_HI] = a1 * b1 + (mid >> 15) + (lo >> 30)
+                    io[_LO] = lo & _CAP
+                    r = int(isqrt_limbs(io_buf))
+                    if shift >= 0:
+                        r = r << shift
+                    else:
+                        r = r >> (0 - shift)
+                    if r > rate_nom:
+                        r = rate_nom
+                    if r < floor:
+                        r = floor
+                if j == 0:
+                    r_nom = r
+                elif j == 1:
+                    r0 = r
+                else:
+                    r1 = r
+            if v02 != lk[at + _L_V0]:
+                lk[at + _L_V0] = v02
+                lk[at + _L_RATE_V0] = r0
+            if r0 > r_nom:
+                r0 = r_nom
+            if r1 > r_nom:
+                r1 = r_nom
+            b = _BLOCK_BASE + k * _B_WORDS
+            # The look-ahead rewrites every waiting block for each new one, mostly with
+            # the same rates: the schedule is worked out again only when they change.
+            if lk[at + _L_R0] != r0 or lk[at + L_RN] != r_nom or lk[at + _L_R1] != r1:
+                io[0] = mem[b + _B_N]  # ramp.IO_N .. IO_ACC, checked in planner.py
+                io[1] = r0
+                io[2] = r_nom
+                io[3] = r1
+                io[4] = lk[at + L_ACC]
+                ramp_into(io_buf)
+                lk[at + _L_UNTIL] = io[5]
+                lk[at + _L_AFTER] = io[6]
+                lk[at + _L_RATE_DECEL] = io[7]
+                lk[at + _L_R0] = r0
+                lk[at + L_RN] = r_nom
+                lk[at + _L_R1] = r1
+            # The step loop must not start the block half written: its interrupt held
+            # back, in the NVIC where one IRQ runs it (ISER reads which are enabled),
+            # else all.
+            was = 0
+            state = hooks  # any object, until irq_off's state
+            if bit:
+                was = ptr32(mask[1])[0] & bit
+                ptr32(mask[0])[0] = bit
+            else:
+                state = hooks[0]()
+            if not (k == mem[_S_TAIL] and mem[_S_ACTIVE]):  # else too late to change
+                mem[b + _B_RATE_INIT] = r0
+                mem[b + _B_RATE_NOM] = r_nom
+                mem[b + _B_RATE_FINAL] = r1
+                mem[b + _B_ACCEL] = lk[at + L_ACC]
+                mem[b + _B_ACCEL_UNTIL] = lk[at + _L_UNTIL]
+                mem[b + _B_DECEL_AFTER] = lk[at + _L_AFTER]
+                mem[b + _B_RATE_DECEL] = lk[at + _L_RATE_DECEL]
+                lk[at + L_EXIT] = v1
+            if bit:
+                if was:
+                    ptr32(mask[1])[0] = bit
+            else:
+                hooks[1](state)
+        elif k == newest or v0 != lk[at + L_ENTRY] or v1 != lk[at + L_EXIT]:
+            lk[at + L_ENTRY] = v0  # a dwell: no record
         if k == newest:
             break
         # The step loop may have started block k meanwhile: then the next block enters

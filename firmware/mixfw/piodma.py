@@ -185,8 +185,8 @@ class Feed:
         self.tail = array("i", bytes(4 * _TAIL_WORDS))
         self.dmas = [rp2.DMA(), rp2.DMA()]
         # What the planner needs to hold the refill back while it rewrites a queued
-        # block's record (lookahead._write): (ICER, ISER, bit) of the DMA's IRQ in the
-        # NVIC, as words of an array 'i'; None on the simulated chip (no NVIC: the
+        # block's record (lookahead.recalculate): (ICER, ISER, bit) of the DMA's IRQ in
+        # the NVIC, as words of an array 'i'; None on the simulated chip (no NVIC: the
         # planner then masks every interrupt, as for the timer). Masking only the IRQ
         # that runs the step loop is enough: it is the only code besides the main loop
         # that reads the block records. A refill it holds back runs as soon as the

@@ -400,7 +400,7 @@ _plan_words = lookahead.plan_words
 _lengths = geometry.lengths
 _junction = geometry.junction
 assert (ramp.IO_N, ramp.IO_R0, ramp.IO_RNOM, ramp.IO_R1, ramp.IO_ACC, ramp.IO_ACCEL_UNTIL,
-        ramp.IO_DECEL_AFTER, ramp.IO_RATE_DECEL) == tuple(range(8))  # as lookahead._write has them
+        ramp.IO_DECEL_AFTER, ramp.IO_RATE_DECEL) == tuple(range(8))  # as recalculate has
 
 
 class PlanError(ValueError):
