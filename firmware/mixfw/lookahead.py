@@ -276,22 +276,24 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
             reach = v0 + lk[at + L_GAIN]
             if v1 > reach:
                 v1 = reach
-        # A record is a function of its entry and exit: rewrite changed ones.
-        if (k == newest or v0 != lk[at + L_ENTRY] or v1 != lk[at + L_EXIT]) and (
-                lk[at + L_DWELL] == 0):
+        # A record is a function of its entry and exit: rewrite changed ones (a dwell
+        # has none).
+        changed = 0
+        if k == newest or v0 != lk[at + L_ENTRY] or v1 != lk[at + L_EXIT]:
             lk[at + L_ENTRY] = v0
-            v02 = v0
+            changed = 1 - lk[at + L_DWELL]
+        if changed:
             vn2 = lk[at + L_NOMINAL]
             gain = lk[at + L_GAIN]
-            if (vn2 - v02) + (vn2 - v1) > gain:
+            if (vn2 - v0) + (vn2 - v1) > gain:
                 # The nominal speed is never reached: accelerate to where the ramps
                 # meet.
-                vn2 = (v02 + v1 + gain) >> 1
-                if vn2 < v02:
-                    vn2 = v02
-                elif vn2 > v02 + gain:
-                    vn2 = v02 + gain
-            # The step loop's rates for V2 vn2, v02 and v1, within the floor and the
+                vn2 = (v0 + v1 + gain) >> 1
+                if vn2 < v0:
+                    vn2 = v0
+                elif vn2 > v0 + gain:
+                    vn2 = v0 + gain
+            # The step loop's rates for V2 vn2, v0 and v1, within the floor and the
             # nominal rate: rate = isqrt(V2 * K2) scaled by 2**K_SHIFT. In one loop, as a
             # call for each costs the chip about 6 us, and a record has three.
             rate_nom = lk[at + L_RATE_NOM]
@@ -303,7 +305,7 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
             r0 = 0
             r1 = 0
             for j in range(3):
-                x = vn2 if j == 0 else (v02 if j == 1 else v1)
+                x = vn2 if j == 0 else (v0 if j == 1 else v1)
                 if j == 1 and x == lk[at + _L_V0]:
                     r = lk[at + _L_RATE_V0]  # the entry's rate, mostly as before
                 elif x >= nominal:
@@ -336,8 +338,8 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
                     r0 = r
                 else:
                     r1 = r
-            if v02 != lk[at + _L_V0]:
-                lk[at + _L_V0] = v02
+            if v0 != lk[at + _L_V0]:
+                lk[at + _L_V0] = v0
                 lk[at + _L_RATE_V0] = r0
             if r0 > r_nom:
                 r0 = r_nom
@@ -383,8 +385,6 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
                     ptr32(mask[1])[0] = bit
             else:
                 hooks[1](state)
-        elif k == newest or v0 != lk[at + L_ENTRY] or v1 != lk[at + L_EXIT]:
-            lk[at + L_ENTRY] = v0  # a dwell: no record
         if k == newest:
             break
         # The step loop may have started block k meanwhile: then the next block enters

@@ -585,7 +585,7 @@ class Planner:
     def _set_spm_fixed(self):
         self._spm_fixed = [spm_fixed(v) for v in self.drive_steps_per_mm]
         # Per drive: [p, q, base steps, low, high, base nm], p/q its steps per nm (see
-        # _rebase for the rest), set by _drive_pos_from_steps.
+        # _rebase for the rest): low and high 0 until the drive's first plan sets them.
         self._per_nm = [list(steps_per_nm(v)) + [0, 0, 0, 0]
                         for v in self.drive_steps_per_mm]
         # The longest extrusion that goes in one block (see add_move), worked out here
@@ -616,17 +616,18 @@ class Planner:
         while there is a base, so that the rest's rounding (half away from zero) is
         the whole filament's. Called where x leaves low..high (words 3 and 4)."""
         pq = self._per_nm[i]
-        p, q, base_steps, low, high, base_nm = pq
+        p, q, base_nm = pq[0], pq[1], pq[5]
+        movable = q <= _NM_HIGH - _NM_KEEP
         k = 0
-        if q <= _NM_HIGH - _NM_KEEP:
+        if movable:
             if base_nm + x < _NM_KEEP:
                 k = -(base_nm // q)  # the whole base back
             else:
                 k = (x - _NM_KEEP) // q
-        pq[2] = base_steps + k * p
+        pq[2] += k * p
         pq[5] = base_nm = base_nm + k * q
         pq[3] = _NM_LOW if base_nm else -_CAP - 1
-        pq[4] = _NM_HIGH if q <= _NM_HIGH - _NM_KEEP else _CAP
+        pq[4] = _NM_HIGH if movable else _CAP
         return x - k * q
 
     @micropython.native
