@@ -312,7 +312,7 @@ for counts in json.loads(sys.stdin.read()):
     n = len(counts)
     weights = array("i", [7] * n)
     steps = array("i", [7] * n)
-    fits = block_weights(array("i", counts), weights, steps)
+    fits = block_weights(array("i", counts), weights, steps, n)
     out.append([fits, list(steps), list(weights)])
 print(json.dumps(out))
 """

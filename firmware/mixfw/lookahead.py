@@ -283,33 +283,27 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
             lk[at + L_ENTRY] = v0
             changed = 1 - lk[at + L_DWELL]
         if changed:
-            vn2 = lk[at + L_NOMINAL]
-            gain = lk[at + L_GAIN]
-            if (vn2 - v0) + (vn2 - v1) > gain:
-                # The nominal speed is never reached: accelerate to where the ramps
-                # meet.
-                vn2 = (v0 + v1 + gain) >> 1
-                if vn2 < v0:
-                    vn2 = v0
-                elif vn2 > v0 + gain:
-                    vn2 = v0 + gain
-            # The step loop's rates for V2 vn2, v0 and v1, within the floor and the
-            # nominal rate: rate = isqrt(V2 * K2) scaled by 2**K_SHIFT. In one loop, as a
-            # call for each costs the chip about 6 us, and a record has three.
-            rate_nom = lk[at + L_RATE_NOM]
+            # The step loop's rates for V2 v0 and v1, within the floor and the nominal
+            # rate: rate = isqrt(V2 * K2) scaled by 2**K_SHIFT. In one loop, as a call
+            # for each costs the chip about 6 us. The top rate is the nominal one:
+            # where the ramps meet below it (on curves, most blocks), ramp_into finds
+            # their peak in the rates themselves, and the step loop's clamp at the
+            # nominal rate never binds. (A peak worked out here as well, from V2,
+            # took a third root a record and mostly disagreed with ramp_into's by its
+            # rounding.)
+            r_nom = lk[at + L_RATE_NOM]
             nominal = lk[at + L_NOMINAL]
             floor = lk[at + L_FLOOR]
             k2 = lk[at + L_K2]
             shift = lk[at + L_K_SHIFT] - _SHIFT_BIAS
-            r_nom = 0
             r0 = 0
             r1 = 0
-            for j in range(3):
-                x = vn2 if j == 0 else (v0 if j == 1 else v1)
-                if j == 1 and x == lk[at + _L_V0]:
+            for j in range(2):
+                x = v0 if j == 0 else v1
+                if j == 0 and x == lk[at + _L_V0]:
                     r = lk[at + _L_RATE_V0]  # the entry's rate, mostly as before
                 elif x >= nominal:
-                    r = rate_nom
+                    r = r_nom
                 elif x <= 0:
                     r = floor  # a stop: the root below would take 30 turns to say 0
                 else:
@@ -328,23 +322,17 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
                         r = r << shift
                     else:
                         r = r >> (0 - shift)
-                    if r > rate_nom:
-                        r = rate_nom
+                    if r > r_nom:
+                        r = r_nom
                     if r < floor:
                         r = floor
                 if j == 0:
-                    r_nom = r
-                elif j == 1:
                     r0 = r
                 else:
                     r1 = r
             if v0 != lk[at + _L_V0]:
                 lk[at + _L_V0] = v0
                 lk[at + _L_RATE_V0] = r0
-            if r0 > r_nom:
-                r0 = r_nom
-            if r1 > r_nom:
-                r1 = r_nom
             b = _BLOCK_BASE + k * _B_WORDS
             # The look-ahead rewrites every waiting block for each new one, mostly with
             # the same rates: the schedule is worked out again only when they change.

@@ -39,6 +39,7 @@ _MAX_DRIVES = const(6)
 _CAP = const(0x3FFFFFFF)
 _S_N_XYZ = const(4)  # words of Planner._abs_steps after X Y Z E: see _xyz_steps
 _S_LEAD = const(5)
+_S_DRIVES = const(6)
 assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _BLOCK_BASE, _B_WORDS, _B_N, _B_STEPS, _B_DIR_SET,
         _B_DIR_CLR, _B_FLAGS, _B_DWELL, _B_MIX, _F_NEG, _F_DWELL, _B_RATE_INIT, _B_RATE_NOM,
         _B_RATE_FINAL, _B_ACCEL, _B_ACCEL_UNTIL, _B_DECEL_AFTER, _B_RATE_DECEL) == (
@@ -206,18 +207,18 @@ def steps_of_nm(x: int, spm_buf, at: int) -> int:
 
 
 @micropython.viper
-def block_weights(counts_buf, weights_buf, steps_buf) -> int:
+def block_weights(counts_buf, weights_buf, steps_buf, n: int) -> int:
     """Mixer weights that make the step loop give each drive exactly abs(counts[i])
     steps in a block (one whole period of the schedule); a block runs every drive the
     same way: abs(counts) into steps, and the weights as the steps over their gcd
-    (arrays 'i' as long as counts, made once). Returns 0 if that period is longer
+    (arrays 'i' of n words, the drives, made once: len() from viper is a call of
+    about 10 us on the chips). Returns 0 if that period is longer
     than the mixer takes (nothing written to weights then: add_move scales them). In
     one viper call, where native code paid a runtime call for every item read or
     written, and a bytecode call for every gcd."""
     c = ptr32(counts_buf)
     s = ptr32(steps_buf)
     w = ptr32(weights_buf)
-    n = int(len(counts_buf))
     g = 0
     total = 0
     for i in range(n):
@@ -258,12 +259,12 @@ def _ring_room(mem_buf) -> int:
 
 
 @micropython.viper
-def _steps_to(targets_buf, steps_buf, counts_buf):
-    """Each drive's steps from where it is to its target step (arrays 'i')."""
+def _steps_to(targets_buf, steps_buf, counts_buf, n: int):
+    """Each of n drives' steps from where it is to its target step (arrays 'i')."""
     t = ptr32(targets_buf)
     s = ptr32(steps_buf)
     c = ptr32(counts_buf)
-    for i in range(int(len(counts_buf))):
+    for i in range(n):
         c[i] = t[i] - s[i]
 
 
@@ -292,10 +293,18 @@ def _queue_block(io, slot: int, n: int, flags: int, neg: int, mix_id: int, entry
         w = b + _B_MIX
         m[w] = mix_id
         weights = ptr32(io[8])
-        drives = int(len(io[8]))
+        drives = steps[_S_DRIVES]
         for i in range(_MAX_DRIVES):
             m[w + 1 + i] = weights[i] if i < drives else 0
     lk = io[1]
+    # No faster than the move before, the ring's slot before this one: its nominal V2.
+    # (entry_v2 is 0 after a stop.)
+    prev = slot - 1
+    if prev < 0:
+        prev = m[_S_QUEUE] - 1
+    prev_v2 = ptr32(lk)[prev * _L_WORDS + _L_NOMINAL]
+    if prev_v2 < entry_v2:
+        entry_v2 = prev_v2
     _plan_words(lk, slot * _L_WORDS, io[2], n, io[5], entry_v2)
     _recalculate(lk, io[0], slot, io[4])
     slot += 1  # committed: the step loop may start it
@@ -310,7 +319,7 @@ def _queue_block(io, slot: int, n: int, flags: int, neg: int, mix_id: int, entry
     # and the sum's low 32 bits, all the word keeps, are the same.
     drive_steps = ptr32(io[9])
     steps_given = ptr32(given)
-    for i in range(int(len(io[9]))):
+    for i in range(steps[_S_DRIVES]):
         drive_steps[i] += steps_given[i]
 
 
@@ -318,8 +327,9 @@ def _queue_block(io, slot: int, n: int, flags: int, neg: int, mix_id: int, entry
 def _xyz_steps(pos, target, steps_buf, geo_buf) -> int:
     """X Y Z's steps from pos to target (absolute steps): their sizes into steps_buf
     (X Y Z) and geometry's D words, the largest into steps_buf[_S_N_XYZ] and its axis
-    into [_S_LEAD]. Returns the bits of the axes that run backwards, or -1 for a move
-    of 2**30 steps or more, beyond the chips' small ints. One viper call where the same
+    into [_S_LEAD]. Returns the bits of the axes that run backwards, and those of the
+    axes that move shifted left 4; or -1 for a move of 2**30 steps or more, beyond the
+    chips' small ints. One viper call where the same
     arithmetic in native code cost the chip about 0.1 ms a line."""
     steps = ptr32(steps_buf)
     geo = ptr32(geo_buf)
@@ -339,6 +349,8 @@ def _xyz_steps(pos, target, steps_buf, geo_buf) -> int:
             d = 0 - d
         if d >= _CAP:
             return -1
+        if d:
+            neg |= 16 << i
         steps[i] = d
         geo[_G_D + i] = d
         if d > n:
@@ -449,7 +461,7 @@ class Planner:
         self._seen_min_bits = 0
         self._min_mm_f = array("f", bytes(4))
         self._jd_accel = None
-        self._e8_of = (None, None, 0.0, 0.0)  # see add_move's limits
+        self._limits_of = (None, None, None, None, 0)  # see add_move's limits
         self._jd_mm = None
         self.position_steps = [0, 0, 0, 0]
         # Per-slot planning data in integers, for the look-ahead (see lookahead.py).
@@ -463,13 +475,15 @@ class Planner:
         # The latest block is a move the next one may join at speed (geometry.junction
         # has its direction); False after a stop.
         self.joins = False
-        self._abs_steps = array("i", bytes(4 * 6))  # X Y Z E, n, lead: _xyz_steps
+        # X Y Z E, n, lead (_xyz_steps), and the drives (_queue_block: len() is a call).
+        self._abs_steps = array("i", bytes(4 * 7))
         self.mix_id = 0
         self.tool_mix = (1,) + (0,) * (MAX_DRIVES - 1)  # the active tool's weights
         self._block_mix_id = 0
         # E is planned per drive, from absolute positions so rounding never drifts:
         # each drive's exact filament (its share of every E move) -> its target step.
         self.drives = settings["drives"]
+        self._abs_steps[_S_DRIVES] = self.drives
         self.drive_steps_per_mm = list(settings.get("drive_steps_per_mm") or
                                        [self.steps_per_mm[3]] * self.drives)
         self._set_spm_fixed()
@@ -647,7 +661,7 @@ class Planner:
         # step, where it is known: every drive's steps to its target first, in one viper
         # call, then the drives with a share (a loop over every drive in native code
         # was a tenth of a line's time on the chips).
-        _steps_to(targets, now_steps, counts)
+        _steps_to(targets, now_steps, counts, self.drives)
         now_total = self.rem_total
         rescale = now_total != total
         every = not self.targets_known
@@ -826,12 +840,15 @@ class Planner:
         neg = -1
         if (-_CAP <= target_steps[0] <= _CAP and -_CAP <= target_steps[1] <= _CAP
                 and -_CAP <= target_steps[2] <= _CAP):
-            neg = _xyz_steps(pos, target_steps, steps, geo)  # bit i: axis i backwards
+            # Bit i: axis i runs backwards; bit 4 + i: it moves.
+            neg = _xyz_steps(pos, target_steps, steps, geo)
         # Before the filament is planned: a move refused changes nothing. (E has at
         # most MAX_PERIOD steps a block: see add_move.)
         if neg < 0:
             raise PlanError("move too long: from %s to %s steps"
                             % (pos[:3], list(target_steps[:3])))
+        moving = neg >> 4
+        neg &= 7
         if replay and e_nm:
             self._replay_counts(e_nm)
         else:
@@ -846,6 +863,8 @@ class Planner:
             e_steps_abs = -e_steps
         else:
             e_steps_abs = e_steps
+        if e_steps:
+            moving |= 8
         steps[3] = e_steps_abs
         if e_steps_abs > n:
             n = e_steps_abs
@@ -868,32 +887,39 @@ class Planner:
         accel = self.acceleration_mm_s2 if along_xyz else self.retract_acceleration_mm_s2
         max_feed = self.max_feed_mm_s
         max_accel = self.max_accel_mm_s2
-        inv = 0.0
-        for i in range(4):
-            if steps[i]:
-                # An axis's share of the path is at most 1 (always on X Y Z), so its
-                # limits bind only when the move asks more than the limits themselves:
-                # most moves skip the arithmetic (each float operation allocates).
-                if speed <= max_feed[i] and accel <= max_accel[i] and (
-                        i < 3 or geo[_G_C + 3] <= geo[_G_DIST]):
-                    continue
-                if i == 3 and (geo[_G_C + 3] << 3) <= geo[_G_DIST]:
-                    # E, at most an eighth of the path (as when printing), binds only
-                    # beyond eight times its limits, kept from the limits' last change.
-                    if max_feed is not self._e8_of[0] or max_accel is not self._e8_of[1]:
-                        self._e8_of = (max_feed, max_accel, 8 * max_feed[3],
-                                       8 * max_accel[3])
-                    if speed <= self._e8_of[2] and accel <= self._e8_of[3]:
-                        continue
-                if not inv:
-                    inv = 1.0 / geo[_G_DIST]
-                share = geo[_G_C + i] * inv
-                v = max_feed[i] / share
-                if v < speed:
-                    speed = v
-                v = max_accel[i] / share
-                if v < accel:
-                    accel = v
+        # The axes whose limits the move's speed and acceleration are within (bit i),
+        # and bit 4: within eight times E's. Worked out again only when one of them
+        # changes (a new F, M201, M203): most lines keep them all.
+        lim = self._limits_of
+        if (speed is not lim[0] or accel is not lim[1] or max_feed is not lim[2]
+                or max_accel is not lim[3]):
+            within = 0
+            for i in range(4):
+                if speed <= max_feed[i] and accel <= max_accel[i]:
+                    within |= 1 << i
+            if speed <= 8 * max_feed[3] and accel <= 8 * max_accel[3]:
+                within |= 16
+            lim = self._limits_of = (speed, accel, max_feed, max_accel, within)
+        within = lim[4]
+        # An axis's share of the path is at most 1 (always on X Y Z), so its limits
+        # bind only when the move asks more than the limits themselves; E, at most an
+        # eighth of the path (as when printing), binds only beyond eight times its
+        # limits. Most moves skip the arithmetic (each float operation allocates).
+        over = moving & ~within & 7
+        if moving & 8 and not (within & 8 and geo[_G_C + 3] <= geo[_G_DIST]) and not (
+                within & 16 and (geo[_G_C + 3] << 3) <= geo[_G_DIST]):
+            over |= 8
+        if over:
+            inv = 1.0 / geo[_G_DIST]
+            for i in range(4):
+                if (over >> i) & 1:
+                    share = geo[_G_C + i] * inv
+                    v = max_feed[i] / share
+                    if v < speed:
+                        speed = v
+                    v = max_accel[i] / share
+                    if v < accel:
+                        accel = v
         # The step rate's limit binds only where the lead axis could ask more than it.
         if lead >= 3 or speed > self._lead_max_mm_s[lead]:
             v = self.max_step_rate * f[_F_MM] / n
@@ -929,12 +955,6 @@ class Planner:
                 self._geo_f[_GF_ACCEL_JD] = accel * jd
             geo_flags |= _FL_JOIN
         entry_v2 = _junction(geo, self._geo_f, geo_flags)
-        lk = self.lk
-        if join:
-            # The move before is the ring's slot before this one: its nominal V2.
-            prev_v2 = lk[(slot - 1 if slot else self.queue - 1) * _L_WORDS + _L_NOMINAL]
-            if prev_v2 < entry_v2:
-                entry_v2 = prev_v2
 
         # The DIR pins to set and clear for each pattern of the axes' signs, worked out
         # once for these masks.
@@ -950,7 +970,7 @@ class Planner:
             # Exact per-drive counts as the block's mix; a fresh id, so the step loop
             # starts its schedule anew and gives each drive exactly its count.
             given = self._given
-            if not block_weights(counts, self._weights, given):
+            if not block_weights(counts, self._weights, given, self.drives):
                 given = self._scaled(given)
             if e_steps < 0:
                 for i in range(self.drives):
