@@ -132,6 +132,21 @@ def _ramp_cases():
         r1 = isqrt(max(r0 * r0 + rnd.randint(-reach, reach), acc * one))
         if abs(r0 * r0 - r1 * r1) <= reach:
             cases.append((n, r0, one // 2, r1, acc))
+    # Either side of where the ramps just fill the block, which ramp_into decides
+    # without dividing: the least r_nom whose ramps' steps, truncated, pass n << 28.
+    while len(cases) < 2400:
+        acc = rnd.choice([1, 7, 161, 501, 5000, 20000, 100000, 1 << 20])
+        n = rnd.choice([1, 2, 3, 5, 30, 300, 5000, 10 ** 6])
+        r0 = rnd.randint(isqrt(acc * one), one // 4)
+        r1 = rnd.randint(isqrt(acc * one), one // 4)
+        # (2 r**2 - r0**2 - r1**2) // (2 acc) > n one, for the least such r.
+        least = isqrt(((n * one + 1) * 2 * acc + r0 * r0 + r1 * r1 - 1) // 2)
+        while (2 * least * least - r0 * r0 - r1 * r1) // (2 * acc) <= n * one:
+            least += 1
+        for r_nom in (least - 1, least):
+            if (max(r0, r1) <= r_nom <= one // 2
+                    and abs(r0 * r0 - r1 * r1) <= 2 * acc * n * one):
+                cases.append((n, r0, r_nom, r1, acc))
     return cases
 
 
