@@ -518,6 +518,7 @@ mem = printer.mem
 run = printer.run_line
 parse = printer.parser.parse
 plans = []
+from mixfw.planner import waiting_blocks
 
 def take_one():
     # The step loop takes a block only when the planner waits for room: so the queue
@@ -529,7 +530,7 @@ def take_one():
 
 pl.idle = take_one
 for text in json.loads(sys.stdin.read()):
-    waiting = pl._waiting()
+    waiting = waiting_blocks(mem)
     head = mem[st.S_HEAD]
     run(parse(text.encode(), len(text)))
     if mem[st.S_HEAD] != head:

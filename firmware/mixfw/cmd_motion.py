@@ -319,7 +319,6 @@ class Motion:
             else:  # beyond +-1,073 mm, or no number (which this refuses)
                 v = line.fixed_at(_E_INDEX, _NM_DECIMALS)
             target_e_nm = v if self.absolute_e else target_e_nm + v
-        steps[3] = self.planner.position_steps[3]
         e_nm = target_e_nm - self.e_nm
         xyz = (moved >> 4) & 7
         if xyz or e_nm:
@@ -347,7 +346,8 @@ class Motion:
     def _queue(self, steps, xyz, e_nm, feed_mm_s):
         """Queue a move of X Y Z (axes in xyz) to steps, with e_nm of filament."""
         if e_nm:
-            if not -self._max_extrude_nm <= e_nm <= self._max_extrude_nm:
+            most = self._max_extrude_nm
+            if e_nm > most or e_nm < -most:
                 raise GcodeError("extrusion of %.1f mm in one move is over max_extrude_mm %g"
                                  % (abs(e_nm) / NM_PER_MM, self.max_extrude_mm))
             for guard in self.extrusion_guards:

@@ -259,6 +259,20 @@ def _ring_room(mem_buf) -> int:
 
 
 @micropython.viper
+def waiting_blocks(mem_buf) -> int:
+    """Blocks queued that the step loop has not started. A function, not a method:
+    add_move asks for every short move, and a bytecode method looked up on the planner
+    cost the chip about 30 us."""
+    m = ptr32(mem_buf)
+    count = m[_S_HEAD] - m[_S_TAIL]
+    if count < 0:
+        count += m[_S_QUEUE]
+    if count and m[_S_ACTIVE]:
+        return count - 1
+    return count
+
+
+@micropython.viper
 def _steps_to(targets_buf, steps_buf, counts_buf, n: int):
     """Each of n drives' steps from where it is to its target step (arrays 'i')."""
     t = ptr32(targets_buf)
@@ -469,6 +483,7 @@ class Planner:
         self._plan_f = array("f", bytes(4 * lookahead.F_WORDS))
         self._plan_f[lookahead.F_TICK_ONE] = self.tick_s * st.ONE
         self._plan_f[lookahead.F_TICK_S] = self.tick_s
+        self._f_of = (None, None)  # the speed and acceleration in _plan_f: see add_move
         self.lk = lk or heap.zeros(lk_words(q))
         # The last: irq, or a bit of 0 for irq_off and irq_on.
         self._hooks = (irq_off, irq_on, _RAMP_IO, irq or array("i", bytes(12)))
@@ -573,14 +588,6 @@ class Planner:
         that the step path does not run dry between lines a host or the planner is
         slow to bring (a stop and a blob on every short curve segment). 0: off."""
         self.min_segment_s = us * 1e-6
-
-    def _waiting(self):
-        """Blocks queued that the step loop has not started."""
-        m = self.mem
-        count = m[_S_HEAD] - m[_S_TAIL]
-        if count < 0:
-            count += self.queue
-        return count - 1 if count and m[_S_ACTIVE] else count
 
     def set_mix(self, mix_id, weights, tool=-1):
         """The mix for E moves queued from now on (already normalised weights). The
@@ -696,8 +703,12 @@ class Planner:
                 drive_rem[i] = rem
                 targets[i] = target
                 counts[i] = target - now_steps[i]
-        self.rem_total = total
-        self.targets_known = True
+        # Stored only when they change: a store on an object of sixty attributes costs
+        # the chip about 5 us.
+        if rescale:
+            self.rem_total = total
+        if every:
+            self.targets_known = True
 
     def _sharing(self, weights):
         """The drives with a share in weights. Apart from _plan_e: a comprehension's
@@ -820,7 +831,8 @@ class Planner:
         # The mixer gives every drive exactly its count in a block of at most
         # MAX_PERIOD E steps (each drive's count rounds by up to a step: hence the
         # margin), so a longer extrusion, such as a purge, goes in equal pieces.
-        if not -self._one_piece_nm < e_nm < self._one_piece_nm:
+        piece_nm = self._one_piece_nm
+        if e_nm >= piece_nm or e_nm <= -piece_nm:
             return self._add_pieces(target_steps, feed_mm_s, dir_masks, e_nm, mix, replay,
                                     homing_axes)
         if feed_mm_s <= 0:
@@ -938,7 +950,7 @@ class Planner:
         if min_s and self._seen_min_bits > dist_bits:
             # Marlin's SLOWDOWN (set_min_segment_time), with its bounds: 2 to half the
             # queue's blocks waiting, and 2 (min_s - t) / waiting added to the time t.
-            waiting = self._waiting()
+            waiting = waiting_blocks(self.mem)
             if 2 <= waiting < self.queue // 2:
                 dist = f[_F_MM]
                 t = dist / speed
@@ -979,9 +991,14 @@ class Planner:
                 self._remember_extrusion(tuple(self._weights), list(given))
             mix_id = self._block_mix_id = (self._block_mix_id + 1) & 0x3FFFFFF
         # The floats end here: the look-ahead works on integers (lookahead.plan_words).
-        f[_F_ACCEL] = accel
-        f[_F_NOMINAL] = speed
-        f[_F_NOMINAL2] = nominal2
+        # Most lines keep the speed and acceleration of the line before, and f keeps
+        # them (a float's store into the array costs the chip a few us).
+        kept = self._f_of
+        if speed is not kept[0] or accel is not kept[1]:
+            f[_F_ACCEL] = accel
+            f[_F_NOMINAL] = speed
+            f[_F_NOMINAL2] = nominal2
+            self._f_of = (speed, accel)
         # In place, as the drives' plans: a list a line is garbage on the chips.
         _queue_block(self._queue_io, slot, n, flags, neg, mix_id, entry_v2, e_steps, given,
                      pos, target_steps)
