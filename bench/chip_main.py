@@ -114,7 +114,12 @@ def stepping_printer():
     plans never reaches the pins and never waits for them; both share the CPU."""
     if not PRINTERS.get("stepper"):
         gc.collect()
-        printer = assemble.build(files_root=None)
+        # Its one move needs neither the trace's records (3 kB at the firmware's 256)
+        # nor a long queue: the heap they took left too little for the PIO programs
+        # its step path assembles when it starts, once a change of the firmware's
+        # code had moved the pieces (MemoryError).
+        config = Config(dict(board.SETTINGS, trace_records=0, queue_blocks=4), None)
+        printer = assemble.build(config, files_root=None)
         for line in STEP_SETUP + (STEP_MOVE,):
             printer.run_line(printer.parser.parse(line, len(line)))
         PRINTERS["stepper"] = printer

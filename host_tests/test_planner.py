@@ -204,7 +204,7 @@ w = array("i", bytes(4 * la.W_WORDS))
 out = []
 for bits, n, entry_v2 in json.loads(sys.stdin.read()):
     f = array("f", bytes(array("I", bits)))
-    la.plan_words(lk, 0, f, n, w, entry_v2)
+    la.plan_words(lk, 0, f, n, w, entry_v2, 0)
     out.append(list(lk))
 print(json.dumps(out))
 """
@@ -269,7 +269,7 @@ def test_a_blocks_words_are_the_same_integers_on_every_build_and_the_exact_ones(
     w = array("i", bytes(4 * la.W_WORDS))
     on_host = []
     for bits, n, entry_v2 in cases:
-        la.plan_words(lk, 0, array("f", bytes(array("I", bits))), n, w, entry_v2)
+        la.plan_words(lk, 0, array("f", bytes(array("I", bits))), n, w, entry_v2, 0)
         on_host.append(list(lk))
     assert mp.json(PLAN_WORDS, stdin=json.dumps(cases).encode()) == on_host
     for (bits, n, entry_v2), got in zip(cases, on_host):
@@ -537,6 +537,52 @@ for text in json.loads(sys.stdin.read()):
         plans.append([waiting, pl.lk[head * lookahead.L_WORDS + lookahead.L_NOMINAL]])
 print(json.dumps(plans))
 """
+
+
+STEP_RATE = """
+import sys, json
+import simmachine
+sys.modules["machine"] = simmachine
+import board
+from mixfw import assemble, lookahead as la
+from mixfw import stepper as st
+
+simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(6)])
+printer = assemble.build(files_root=None)
+pl = printer.planner
+mem = printer.mem
+plans = []
+
+def take_all():
+    mem[st.S_TAIL] = mem[st.S_HEAD]
+    mem[st.S_ACTIVE] = 0
+
+pl.idle = take_all
+for text in json.loads(sys.stdin.read()):
+    head = mem[st.S_HEAD]
+    printer.run_line(printer.parser.parse(text.encode(), len(text)))
+    if mem[st.S_HEAD] != head:
+        at = head * la.L_WORDS
+        plans.append([pl.lk[at + la.L_NOMINAL], pl.lk[at + la.L_RATE_NOM]])
+print(json.dumps(plans))
+"""
+
+
+def test_the_lead_axis_never_steps_faster_than_the_step_pulse_allows(mp):
+    """A STEP pin is high for a pulse and low as long (on the simulated board one 20 us
+    tick each: 25,000 steps/s). At 400 steps/mm that is 62.5 mm/s along X, and 88.4
+    mm/s on a diagonal, whose lead axis moves 1/sqrt(2) of the path: a move asked
+    faster keeps its lead axis at that rate (half a step a tick), and its V2 is that
+    speed's; a slower one keeps its own."""
+    lines = ["M302 P1", "G92 X0 Y0 Z0", "G90", "M92 X400 Y400", "G1 X10 F6000",
+             "G1 X20 Y10 F6000", "G1 X30 Y10 F3000"]
+    got = mp.json(STEP_RATE, stdin=json.dumps(lines).encode())
+    cap = (1 << 28) // 2
+    (x_v2, x_rate), (d_v2, d_rate), (slow_v2, slow_rate) = got
+    assert x_rate == d_rate == cap
+    assert abs(x_v2 - 62.5 ** 2 * 64) <= 62.5 ** 2 * 64 * 1e-4
+    assert abs(d_v2 - 2 * 62.5 ** 2 * 64) <= 2 * 62.5 ** 2 * 64 * 1e-4
+    assert slow_v2 == round(50.0 ** 2 * 64) and slow_rate < cap
 
 
 def test_short_moves_slow_down_while_the_queue_is_under_half_full(mp):

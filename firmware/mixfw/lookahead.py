@@ -95,12 +95,18 @@ assert (_HI, _LO, _W_M, _CAP, _P_LIMBS, _P_TRUNC, _P_ROUND, _P_TOP) == (
 
 
 @micropython.viper
-def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int):
+def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: int):
     """A new block's words in lk (slot at word `at`) from its floats (F_*), n, its
     lead-axis steps (0 for a dwell), and entry_v2, the junction's limit (V2, see
     geometry.junction). Speeds become V2 within the range kept; what the
     block adds to v**2 over its length is 2 a s; mm/s becomes the step loop's rate with
-    k = TICK_ONE n / mm, and mm/s**2 its rate change per tick, k a TICK_S."""
+    k = TICK_ONE n / mm, and mm/s**2 its rate change per tick, k a TICK_S.
+
+    rate_cap (0: none) is the fastest rate the lead axis may step at (the step pulse's
+    high and low time): a nominal rate above it becomes it, and the nominal V2 the
+    V2 whose rate it is. In integers here, as the rate is: the same limit in mm/s was
+    a speed worked out in floats for every fast line (each float operation allocates
+    on the chips)."""
     lk = ptr32(lk_buf)
     w = ptr32(w_buf)
     f = ptr32(f_buf)
@@ -196,12 +202,29 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int):
     else:
         floor = floor >> (0 - t) if t > -31 else 0
     lk[at + L_FLOOR] = floor
-    lk[at + L_RATE_NOM] = r_nom if r_nom > floor else floor
     # rate = k sqrt(V2 / V2_SCALE) = isqrt(V2 * K2) scaled by 2**K_SHIFT, with K2 in
     # [2**24, 2**26): V2 * K2 stays below 2**55, and the root keeps 15 bits or more.
     # k**2 / 2**6 = km**2 2**(2 ke - 6) = K2 4**K_SHIFT with K2 = km**2 >> 26.
-    lk[at + L_K2] = int(product(w_buf, km, km, 1, -26, _P_TRUNC))
-    lk[at + L_K_SHIFT] = ke + 10 + _SHIFT_BIAS
+    k2 = int(product(w_buf, km, km, 1, -26, _P_TRUNC))
+    lk[at + L_K2] = k2
+    shift = ke + 10
+    lk[at + L_K_SHIFT] = shift + _SHIFT_BIAS
+    if rate_cap > 0 and r_nom > rate_cap:
+        r_nom = rate_cap
+        # The cap's V2, (cap / 2**K_SHIFT)**2 / K2 truncated: its rate by the root
+        # above is the cap or just below.
+        a = 0
+        if shift >= 0:
+            a = rate_cap >> shift
+        elif shift > -30 and (rate_cap >> (30 + shift)) == 0:
+            a = rate_cap << (0 - shift)
+        if a:  # else the cap's V2 is past any V2 kept
+            x = int(product(w_buf, a, a, k2, 0, _P_TRUNC))
+            if x < lk[at + L_NOMINAL]:
+                lk[at + L_NOMINAL] = x
+                if x < lk[at + L_MAX_ENTRY]:
+                    lk[at + L_MAX_ENTRY] = x
+    lk[at + L_RATE_NOM] = r_nom if r_nom > floor else floor
 
 
 @micropython.viper

@@ -38,8 +38,8 @@ _B_RATE_DECEL = const(22)
 _MAX_DRIVES = const(6)
 _CAP = const(0x3FFFFFFF)
 _S_N_XYZ = const(4)  # words of Planner._abs_steps after X Y Z E: see _xyz_steps
-_S_LEAD = const(5)
-_S_DRIVES = const(6)
+_S_DRIVES = const(5)
+_S_RATE_CAP = const(6)
 assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _BLOCK_BASE, _B_WORDS, _B_N, _B_STEPS, _B_DIR_SET,
         _B_DIR_CLR, _B_FLAGS, _B_DWELL, _B_MIX, _F_NEG, _F_DWELL, _B_RATE_INIT, _B_RATE_NOM,
         _B_RATE_FINAL, _B_ACCEL, _B_ACCEL_UNTIL, _B_DECEL_AFTER, _B_RATE_DECEL) == (
@@ -319,7 +319,7 @@ def _queue_block(io, slot: int, n: int, flags: int, neg: int, mix_id: int, entry
     prev_v2 = ptr32(lk)[prev * _L_WORDS + _L_NOMINAL]
     if prev_v2 < entry_v2:
         entry_v2 = prev_v2
-    _plan_words(lk, slot * _L_WORDS, io[2], n, io[5], entry_v2)
+    _plan_words(lk, slot * _L_WORDS, io[2], n, io[5], entry_v2, steps[_S_RATE_CAP])
     _recalculate(lk, io[0], slot, io[4])
     slot += 1  # committed: the step loop may start it
     if slot >= m[_S_QUEUE]:
@@ -340,16 +340,14 @@ def _queue_block(io, slot: int, n: int, flags: int, neg: int, mix_id: int, entry
 @micropython.viper
 def _xyz_steps(pos, target, steps_buf, geo_buf) -> int:
     """X Y Z's steps from pos to target (absolute steps): their sizes into steps_buf
-    (X Y Z) and geometry's D words, the largest into steps_buf[_S_N_XYZ] and its axis
-    into [_S_LEAD]. Returns the bits of the axes that run backwards, and those of the
-    axes that move shifted left 4; or -1 for a move of 2**30 steps or more, beyond the
-    chips' small ints. One viper call where the same
-    arithmetic in native code cost the chip about 0.1 ms a line."""
+    (X Y Z) and geometry's D words, the largest into steps_buf[_S_N_XYZ]. Returns the
+    bits of the axes that run backwards, and those of the axes that move shifted left
+    4; or -1 for a move of 2**30 steps or more, beyond the chips' small ints. One viper
+    call where the same arithmetic in native code cost the chip about 0.1 ms a line."""
     steps = ptr32(steps_buf)
     geo = ptr32(geo_buf)
     neg = 0
     n = 0
-    lead = 0
     for i in range(3):
         t = int(target[i])
         p = int(pos[i])
@@ -369,9 +367,7 @@ def _xyz_steps(pos, target, steps_buf, geo_buf) -> int:
         geo[_G_D + i] = d
         if d > n:
             n = d
-            lead = i
     steps[_S_N_XYZ] = n
-    steps[_S_LEAD] = lead
     return neg
 
 
@@ -463,9 +459,6 @@ class Planner:
         self.set_min_segment_time(settings["min_segment_time_us"])
         tick_us = settings["tick_us"]
         self.tick_s = tick_us * 1e-6
-        pulse_ticks = mem[st.S_PULSE_TICKS]
-        # A STEP pin is high for pulse_ticks and low at least as long.
-        self.max_step_rate = 1.0 / (2 * pulse_ticks * self.tick_s)
         self.set_steps_per_mm(settings["steps_per_mm"])
         # Products kept while their factors are the same objects (see add_move).
         self._seen_speed = None
@@ -475,7 +468,10 @@ class Planner:
         self._seen_min_bits = 0
         self._min_mm_f = array("f", bytes(4))
         self._jd_accel = None
-        self._limits_of = (None, None, None, None, 0)  # see add_move's limits
+        # add_move's limits: the speed, acceleration and limits they were worked out
+        # for, the bits, and eight times E's limits. A list changed in place: a tuple
+        # a new F would be garbage on the chips.
+        self._limits_of = [None, None, None, None, 0, 0.0, 0.0]
         self._jd_mm = None
         self.position_steps = [0, 0, 0, 0]
         # Per-slot planning data in integers, for the look-ahead (see lookahead.py).
@@ -483,14 +479,16 @@ class Planner:
         self._plan_f = array("f", bytes(4 * lookahead.F_WORDS))
         self._plan_f[lookahead.F_TICK_ONE] = self.tick_s * st.ONE
         self._plan_f[lookahead.F_TICK_S] = self.tick_s
-        self._f_of = (None, None)  # the speed and acceleration in _plan_f: see add_move
+        # The speed and acceleration in _plan_f (see add_move): changed in place.
+        self._f_of = [None, None]
         self.lk = lk or heap.zeros(lk_words(q))
         # The last: irq, or a bit of 0 for irq_off and irq_on.
         self._hooks = (irq_off, irq_on, _RAMP_IO, irq or array("i", bytes(12)))
         # The latest block is a move the next one may join at speed (geometry.junction
         # has its direction); False after a stop.
         self.joins = False
-        # X Y Z E, n, lead (_xyz_steps), and the drives (_queue_block: len() is a call).
+        # X Y Z E, n (_xyz_steps), the drives (_queue_block: len() is a call) and the
+        # fastest rate the step loop may step at (see lookahead.plan_words).
         self._abs_steps = array("i", bytes(4 * 7))
         self.mix_id = 0
         self.tool_mix = (1,) + (0,) * (MAX_DRIVES - 1)  # the active tool's weights
@@ -499,6 +497,9 @@ class Planner:
         # each drive's exact filament (its share of every E move) -> its target step.
         self.drives = settings["drives"]
         self._abs_steps[_S_DRIVES] = self.drives
+        # A STEP pin is high for pulse_ticks and low at least as long: at most a step in
+        # 2 pulse_ticks, in the step loop's rate (ONE a step a tick).
+        self._abs_steps[_S_RATE_CAP] = st.ONE // (2 * mem[st.S_PULSE_TICKS])
         self.drive_steps_per_mm = list(settings.get("drive_steps_per_mm") or
                                        [self.steps_per_mm[3]] * self.drives)
         self._set_spm_fixed()
@@ -577,10 +578,6 @@ class Planner:
         self.steps_per_mm = list(steps_per_mm)
         for i in range(4):
             self._geo_f[geometry.GF_SCALE + i] = 1.0 / self.steps_per_mm[i]
-        # Above these speeds, X Y or Z as the lead axis may reach the step rate's limit
-        # (with room for float32's rounding of the move's length).
-        self._lead_max_mm_s = [self.max_step_rate * (1 - 1e-5) / self.steps_per_mm[i]
-                               for i in range(3)]
 
     def set_min_segment_time(self, us):
         """Marlin's SLOWDOWN: while fewer than half the queue's blocks wait, a move
@@ -815,7 +812,7 @@ class Planner:
             m[b + i] = 0
         m[b + st.B_FLAGS] = st.F_DWELL
         m[b + st.B_DWELL] = ticks
-        _plan_words(self.lk, slot * _L_WORDS, self._plan_f, 0, _RAMP_IO, 0)
+        _plan_words(self.lk, slot * _L_WORDS, self._plan_f, 0, _RAMP_IO, 0, 0)
         slot += 1
         m[_S_HEAD] = 0 if slot >= self.queue else slot
         self.joins = False
@@ -869,7 +866,6 @@ class Planner:
         e_steps = sum(counts)
         n = steps[_S_N_XYZ]
         along_xyz = n
-        lead = steps[_S_LEAD]
         if e_steps < 0:
             neg |= 8
             e_steps_abs = -e_steps
@@ -880,7 +876,6 @@ class Planner:
         steps[3] = e_steps_abs
         if e_steps_abs > n:
             n = e_steps_abs
-            lead = 3
         if n == 0:
             return False  # less than a step: the filament counts toward the next move
         # The method only where the ring is full or the step path idle: a call costs.
@@ -903,15 +898,22 @@ class Planner:
         # and bit 4: within eight times E's. Worked out again only when one of them
         # changes (a new F, M201, M203): most lines keep them all.
         lim = self._limits_of
-        if (speed is not lim[0] or accel is not lim[1] or max_feed is not lim[2]
-                or max_accel is not lim[3]):
+        if max_feed is not lim[2] or max_accel is not lim[3]:
+            lim[2] = max_feed
+            lim[3] = max_accel
+            lim[5] = 8 * max_feed[3]
+            lim[6] = 8 * max_accel[3]
+            lim[0] = None
+        if speed is not lim[0] or accel is not lim[1]:
             within = 0
             for i in range(4):
                 if speed <= max_feed[i] and accel <= max_accel[i]:
                     within |= 1 << i
-            if speed <= 8 * max_feed[3] and accel <= 8 * max_accel[3]:
+            if speed <= lim[5] and accel <= lim[6]:
                 within |= 16
-            lim = self._limits_of = (speed, accel, max_feed, max_accel, within)
+            lim[0] = speed
+            lim[1] = accel
+            lim[4] = within
         within = lim[4]
         # An axis's share of the path is at most 1 (always on X Y Z), so its limits
         # bind only when the move asks more than the limits themselves; E, at most an
@@ -932,11 +934,6 @@ class Planner:
                     v = max_accel[i] / share
                     if v < accel:
                         accel = v
-        # The step rate's limit binds only where the lead axis could ask more than it.
-        if lead >= 3 or speed > self._lead_max_mm_s[lead]:
-            v = self.max_step_rate * f[_F_MM] / n
-            if v < speed:
-                speed = v
         # Most lines keep the feed rate of the line before (the same float object):
         # its square and its SLOWDOWN length are worked out once (each float operation
         # allocates on the chips).
@@ -998,7 +995,8 @@ class Planner:
             f[_F_ACCEL] = accel
             f[_F_NOMINAL] = speed
             f[_F_NOMINAL2] = nominal2
-            self._f_of = (speed, accel)
+            kept[0] = speed
+            kept[1] = accel
         # In place, as the drives' plans: a list a line is garbage on the chips.
         _queue_block(self._queue_io, slot, n, flags, neg, mix_id, entry_v2, e_steps, given,
                      pos, target_steps)
