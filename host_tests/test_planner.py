@@ -501,9 +501,11 @@ def test_xyz_words_become_the_exact_nanometres_or_a_clear_refusal(mp):
     assert e_read > 150
 
 
-# --- Marlin's SLOWDOWN (min_segment_time_us, M205 B) ------------------------------
+# --- A block's nominal speed: the step rate's limit, Marlin's SLOWDOWN (M205 B) ----
 
-SLOWDOWN = """
+# For each line that queued a block: the blocks waiting before it, its nominal V2 and
+# its nominal rate.
+PLANS = """
 import sys, json
 import simmachine
 sys.modules["machine"] = simmachine
@@ -534,36 +536,9 @@ for text in json.loads(sys.stdin.read()):
     head = mem[st.S_HEAD]
     run(parse(text.encode(), len(text)))
     if mem[st.S_HEAD] != head:
-        plans.append([waiting, pl.lk[head * lookahead.L_WORDS + lookahead.L_NOMINAL]])
-print(json.dumps(plans))
-"""
-
-
-STEP_RATE = """
-import sys, json
-import simmachine
-sys.modules["machine"] = simmachine
-import board
-from mixfw import assemble, lookahead as la
-from mixfw import stepper as st
-
-simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(6)])
-printer = assemble.build(files_root=None)
-pl = printer.planner
-mem = printer.mem
-plans = []
-
-def take_all():
-    mem[st.S_TAIL] = mem[st.S_HEAD]
-    mem[st.S_ACTIVE] = 0
-
-pl.idle = take_all
-for text in json.loads(sys.stdin.read()):
-    head = mem[st.S_HEAD]
-    printer.run_line(printer.parser.parse(text.encode(), len(text)))
-    if mem[st.S_HEAD] != head:
-        at = head * la.L_WORDS
-        plans.append([pl.lk[at + la.L_NOMINAL], pl.lk[at + la.L_RATE_NOM]])
+        at = head * lookahead.L_WORDS
+        plans.append([waiting, pl.lk[at + lookahead.L_NOMINAL],
+                      pl.lk[at + lookahead.L_RATE_NOM]])
 print(json.dumps(plans))
 """
 
@@ -576,9 +551,9 @@ def test_the_lead_axis_never_steps_faster_than_the_step_pulse_allows(mp):
     speed's; a slower one keeps its own."""
     lines = ["M302 P1", "G92 X0 Y0 Z0", "G90", "M92 X400 Y400", "G1 X10 F6000",
              "G1 X20 Y10 F6000", "G1 X30 Y10 F3000"]
-    got = mp.json(STEP_RATE, stdin=json.dumps(lines).encode())
+    got = mp.json(PLANS, stdin=json.dumps(lines).encode())
     cap = (1 << 28) // 2
-    (x_v2, x_rate), (d_v2, d_rate), (slow_v2, slow_rate) = got
+    (_, x_v2, x_rate), (_, d_v2, d_rate), (_, slow_v2, slow_rate) = got
     assert x_rate == d_rate == cap
     assert abs(x_v2 - 62.5 ** 2 * 64) <= 62.5 ** 2 * 64 * 1e-4
     assert abs(d_v2 - 2 * 62.5 ** 2 * 64) <= 2 * 62.5 ** 2 * 64 * 1e-4
@@ -594,7 +569,7 @@ def test_short_moves_slow_down_while_the_queue_is_under_half_full(mp):
     lines = ["M302 P1", "G92 X0 Y0 Z0", "G90", "G1 X10 F9000", "M400"] + moves + [
         "M400", "G1 X14 F9000", "G1 X14.3", "G1 X100", "M400", "M205 B0"] + [
         "G1 X%.1f F9000" % (100 + 0.3 * (i + 1)) for i in range(12)]
-    got = mp.json(SLOWDOWN, stdin=json.dumps(lines).encode())
+    got = [plan[:2] for plan in mp.json(PLANS, stdin=json.dumps(lines).encode())]
     nominal = round(feed * feed * 64)
     short = got[1:13]  # after the first move
     assert [w for w, _ in short] == list(range(12))

@@ -320,32 +320,31 @@ def ramp_into(io_buf):
         else:
             h1 = hi
             l1 = lo
-    # Whether the ramps pass the whole block, (s / 2acc, truncated) > n << 28, without
-    # the division: s >= n acc 2**29 + 2 acc. On curves most blocks never reach their
-    # nominal rate, and the quotient is needed only for a cruise.
-    peak = 0
-    a1 = n >> 15
-    a0 = n & 0x7FFF
-    b1 = acc >> 15
-    b0 = acc & 0x7FFF
-    mid = a1 * b0 + a0 * b1
-    lo = ((mid & 0x7FFF) << 15) + a0 * b0
-    hi = a1 * b1 + (mid >> 15) + (lo >> 30)
-    if hi < 2:  # n acc below 2**31: else past any s (below 2**59)
-        nacc = (hi << 30) | (lo & _M30)
+    # Whether the ramps pass the whole block, (s / 2 acc, truncated) > n << 28: for n
+    # acc below 2**31 (the blocks of a print) without the division, as s >= n acc 2**29
+    # + 2 acc. On curves most blocks never reach their nominal rate, and the quotient is
+    # needed only for a cruise.
+    peak = -1  # not known yet
+    if (n >> 16) == 0 and (acc >> 15) == 0:
+        nacc = n * acc
         t_lo = ((nacc & 1) << 29) + 2 * acc
         t_hi = (nacc >> 1) + (t_lo >> 30)
         t_lo &= _M30
+        peak = 0
         if s_hi > t_hi or (s_hi == t_hi and s_lo >= t_lo):
             peak = 1
     c_hi = 0
     c_lo = 0
-    if not peak and (s_hi or s_lo):
+    if peak != 1 and (s_hi or s_lo):
         io[_HI] = s_hi
         io[_LO] = s_lo
         div_limbs(io_buf, 2 * acc)
         s_hi = io[_HI]
         s_lo = io[_LO]
+    if peak < 0:
+        peak = 0
+        if s_hi > all_hi or (s_hi == all_hi and s_lo > all_lo):
+            peak = 1
     if peak:
         # The ramps meet below vn: peak^2 = acc n ONE + (r0^2 + r1^2) / 2, with no
         # cruise. Then peak < vn < 2**28, so acc * n < 2**26 here.
