@@ -320,31 +320,27 @@ def ramp_into(io_buf):
         else:
             h1 = hi
             l1 = lo
-    # Whether the ramps pass the whole block, (s / 2 acc, truncated) > n << 28: for n
-    # acc below 2**31 (the blocks of a print) without the division, as s >= n acc 2**29
-    # + 2 acc. On curves most blocks never reach their nominal rate, and the quotient is
-    # needed only for a cruise.
-    peak = -1  # not known yet
-    if (n >> 16) == 0 and (acc >> 15) == 0:
+    # Whether the ramps pass the whole block, (s / 2 acc, truncated) > n << 28, without
+    # the division: s >= n acc 2**29 + 2 acc. They can only where n acc is below 2**28
+    # (s is below 2**57, vn below 2**28); past 2**30 the block cruises. On curves most
+    # blocks never reach their nominal rate, and the quotient is needed only for a
+    # cruise. (The chip divides machine words in hardware.)
+    peak = 0
+    if acc < 0x10000000 and n <= _M30 // acc:
         nacc = n * acc
         t_lo = ((nacc & 1) << 29) + 2 * acc
         t_hi = (nacc >> 1) + (t_lo >> 30)
         t_lo &= _M30
-        peak = 0
         if s_hi > t_hi or (s_hi == t_hi and s_lo >= t_lo):
             peak = 1
     c_hi = 0
     c_lo = 0
-    if peak != 1 and (s_hi or s_lo):
+    if not peak and (s_hi or s_lo):
         io[_HI] = s_hi
         io[_LO] = s_lo
         div_limbs(io_buf, 2 * acc)
         s_hi = io[_HI]
         s_lo = io[_LO]
-    if peak < 0:
-        peak = 0
-        if s_hi > all_hi or (s_hi == all_hi and s_lo > all_lo):
-            peak = 1
     if peak:
         # The ramps meet below vn: peak^2 = acc n ONE + (r0^2 + r1^2) / 2, with no
         # cruise. Then peak < vn < 2**28, so acc * n < 2**26 here.
