@@ -701,7 +701,7 @@ class Planner:
                 targets[i] = target
                 counts[i] = target - now_steps[i]
         # Stored only when they change: a store on an object of sixty attributes costs
-        # the chip about 5 us.
+        # the chip a few us.
         if rescale:
             self.rem_total = total
         if every:
