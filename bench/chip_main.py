@@ -5,8 +5,9 @@
 #   M115                   ok (the harness asks it once it has booted)
 #   plan FILE STEP         parse and plan FILE's lines (in RAM: see Lines) through
 #                          the firmware's parser, command table and planner, with the
-#                          queue retired by hand as boards/sim/plan_only.py's retire_one
-#                          does; with STEP 1 the step path runs meanwhile (see
+#                          queue retired by hand (boards/sim/plan_only.py's make_room
+#                          after each line, so the look-ahead stays full and the
+#                          planner never waits); with STEP 1 the step path runs meanwhile (see
 #                          stepping_printer). Answers `bench:{json}`.
 #   profile FILE           plan FILE without stepping, then again with the planner's
 #                          functions timed (bench/chip_profile.py): `bench:{json}`.
@@ -97,7 +98,7 @@ heap.reserve(heap.step_loop_bytes(board.SETTINGS))
 from mixfw import assemble  # noqa: E402
 from mixfw.config import Config  # noqa: E402
 from mixfw import stepper as st  # noqa: E402
-from plan_only import retire_one  # noqa: E402
+from plan_only import make_room, retire_one  # noqa: E402
 
 # The step path's move while planning: X 100 mm/s, Y 75 mm/s and E 14.46 mm/s of
 # filament mixed over all six drives, i.e. 8,000 + 6,000 + 6,000 steps/s at the
@@ -178,6 +179,8 @@ def plan(path, stepping, profile=0):
     gc.collect()
     free = gc.mem_free()
     errors = []
+    mem = printer.mem
+    full = planner.queue - 1
     t0 = time.ticks_us()
     buf = data.buf
     line = data.line
@@ -187,6 +190,9 @@ def plan(path, stepping, profile=0):
         except Exception as e:  # the firmware would answer Error: and go on
             if len(errors) < 5:
                 errors.append("line %d: %r" % (number, e))
+        # As a board's step path would: the ring keeps its one free slot, so the
+        # planner never waits (its wait hook stays for a line of several blocks).
+        make_room(mem, full)
     planner.synchronize()
     us = time.ticks_diff(time.ticks_us(), t0)
     if profile == 1:

@@ -1,9 +1,10 @@
 # Planner throughput on the MicroPython unix port: every line of a G-code file goes
 # through the firmware's parser and command table into the planner, with no stepping.
-# The step loop is replaced by the planner's wait hook, which retires blocks itself:
-#   full:  one block per wait, so the ring stays full and every new block is planned
-#          against a full look-ahead queue, as while printing (the default);
-#   empty: every queued block at once (S_TAIL = S_HEAD), the cheapest look-ahead.
+# Nothing steps; blocks are retired by hand (boards/sim/plan_only.py):
+#   full:  after each line, the oldest block where the ring is full (make_room), so
+#          every new block is planned against a full look-ahead queue, as while
+#          printing, and the planner never waits (the default);
+#   empty: every queued block at each wait (S_TAIL = S_HEAD), the cheapest look-ahead.
 # Heating waits (M109, M190, M116) are skipped and cold extrusion is allowed, as no
 # time passes. Prints one JSON line: lines, G0/G1 lines, seconds, G1 lines per second.
 #   MICROPYPATH=firmware:boards/sim micropython -X heapsize=2M bench/plan_rate.py FILE [full|empty]
@@ -15,7 +16,7 @@ import simmachine
 sys.modules["machine"] = simmachine
 import board
 from mixfw import assemble
-from plan_only import retire_one, retire_all
+from plan_only import make_room, retire_one, retire_all
 
 SKIPPED = (b"M109", b"M190", b"M116")
 
@@ -68,6 +69,7 @@ def plan_file(path, mode):
     parse = printer.parser.parse
     run_line = printer.run_line
     run_line(parse(b"M302 P1", 7))
+    full = printer.planner.queue - 1 if mode != "empty" else 0
     moves = 0
     errors = []
     lines = 0
@@ -83,6 +85,8 @@ def plan_file(path, mode):
         except Exception as e:  # the firmware would answer Error: and go on
             if len(errors) < 10:
                 errors.append("line %d: %r" % (lines, e))
+        if full:
+            make_room(mem, full)  # as a step path would: the planner never waits
     printer.planner.synchronize()
     seconds = time.ticks_diff(time.ticks_us(), t0) / 1e6
     return {"file": path, "mode": mode, "lines": lines, "move_lines": moves,

@@ -253,9 +253,11 @@ def bench_planner(res):
     res["required_lines_per_s"] = REQUIRED_LINES_PER_S
     res["planner_note"] = ("G0/G1 lines per second through parser, command table and "
                            "planner on the unix port, no stepping; the smaller of the "
-                           "example and %s, with the block ring kept full (one block "
-                           "retired per wait: full look-ahead); _queue_emptied: every "
-                           "block retired at each wait" % SLICER_100K.name)
+                           "example and %s, with the block ring kept full (after each "
+                           "line the oldest block retired where the ring is full, by "
+                           "boards/sim/plan_only.py's make_room: full look-ahead, and "
+                           "the planner never waits); _queue_emptied: every block "
+                           "retired at each wait" % SLICER_100K.name)
 
 
 # --- step timing -----------------------------------------------------------------

@@ -3,8 +3,12 @@
 #   retire_one: one block per wait, so the ring stays full and every new block is
 #               planned against a full look-ahead queue, as while printing;
 #   retire_all: every queued block at once, the cheapest look-ahead.
+#   make_room:  retire_one's work as a function a bench calls itself between lines,
+#               so that the planner finds room and never waits: on a board the step
+#               path retires blocks at no cost to the planner, and the hook's calls
+#               (the planner's wait method, then this closure) are not planning.
 # Homing ends at once: every endstop is hit as the block is retired.
-from mixfw.compat import const
+from mixfw.compat import const, micropython, ptr32
 from mixfw import stepper as st
 
 # The words as constants, which the compiler folds: a closure over more than five
@@ -15,18 +19,32 @@ _S_HEAD = const(0)
 _S_TAIL = const(1)
 _S_ACTIVE = const(2)
 _S_HOME_STOP = const(27)
-assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _S_HOME_STOP) == (
-    st.S_HEAD, st.S_TAIL, st.S_ACTIVE, st.S_HOME_STOP)
+_S_QUEUE = const(26)
+assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _S_HOME_STOP, _S_QUEUE) == (
+    st.S_HEAD, st.S_TAIL, st.S_ACTIVE, st.S_HOME_STOP, st.S_QUEUE)
+
+
+@micropython.viper
+def make_room(mem_buf, full: int):
+    """Retire the oldest block if `full` or more are queued (full = queue - 1: the
+    ring is full, and retire_one's wait would be called)."""
+    mem = ptr32(mem_buf)
+    q = mem[_S_QUEUE]
+    head = mem[_S_HEAD]
+    tail = mem[_S_TAIL]
+    count = head - tail
+    if count < 0:
+        count += q
+    if count and count >= full:
+        tail += 1
+        mem[_S_TAIL] = 0 if tail >= q else tail
+    mem[_S_ACTIVE] = 0
+    mem[_S_HOME_STOP] = 7
 
 
 def retire_one(mem, queue_blocks):
     def wait():
-        tail = mem[_S_TAIL]
-        if tail != mem[_S_HEAD]:
-            tail += 1
-            mem[_S_TAIL] = 0 if tail >= queue_blocks else tail
-        mem[_S_ACTIVE] = 0
-        mem[_S_HOME_STOP] = 7
+        make_room(mem, 1)
 
     return wait
 
