@@ -25,7 +25,7 @@ TIMED = (
     ("block_weights", "planner_mod", "block_weights"),
     ("planner._xyz_steps", "planner_mod", "_xyz_steps"),
     ("planner._new_slot", "planner_class", "_new_slot"),
-    ("planner._queue_block", "planner_mod", "_queue_block"),
+    ("planner._plan_move", "planner_mod", "_plan_move"),
     ("planner._remember_extrusion", "planner", "_remember_extrusion"),
     ("geometry.lengths", "planner_mod", "_lengths"),
     ("geometry.junction", "planner_mod", "_junction"),

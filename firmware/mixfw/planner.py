@@ -282,49 +282,159 @@ def _steps_to(targets_buf, steps_buf, counts_buf, n: int):
         c[i] = t[i] - s[i]
 
 
+# _plan_move's answers besides 1 (queued) and 0 (shorter than a step: nothing to do),
+# each with nothing queued, for add_move to do in Python and ask again.
+_RING_WAIT = const(-1)  # the ring is full, or the step path idle (see _new_slot)
+_FLOATS = const(-2)  # an axis's limit binds, or SLOWDOWN may: speed in floats
+_SCALE = const(-3)  # too many steps for the mixer's weights (see _scaled)
+_EXTRUDED = const(2)  # queued, with filament forward
+# What add_move has done of that (_plan_move's `how`), and whether the move may join
+# the one before at speed.
+_HOW_SLOT = const(1)
+_HOW_FLOATS = const(2)
+_HOW_SCALED = const(4)
+_HOW_JOIN = const(8)
+# Words of Planner._abs_steps past the drives and the rate cap.
+_S_MIX_ID = const(7)  # the latest block's mix id
+_S_WITHIN = const(8)  # the axes whose limits the speed is within (see _base_floats)
+_S_MIN_BITS = const(9)  # SLOWDOWN's shortest length at that speed, as lengths' bits
+_S_OVER = const(10)  # _plan_move's answer _FLOATS: the axes whose limits bind
+_S_DIST_BITS = const(11)  # and the move's length, as lengths' bits
+_S_F_BASE = const(12)  # 1: the floats hold _base_floats' speed and acceleration
+_S_WORDS = const(13)
+
+
 @micropython.viper
-def _queue_block(io, slot: int, n: int, flags: int, neg: int, mix_id: int, entry_v2: int,
-                 e_steps: int, given, pos, target):
-    """A planned move into its slot of the step loop's ring, and on to the step loop.
-    Its words: n, the axes' steps (io's steps array, X Y Z E), flags, the DIR words for
-    its signs (neg) and, for mix_id >= 0, the mix id and the block's weights (the rest
-    0). Then its look-ahead words and the records it changes (lookahead.plan_words,
-    recalculate), S_HEAD past it, and the planner's position (pos: X Y Z from target,
-    E plus e_steps) and the drives' (plus given, each drive's steps). io: the
-    planner's arrays (Planner._queue_io). One call where each part was a call or native
-    code, which pays a runtime call for every item it reads or writes."""
-    m = ptr32(io[0])
-    steps = ptr32(io[3])
+def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
+               target) -> int:
+    """The move _xyz_steps measured (neg: its answer) with e_nm of filament, whose
+    drives' steps are planned (io's counts), from its lengths to its slot of the step
+    loop's ring, where its speed is the one add_move set in floats (_base_floats) and
+    nothing needs Python: else the answer says what add_move must do first (_FLOATS
+    and the rest). flags: the block's homing flags. how: _HOW_*, with slot the ring's
+    slot where _HOW_SLOT. One call for the lengths, the axes' limits, SLOWDOWN's check,
+    the junction, the block's weights and its words, where each was a call and the
+    glue between them native code on objects, at 1 to 2 us an attribute or an
+    operation on the chips."""
+    words = ptr32(io[3])
+    counts = ptr32(io[12])
+    geo = ptr32(io[10])
+    drives = words[_S_DRIVES]
+    e_steps = 0
+    for i in range(drives):
+        c = counts[i]
+        if c > _CAP:  # negative: a 64-bit port's ptr32 reads it zero-extended
+            c = 0 - ((0 - c) & _CAP)
+        e_steps += c
+    moving = neg >> 4
+    neg &= 7
+    n = words[_S_N_XYZ]
+    along_xyz = n
+    e_abs = e_steps
+    if e_steps < 0:
+        neg |= 8
+        e_abs = 0 - e_steps
+    if e_steps:
+        moving |= 8
+    words[3] = e_abs
+    if e_abs > n:
+        n = e_abs
+    if n == 0:
+        return 0  # less than a step: the filament counts toward the next move
+    mem = ptr32(io[0])
+    if not (how & _HOW_SLOT):
+        slot = int(_ring_room(io[0]))
+        if slot < 0 or slot & _RING_IDLE:
+            return _RING_WAIT
+    if e_nm:
+        geo[_G_D + 3] = e_nm if e_nm >= 0 else 0 - e_nm
+        geo_flags = neg & 7 | _FL_E_NM
+        if e_nm < 0:
+            geo_flags |= 8
+    else:
+        geo[_G_D + 3] = e_abs
+        geo_flags = neg
+    dist_bits = int(_lengths(io[10], io[11], io[2], geo_flags))
+    if not (how & _HOW_FLOATS):
+        # An axis's share of the path is at most 1 (always on X Y Z), so its limits
+        # bind only when the move asks more than the limits themselves; E, at most an
+        # eighth of the path (as when printing), binds only beyond eight times its
+        # limits. Then, or where SLOWDOWN may slow the move, add_move works its speed
+        # out in floats.
+        within = words[_S_WITHIN]
+        over = moving & ~within & 7
+        if moving & 8:
+            over |= 8
+            c3 = geo[_G_C + 3]
+            dist = geo[_G_DIST]
+            if within & 8:
+                if c3 <= dist:
+                    over ^= 8
+            elif within & 16:
+                if (c3 << 3) <= dist:
+                    over ^= 8
+        slow = 0
+        if words[_S_MIN_BITS] > dist_bits:
+            # Marlin's bounds: 2 to half the queue's blocks waiting.
+            waiting = int(waiting_blocks(io[0]))
+            if 2 <= waiting and waiting < mem[_S_QUEUE] // 2:
+                slow = 1
+        if over or slow or not words[_S_F_BASE]:
+            words[_S_OVER] = over
+            words[_S_DIST_BITS] = dist_bits
+            return _FLOATS
+    mix_id = -1
+    given = io[12]
+    if e_steps:
+        # Exact per-drive counts as the block's mix; a fresh id, so the step loop
+        # starts its schedule anew and gives each drive exactly its count.
+        given = io[13]
+        if not (how & _HOW_SCALED):
+            if int(block_weights(io[12], io[8], given, drives)) == 0:
+                return _SCALE
+        if e_steps < 0:
+            g = ptr32(given)
+            for i in range(drives):
+                g[i] = 0 - g[i]
+        mix_id = (words[_S_MIX_ID] + 1) & 0x3FFFFFF
+        words[_S_MIX_ID] = mix_id
+    # The junction's speed, from the deviation model (a stop if the queue ran empty),
+    # as the look-ahead's V2.
+    if how & _HOW_JOIN:
+        geo_flags |= _FL_JOIN
+    entry_v2 = int(_junction(io[10], io[11], geo_flags))
+    # The block's words, then its look-ahead words and the records it changes
+    # (lookahead.plan_words, recalculate), S_HEAD past it, and the planner's position:
+    # X Y Z from target, E plus e_steps, and the drives' plus given, each drive's steps.
     b = _BLOCK_BASE + slot * _B_WORDS
-    m[b + _B_N] = n
+    mem[b + _B_N] = n
     for i in range(4):
-        m[b + _B_STEPS + i] = steps[i]
-    m[b + _B_FLAGS] = flags
-    m[b + _B_DIR_SET] = ptr32(io[6])[neg]
-    m[b + _B_DIR_CLR] = ptr32(io[7])[neg]
-    m[b + _B_DWELL] = 0
+        mem[b + _B_STEPS + i] = words[i]
+    mem[b + _B_FLAGS] = flags | neg * _F_NEG
+    mem[b + _B_DIR_SET] = ptr32(io[6])[neg]
+    mem[b + _B_DIR_CLR] = ptr32(io[7])[neg]
+    mem[b + _B_DWELL] = 0
     if mix_id >= 0:
         w = b + _B_MIX
-        m[w] = mix_id
+        mem[w] = mix_id
         weights = ptr32(io[8])
-        drives = steps[_S_DRIVES]
         for i in range(_MAX_DRIVES):
-            m[w + 1 + i] = weights[i] if i < drives else 0
+            mem[w + 1 + i] = weights[i] if i < drives else 0
     lk = io[1]
     # No faster than the move before, the ring's slot before this one: its nominal V2.
     # (entry_v2 is 0 after a stop.)
     prev = slot - 1
     if prev < 0:
-        prev = m[_S_QUEUE] - 1
+        prev = mem[_S_QUEUE] - 1
     prev_v2 = ptr32(lk)[prev * _L_WORDS + _L_NOMINAL]
     if prev_v2 < entry_v2:
         entry_v2 = prev_v2
-    _plan_words(lk, slot * _L_WORDS, io[2], n, io[5], entry_v2, steps[_S_RATE_CAP])
+    _plan_words(lk, slot * _L_WORDS, io[2], n, io[5], entry_v2, words[_S_RATE_CAP])
     _recalculate(lk, io[0], slot, io[4])
     slot += 1  # committed: the step loop may start it
-    if slot >= m[_S_QUEUE]:
+    if slot >= mem[_S_QUEUE]:
         slot = 0
-    m[_S_HEAD] = slot
+    mem[_S_HEAD] = slot
     pos[0] = target[0]
     pos[1] = target[1]
     pos[2] = target[2]
@@ -332,9 +442,12 @@ def _queue_block(io, slot: int, n: int, flags: int, neg: int, mix_id: int, entry
     # given, an array 'i': a 64-bit port's ptr32 reads a negative count zero-extended,
     # and the sum's low 32 bits, all the word keeps, are the same.
     drive_steps = ptr32(io[9])
-    steps_given = ptr32(given)
-    for i in range(steps[_S_DRIVES]):
-        drive_steps[i] += steps_given[i]
+    given_steps = ptr32(given)
+    for i in range(drives):
+        drive_steps[i] += given_steps[i]
+    if e_steps > 0:
+        return _EXTRUDED
+    return 1
 
 
 @micropython.viper
@@ -460,39 +573,29 @@ class Planner:
         tick_us = settings["tick_us"]
         self.tick_s = tick_us * 1e-6
         self.set_steps_per_mm(settings["steps_per_mm"])
-        # Products kept while their factors are the same objects (see add_move).
-        self._seen_speed = None
-        self._seen_min_s = None
-        self._seen_speed2 = 0.0
-        # speed * min_segment_s as float32 halved bits, against geometry.lengths's
-        self._seen_min_bits = 0
-        self._min_mm_f = array("f", bytes(4))
-        self._jd_accel = None
-        # add_move's limits: the speed, acceleration and limits they were worked out
-        # for, the bits, and eight times E's limits. A list changed in place: a tuple
-        # a new F would be garbage on the chips.
-        self._limits_of = [None, None, None, None, 0, 0.0, 0.0]
-        self._jd_mm = None
+        # The speed, acceleration, limits, minimum segment time and junction
+        # deviation _base_floats worked out its words for (see add_move): a list
+        # changed in place, as a tuple a new F would be garbage on the chips.
+        self._base_of = [None] * 6
+        self._min_mm_f = array("f", bytes(4))  # SLOWDOWN's length (see _min_bits)
         self.position_steps = [0, 0, 0, 0]
         # Per-slot planning data in integers, for the look-ahead (see lookahead.py).
         # A block's floats for lookahead.plan_words, with the tick's two.
         self._plan_f = array("f", bytes(4 * lookahead.F_WORDS))
         self._plan_f[lookahead.F_TICK_ONE] = self.tick_s * st.ONE
         self._plan_f[lookahead.F_TICK_S] = self.tick_s
-        # The speed and acceleration in _plan_f (see add_move): changed in place.
-        self._f_of = [None, None]
         self.lk = lk or heap.zeros(lk_words(q))
         # The last: irq, or a bit of 0 for irq_off and irq_on.
         self._hooks = (irq_off, irq_on, _RAMP_IO, irq or array("i", bytes(12)))
         # The latest block is a move the next one may join at speed (geometry.junction
         # has its direction); False after a stop.
         self.joins = False
-        # X Y Z E, n (_xyz_steps), the drives (_queue_block: len() is a call) and the
-        # fastest rate the step loop may step at (see lookahead.plan_words).
-        self._abs_steps = array("i", bytes(4 * 7))
+        # X Y Z E, n (_xyz_steps), the drives (_plan_move: len() is a call), the
+        # fastest rate the step loop may step at (see lookahead.plan_words), and
+        # _plan_move's words (_S_MIX_ID on).
+        self._abs_steps = array("i", bytes(4 * _S_WORDS))
         self.mix_id = 0
         self.tool_mix = (1,) + (0,) * (MAX_DRIVES - 1)  # the active tool's weights
-        self._block_mix_id = 0
         # E is planned per drive, from absolute positions so rounding never drifts:
         # each drive's exact filament (its share of every E move) -> its target step.
         self.drives = settings["drives"]
@@ -535,11 +638,12 @@ class Planner:
         # Times the step loop ran dry between two moves with no wait between them
         # (M122): the host or the planner did not keep up, and the axes stopped.
         self.underruns = 0
-        # The arrays _queue_block works with, in one tuple: a viper call's arguments
+        # The arrays _plan_move works with, in one tuple: a viper call's arguments
         # cost the chip each.
         self._queue_io = (mem, self.lk, self._plan_f, self._abs_steps, self._hooks,
                           _RAMP_IO, self._dir_set, self._dir_clr, self._weights,
-                          self.drive_steps)
+                          self.drive_steps, self._geo, self._geo_f, self._counts,
+                          self._given)
 
     # --- queue state, shared with the step loop ---
     def busy(self):
@@ -834,174 +938,139 @@ class Planner:
                                     homing_axes)
         if feed_mm_s <= 0:
             raise PlanError("feed rate must be > 0")
-        # Builtins (abs, min, max) and module attributes are lookups by name: the
-        # arithmetic below is written out, as it runs for every line of G-code. So is
-        # what small methods would do: a call costs the chip about 10 us. The methods
-        # it calls are taken from the class: self.method looks in the instance's
-        # attributes first, and a miss in a map of sixty costs the emulated Pico
-        # about 9 us.
+        # The methods it calls are taken from the class: self.method looks in the
+        # instance's attributes first, and a miss in a map of sixty costs the emulated
+        # Pico about 9 us.
         pos = self.position_steps
-        # The lengths and the junction in integers (geometry.py): every float operation
-        # allocates on the chips. X Y Z's steps go into its words here, in viper, which
-        # would take a big int's low bits for its value: the targets are checked first.
-        geo = self._geo
-        steps = self._abs_steps
+        # X Y Z's steps go into the planner's words here, in viper, which would take a
+        # big int's low bits for its value: the targets are checked first.
         neg = -1
         if (-_CAP <= target_steps[0] <= _CAP and -_CAP <= target_steps[1] <= _CAP
                 and -_CAP <= target_steps[2] <= _CAP):
             # Bit i: axis i runs backwards; bit 4 + i: it moves.
-            neg = _xyz_steps(pos, target_steps, steps, geo)
+            neg = _xyz_steps(pos, target_steps, self._abs_steps, self._geo)
         # Before the filament is planned: a move refused changes nothing. (E has at
         # most MAX_PERIOD steps a block: see add_move.)
         if neg < 0:
             raise PlanError("move too long: from %s to %s steps"
                             % (pos[:3], list(target_steps[:3])))
-        moving = neg >> 4
-        neg &= 7
         if replay and e_nm:
             self._replay_counts(e_nm)
         else:
             Planner._plan_e(self, e_nm, mix[1] if mix else None)
-        counts = self._counts
-        e_steps = sum(counts)
-        n = steps[_S_N_XYZ]
-        along_xyz = n
-        if e_steps < 0:
-            neg |= 8
-            e_steps_abs = -e_steps
-        else:
-            e_steps_abs = e_steps
-        if e_steps:
-            moving |= 8
-        steps[3] = e_steps_abs
-        if e_steps_abs > n:
-            n = e_steps_abs
-        if n == 0:
-            return False  # less than a step: the filament counts toward the next move
-        # The method only where the ring is full or the step path idle: a call costs.
-        slot = _ring_room(self.mem)
-        if slot < 0 or slot & _RING_IDLE:
-            slot = Planner._new_slot(self, slot)
-        if e_nm:
-            geo[_G_D + 3] = e_nm if e_nm >= 0 else -e_nm
-            geo_flags = (neg & 7) | _FL_E_NM | (e_nm < 0) << 3
-        else:
-            geo[_G_D + 3] = e_steps_abs
-            geo_flags = neg
-        f = self._plan_f
-        dist_bits = _lengths(geo, self._geo_f, f, geo_flags)
-        speed = feed_mm_s
-        accel = self.acceleration_mm_s2 if along_xyz else self.retract_acceleration_mm_s2
-        max_feed = self.max_feed_mm_s
-        max_accel = self.max_accel_mm_s2
-        # The axes whose limits the move's speed and acceleration are within (bit i),
-        # and bit 4: within eight times E's. Worked out again only when one of them
-        # changes (a new F, M201, M203): most lines keep them all.
-        lim = self._limits_of
-        if max_feed is not lim[2] or max_accel is not lim[3]:
-            lim[2] = max_feed
-            lim[3] = max_accel
-            lim[5] = 8 * max_feed[3]
-            lim[6] = 8 * max_accel[3]
-            lim[0] = None
-        if speed is not lim[0] or accel is not lim[1]:
-            within = 0
-            for i in range(4):
-                if speed <= max_feed[i] and accel <= max_accel[i]:
-                    within |= 1 << i
-            if speed <= lim[5] and accel <= lim[6]:
-                within |= 16
-            lim[0] = speed
-            lim[1] = accel
-            lim[4] = within
-        within = lim[4]
-        # An axis's share of the path is at most 1 (always on X Y Z), so its limits
-        # bind only when the move asks more than the limits themselves; E, at most an
-        # eighth of the path (as when printing), binds only beyond eight times its
-        # limits. Most moves skip the arithmetic (each float operation allocates).
-        over = moving & ~within & 7
-        if moving & 8 and not (within & 8 and geo[_G_C + 3] <= geo[_G_DIST]) and not (
-                within & 16 and (geo[_G_C + 3] << 3) <= geo[_G_DIST]):
-            over |= 8
-        if over:
-            inv = 1.0 / geo[_G_DIST]
-            for i in range(4):
-                if (over >> i) & 1:
-                    share = geo[_G_C + i] * inv
-                    v = max_feed[i] / share
-                    if v < speed:
-                        speed = v
-                    v = max_accel[i] / share
-                    if v < accel:
-                        accel = v
-        # Most lines keep the feed rate of the line before (the same float object):
-        # its square and its SLOWDOWN length are worked out once (each float operation
-        # allocates on the chips).
-        min_s = self.min_segment_s
-        if speed is not self._seen_speed or min_s is not self._seen_min_s:
-            self._seen_speed = speed
-            self._seen_min_s = min_s
-            self._seen_speed2 = speed * speed
-            self._min_mm_f[0] = speed * min_s
-            self._seen_min_bits = _half_bits(self._min_mm_f)
-        if min_s and self._seen_min_bits > dist_bits:
-            # Marlin's SLOWDOWN (set_min_segment_time), with its bounds: 2 to half the
-            # queue's blocks waiting, and 2 (min_s - t) / waiting added to the time t.
-            waiting = waiting_blocks(self.mem)
-            if 2 <= waiting < self.queue // 2:
-                dist = f[_F_MM]
-                t = dist / speed
-                speed = dist / (t + 2 * (min_s - t) / waiting)
-        nominal2 = self._seen_speed2 if speed is self._seen_speed else speed * speed
-        # The junction's speed, from the deviation model (a stop if the queue ran empty),
-        # as the look-ahead's V2: no faster than the move before.
-        join = self.joins and not homing_axes
-        if join:
-            jd = self.junction_deviation_mm
-            if accel is not self._jd_accel or jd is not self._jd_mm:
-                self._jd_accel = accel
-                self._jd_mm = jd
-                self._geo_f[_GF_ACCEL_JD] = accel * jd
-            geo_flags |= _FL_JOIN
-        entry_v2 = _junction(geo, self._geo_f, geo_flags)
-
+        # The speed and acceleration in floats, worked out again only when one of them
+        # or a limit changes (a new F, M201, M203, M204, M205): most lines keep them.
+        accel = self.acceleration_mm_s2 if neg & 0x70 else self.retract_acceleration_mm_s2
+        base = self._base_of
+        if (feed_mm_s is not base[0] or accel is not base[1]
+                or self.max_feed_mm_s is not base[2] or self.max_accel_mm_s2 is not base[3]
+                or self.min_segment_s is not base[4]
+                or self.junction_deviation_mm is not base[5]):
+            Planner._base_floats(self, feed_mm_s, accel)
         # The DIR pins to set and clear for each pattern of the axes' signs, worked out
         # once for these masks.
         inv = self.dir_invert_mask
         if dir_masks is not self._dir_masks_seen or inv != self._dir_invert_seen:
             self._dir_words(dir_masks, inv)
-        flags = neg * _F_NEG
+        flags = 0
         if homing_axes:
-            flags |= st.F_HOMING | (homing_axes << st.F_HOME_SHIFT)
-        given = counts
-        mix_id = -1
-        if e_steps:
-            # Exact per-drive counts as the block's mix; a fresh id, so the step loop
-            # starts its schedule anew and gives each drive exactly its count.
-            given = self._given
-            if not block_weights(counts, self._weights, given, self.drives):
-                given = self._scaled(given)
-            if e_steps < 0:
-                for i in range(self.drives):
-                    given[i] = -given[i]
-            elif self.keep_extrusion and not replay:
-                self._remember_extrusion(tuple(self._weights), list(given))
-            mix_id = self._block_mix_id = (self._block_mix_id + 1) & 0x3FFFFFF
-        # The floats end here: the look-ahead works on integers (lookahead.plan_words).
-        # Most lines keep the speed and acceleration of the line before, and f keeps
-        # them (a float's store into the array costs the chip a few us).
-        kept = self._f_of
-        if speed is not kept[0] or accel is not kept[1]:
-            f[_F_ACCEL] = accel
-            f[_F_NOMINAL] = speed
-            f[_F_NOMINAL2] = nominal2
-            kept[0] = speed
-            kept[1] = accel
-        # In place, as the drives' plans: a list a line is garbage on the chips.
-        _queue_block(self._queue_io, slot, n, flags, neg, mix_id, entry_v2, e_steps, given,
-                     pos, target_steps)
+            flags = st.F_HOMING | (homing_axes << st.F_HOME_SHIFT)
+        how = _HOW_JOIN if self.joins and not homing_axes else 0
+        io = self._queue_io
+        slot = 0
+        got = _plan_move(io, e_nm, neg, flags, how, slot, pos, target_steps)
+        while got < 0:
+            # In Python, as add_move did all of it before: the ring's room, the speed
+            # where a limit binds or SLOWDOWN slows the move, a mix too long.
+            if got == _RING_WAIT:
+                slot = Planner._new_slot(self, _ring_room(self.mem))
+                how |= _HOW_SLOT
+                if not self.joins:  # the step path ran dry
+                    how &= ~_HOW_JOIN
+            elif got == _FLOATS:
+                Planner._limited_floats(self, feed_mm_s, accel)
+                how |= _HOW_FLOATS
+            else:
+                self._scaled(self._given)
+                how |= _HOW_SCALED
+            got = _plan_move(io, e_nm, neg, flags, how, slot, pos, target_steps)
+        if got == 0:
+            return False
+        if got == _EXTRUDED and self.keep_extrusion and not replay:
+            self._remember_extrusion(tuple(self._weights), list(self._given))
         self.joins = not homing_axes
         return True
+
+    def _base_floats(self, speed, accel):
+        """For add_move: what the move's speed and acceleration are within (the axes'
+        limits, bit i, and bit 4 within eight times E's) and SLOWDOWN's shortest length
+        at that speed, in the planner's words; and the speed and acceleration as the
+        look-ahead and the junction take them, in floats."""
+        max_feed = self.max_feed_mm_s
+        max_accel = self.max_accel_mm_s2
+        within = 0
+        for i in range(4):
+            if speed <= max_feed[i] and accel <= max_accel[i]:
+                within |= 1 << i
+        if speed <= 8 * max_feed[3] and accel <= 8 * max_accel[3]:
+            within |= 16
+        words = self._abs_steps
+        words[_S_WITHIN] = within
+        min_s = self.min_segment_s
+        words[_S_MIN_BITS] = Planner._min_bits(self, speed) if min_s else 0
+        base = self._base_of
+        base[0] = speed
+        base[1] = accel
+        base[2] = max_feed
+        base[3] = max_accel
+        base[4] = min_s
+        base[5] = self.junction_deviation_mm
+        Planner._set_floats(self, speed, accel)
+        words[_S_F_BASE] = 1
+
+    def _min_bits(self, speed):
+        """SLOWDOWN's shortest length at speed, as geometry.lengths gives a length."""
+        self._min_mm_f[0] = speed * self.min_segment_s
+        return _half_bits(self._min_mm_f)
+
+    def _limited_floats(self, speed, accel):
+        """add_move's speed and acceleration where an axis's limits bind (_plan_move
+        said which) or SLOWDOWN may slow the move, in floats; or, with neither, the
+        speed and acceleration asked, where the floats hold another move's."""
+        words = self._abs_steps
+        asked = speed
+        over = words[_S_OVER]
+        geo = self._geo
+        if over:
+            inv = 1.0 / geo[_G_DIST]
+            for i in range(4):
+                if (over >> i) & 1:
+                    share = geo[_G_C + i] * inv
+                    v = self.max_feed_mm_s[i] / share
+                    if v < speed:
+                        speed = v
+                    v = self.max_accel_mm_s2[i] / share
+                    if v < accel:
+                        accel = v
+        min_s = self.min_segment_s
+        if min_s and Planner._min_bits(self, speed) > words[_S_DIST_BITS]:
+            # Marlin's SLOWDOWN (set_min_segment_time), with its bounds: 2 to half the
+            # queue's blocks waiting, and 2 (min_s - t) / waiting added to the time t.
+            waiting = waiting_blocks(self.mem)
+            if 2 <= waiting < self.queue // 2:
+                dist = self._plan_f[_F_MM]
+                t = dist / speed
+                speed = dist / (t + 2 * (min_s - t) / waiting)
+        Planner._set_floats(self, speed, accel)
+        words[_S_F_BASE] = 1 if speed is asked and not over else 0
+
+    def _set_floats(self, speed, accel):
+        """The look-ahead's floats (lookahead.plan_words) and the junction's."""
+        f = self._plan_f
+        f[_F_ACCEL] = accel
+        f[_F_NOMINAL] = speed
+        f[_F_NOMINAL2] = speed * speed
+        self._geo_f[_GF_ACCEL_JD] = accel * self.junction_deviation_mm
 
     def _add_pieces(self, target_steps, feed_mm_s, dir_masks, e_nm, mix, replay,
                     homing_axes):
@@ -1023,7 +1092,7 @@ class Planner:
     def _scaled(self, steps):
         """add_move's weights for steps too many for the mixer's integers: scaled, and
         the steps the schedule then gives, worked out with the mixer itself, into
-        self._given (an array, as _queue_block reads it)."""
+        self._given (an array, as _plan_move reads it)."""
         scaled = normalize(steps, self.drives)
         got = schedule_counts(scaled, sum(steps))
         for i in range(self.drives):
