@@ -564,12 +564,14 @@ def test_a_move_keeps_each_axis_within_its_limits_by_its_share(mp):
     """An axis's max feed (M203) binds on a move by the axis's share of the path: along
     X at 50 mm/s, on a diagonal at 50 / (1/sqrt(2)) = 70.7; Z at its own 10 mm/s; a move
     asked slower keeps its speed. The limits change between moves at one F, and each
-    move sees the ones in force."""
+    move sees the ones in force; a move within them after one slowed by them, at the
+    same F and limits, has its F again."""
     lines = ["M302 P1", "G92 X0 Y0 Z0", "G90", "G1 X10 F6000", "M203 X50", "G1 X20",
-             "G1 X30 Y10", "G1 X40 Y10 F600", "G1 Z1 F6000", "M203 X250", "G1 X50 Y10"]
+             "G1 X30 Y10", "G1 X40 Y10 F600", "G1 Z1 F6000", "G1 Y20", "M203 X250",
+             "G1 X50 Y10"]
     v2 = [plan[1] for plan in mp.json(PLANS, stdin=json.dumps(lines).encode())]
-    first, x_only, diagonal, slow, z_only, again = v2
-    assert first == again == round(100.0 ** 2 * 64)
+    first, x_only, diagonal, slow, z_only, y_after, again = v2
+    assert first == y_after == again == round(100.0 ** 2 * 64)
     assert abs(x_only - 50.0 ** 2 * 64) <= 2
     assert abs(diagonal - 2 * 50.0 ** 2 * 64) <= 4
     assert slow == round(10.0 ** 2 * 64)
