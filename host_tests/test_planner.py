@@ -231,7 +231,7 @@ def _plan_word_cases():
         entry_v2 = rnd.choice([0, (1 << 29) - 1, int(64 * nominal * nominal * rnd.random())])
         tick_s = rnd.choice([5, 10, 20, 50, 1000]) * 1e-6
         n = rnd.choice([1, 3, 16, 800, 10 ** 5, (1 << 30) - 2])
-        floats = [mm, accel, nominal, nominal * nominal, tick_s * (1 << 28), tick_s]
+        floats = [mm, accel, nominal, nominal * nominal, tick_s * (1 << 28), accel * tick_s]
         bits = [struct.unpack("<I", struct.pack("<f", x))[0] for x in floats]
         cases.append((bits, n, min(entry_v2, (1 << 29) - 1)))
     return cases
@@ -245,10 +245,10 @@ def _exact_plan_words(bits, n, entry_v2):
     from fractions import Fraction as F
     from math import isqrt
     cap, v2_max = (1 << 30) - 1, (1 << 29) - 1
-    mm, accel, nominal, nominal2, tick_one, tick_s = (
+    mm, accel, nominal, nominal2, tick_one, accel_tick = (
         F(struct.unpack("<f", struct.pack("<I", b))[0]) for b in bits)
     k = tick_one * n / mm
-    acc = k * accel * tick_s
+    acc = k * accel_tick
     floor = min(cap, isqrt(int(acc * (1 << 28))))
     nominal_v2 = min(v2_max, round(64 * nominal2))
     return {"gain": min(v2_max, round(128 * accel * mm)),

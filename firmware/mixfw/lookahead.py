@@ -71,7 +71,7 @@ F_ACCEL = const(1)  # mm/s**2
 F_NOMINAL = const(2)  # mm/s
 F_NOMINAL2 = const(3)  # its square
 F_TICK_ONE = const(4)  # the step loop's tick in s, times ONE (its rate of a step a tick)
-F_TICK_S = const(5)
+F_ACCEL_TICK = const(5)  # F_ACCEL times the tick in s: the speed gained a tick
 F_WORDS = const(6)
 # Scratch words of the planning io array, after the limbs ramp.py uses.
 _W_M = const(11)  # F_WORDS mantissas (with the hidden bit; 0 for 0)
@@ -177,18 +177,17 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     # RATE_NOM = nominal k, truncated.
     r_nom = int(product(w_buf, w[_W_M + F_NOMINAL], km, 1,
                         w[_W_E + F_NOMINAL] - _BIAS + ke, _P_TRUNC))
-    # acc = k a TICK_S, the rate change per tick, as am * m_ts 2**s: ACC rounded, at
-    # least 1.
-    s = int(product(w_buf, km, m_a, 1, 26, _P_TOP)) + ke + e_a
-    am = w[_LO]
-    m_ts = w[_W_M + F_TICK_S]
-    s += w[_W_E + F_TICK_S] - _BIAS
-    acc = int(product(w_buf, am, m_ts, 1, s, _P_ROUND))
+    # acc = k a TICK_S, the rate change per tick, as km * m_at 2**s (a TICK_S comes
+    # in as one float, worked out where the acceleration changes: a product less a
+    # line): ACC rounded, at least 1.
+    m_at = w[_W_M + F_ACCEL_TICK]
+    s = ke + w[_W_E + F_ACCEL_TICK] - _BIAS
+    acc = int(product(w_buf, km, m_at, 1, s, _P_ROUND))
     lk[at + L_ACC] = acc if acc > 1 else 1
     # FLOOR, the slowest rate a block may fall to: reached from rest within half a
     # step, so a block that ends at a stop still finishes. sqrt(acc ONE), ONE = 2**28:
     # the root of acc taken to 54 bits, or 55 for an even exponent, truncated.
-    t = int(product(w_buf, am, m_ts, 1, 54, _P_TOP)) + s + 28
+    t = int(product(w_buf, km, m_at, 1, 54, _P_TOP)) + s + 28
     if t & 1:
         hi = w[_HI]
         lo = w[_LO]

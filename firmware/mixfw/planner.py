@@ -61,8 +61,10 @@ _F_MM = const(0)
 _F_ACCEL = const(1)
 _F_NOMINAL = const(2)
 _F_NOMINAL2 = const(3)
-assert (_F_MM, _F_ACCEL, _F_NOMINAL, _F_NOMINAL2) == (
-    lookahead.F_MM, lookahead.F_ACCEL, lookahead.F_NOMINAL, lookahead.F_NOMINAL2)
+_F_ACCEL_TICK = const(5)
+assert (_F_MM, _F_ACCEL, _F_NOMINAL, _F_NOMINAL2, _F_ACCEL_TICK) == (
+    lookahead.F_MM, lookahead.F_ACCEL, lookahead.F_NOMINAL, lookahead.F_NOMINAL2,
+    lookahead.F_ACCEL_TICK)
 assert _F_MM == 0  # where geometry.lengths writes a move's length
 _L_WORDS = const(20)
 _L_NOMINAL = const(2)
@@ -583,7 +585,6 @@ class Planner:
         # A block's floats for lookahead.plan_words, with the tick's two.
         self._plan_f = array("f", bytes(4 * lookahead.F_WORDS))
         self._plan_f[lookahead.F_TICK_ONE] = self.tick_s * st.ONE
-        self._plan_f[lookahead.F_TICK_S] = self.tick_s
         self.lk = lk or heap.zeros(lk_words(q))
         # The last: irq, or a bit of 0 for irq_off and irq_on.
         self._hooks = (irq_off, irq_on, _RAMP_IO, irq or array("i", bytes(12)))
@@ -1070,6 +1071,7 @@ class Planner:
         f[_F_ACCEL] = accel
         f[_F_NOMINAL] = speed
         f[_F_NOMINAL2] = speed * speed
+        f[_F_ACCEL_TICK] = accel * self.tick_s
         self._geo_f[_GF_ACCEL_JD] = accel * self.junction_deviation_mm
 
     def _add_pieces(self, target_steps, feed_mm_s, dir_masks, e_nm, mix, replay,
