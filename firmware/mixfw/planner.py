@@ -296,13 +296,16 @@ _HOW_SLOT = const(1)
 _HOW_FLOATS = const(2)
 _HOW_SCALED = const(4)
 _HOW_JOIN = const(8)
+_HOW_LENGTHS = const(16)  # the call before worked out the move's lengths
 # Words of Planner._abs_steps past the drives and the rate cap.
 _S_MIX_ID = const(7)  # the latest block's mix id
 _S_WITHIN = const(8)  # the axes whose limits the speed is within (see _base_floats)
 _S_MIN_BITS = const(9)  # SLOWDOWN's shortest length at that speed, as lengths' bits
 _S_OVER = const(10)  # _plan_move's answer _FLOATS: the axes whose limits bind
 _S_DIST_BITS = const(11)  # and the move's length, as lengths' bits
-_S_F_BASE = const(12)  # 1: the floats hold _base_floats' speed and acceleration
+_S_F_BASE = const(12)  # which floats hold _base_floats' own: _F_BASE_ACCEL the
+_F_BASE_ACCEL = const(2)  # acceleration's, _F_BASE_BOTH its speed's too
+_F_BASE_BOTH = const(3)
 _S_WORDS = const(13)
 
 
@@ -356,7 +359,11 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     else:
         geo[_G_D + 3] = e_abs
         geo_flags = neg
-    dist_bits = int(_lengths(io[10], io[11], io[2], geo_flags))
+    if how & _HOW_LENGTHS:
+        dist_bits = words[_S_DIST_BITS]  # worked out by the call before, for this move
+    else:
+        dist_bits = int(_lengths(io[10], io[11], io[2], geo_flags))
+        words[_S_DIST_BITS] = dist_bits
     if not (how & _HOW_FLOATS):
         # An axis's share of the path is at most 1 (always on X Y Z), so its limits
         # bind only when the move asks more than the limits themselves; E, at most an
@@ -381,9 +388,8 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
             waiting = int(waiting_blocks(io[0]))
             if 2 <= waiting and waiting < mem[_S_QUEUE] // 2:
                 slow = 1
-        if over or slow or not words[_S_F_BASE]:
+        if over or slow or words[_S_F_BASE] != _F_BASE_BOTH:
             words[_S_OVER] = over
-            words[_S_DIST_BITS] = dist_bits
             return _FLOATS
     mix_id = -1
     given = io[12]
@@ -990,10 +996,10 @@ class Planner:
                     how &= ~_HOW_JOIN
             elif got == _FLOATS:
                 Planner._limited_floats(self, feed_mm_s, accel)
-                how |= _HOW_FLOATS
+                how |= _HOW_FLOATS | _HOW_LENGTHS
             else:
                 self._scaled(self._given)
-                how |= _HOW_SCALED
+                how |= _HOW_SCALED | _HOW_LENGTHS
             got = _plan_move(io, e_nm, neg, flags, how, slot, pos, target_steps)
         if got == 0:
             return False
@@ -1027,7 +1033,7 @@ class Planner:
         base[4] = min_s
         base[5] = self.junction_deviation_mm
         Planner._set_floats(self, speed, accel)
-        words[_S_F_BASE] = 1
+        words[_S_F_BASE] = _F_BASE_BOTH
 
     def _min_bits(self, speed):
         """SLOWDOWN's shortest length at speed, as geometry.lengths gives a length."""
@@ -1037,10 +1043,13 @@ class Planner:
     def _limited_floats(self, speed, accel):
         """add_move's speed and acceleration where an axis's limits bind (_plan_move
         said which) or SLOWDOWN may slow the move, in floats; or, with neither, the
-        speed and acceleration asked, where the floats hold another move's."""
+        floats of the speed and acceleration asked, where they hold another move's. On
+        a print that SLOWDOWN slows every line comes here, and each float operation
+        allocates on the chips: the acceleration's floats are kept where they stand."""
         words = self._abs_steps
-        asked = speed
         over = words[_S_OVER]
+        asked = speed
+        asked_accel = accel
         geo = self._geo
         if over:
             inv = 1.0 / geo[_G_DIST]
@@ -1054,16 +1063,28 @@ class Planner:
                     if v < accel:
                         accel = v
         min_s = self.min_segment_s
-        if min_s and Planner._min_bits(self, speed) > words[_S_DIST_BITS]:
-            # Marlin's SLOWDOWN (set_min_segment_time), with its bounds: 2 to half the
-            # queue's blocks waiting, and 2 (min_s - t) / waiting added to the time t.
-            waiting = waiting_blocks(self.mem)
-            if 2 <= waiting < self.queue // 2:
-                dist = self._plan_f[_F_MM]
-                t = dist / speed
-                speed = dist / (t + 2 * (min_s - t) / waiting)
+        if min_s:
+            bits = words[_S_MIN_BITS] if speed is asked else Planner._min_bits(self, speed)
+            if bits > words[_S_DIST_BITS]:
+                # Marlin's SLOWDOWN (set_min_segment_time), with its bounds: 2 to half
+                # the queue's blocks waiting, and 2 (min_s - t) / waiting added to the
+                # time t.
+                waiting = waiting_blocks(self.mem)
+                if 2 <= waiting < self.queue // 2:
+                    dist = self._plan_f[_F_MM]
+                    t = dist / speed
+                    speed = dist / (t + 2 * (min_s - t) / waiting)
+        held = words[_S_F_BASE]
+        if speed is not asked and accel is asked_accel and held & _F_BASE_ACCEL:
+            # SLOWDOWN alone, mostly: the acceleration's floats stand.
+            f = self._plan_f
+            f[_F_NOMINAL] = speed
+            f[_F_NOMINAL2] = speed * speed
+            words[_S_F_BASE] = _F_BASE_ACCEL
+            return
         Planner._set_floats(self, speed, accel)
-        words[_S_F_BASE] = 1 if speed is asked and not over else 0
+        words[_S_F_BASE] = (_F_BASE_BOTH if speed is asked and accel is asked_accel
+                            else 0)
 
     def _set_floats(self, speed, accel):
         """The look-ahead's floats (lookahead.plan_words) and the junction's."""
