@@ -198,12 +198,7 @@ class Motion:
         p.synchronize()
         p.set_steps_per_mm(settings["steps_per_mm"])
         p.set_drive_steps(settings["drive_steps_per_mm"])
-        p.max_feed_mm_s = settings["max_feed_mm_s"]
-        p.max_accel_mm_s2 = settings["max_accel_mm_s2"]
-        p.acceleration_mm_s2 = settings["acceleration_mm_s2"]
-        p.retract_acceleration_mm_s2 = settings["retract_acceleration_mm_s2"]
-        p.junction_deviation_mm = settings["junction_deviation_mm"]
-        p.set_min_segment_time(settings["min_segment_time_us"])
+        p.set_limits(settings)
         self._set_steps_per_mm(p.steps_per_mm)
         p.set_position_steps(self.machine_steps())
         self._travel(settings["travel_mm"])

@@ -572,19 +572,14 @@ class Planner:
         self._geo = array("i", bytes(4 * geometry.G_WORDS))
         self._geo_f = array("f", bytes(4 * geometry.GF_WORDS))
         self._geo_f[geometry.GF_E_NM] = 1.0 / NM_PER_MM
-        self.max_feed_mm_s = settings["max_feed_mm_s"]
-        self.max_accel_mm_s2 = settings["max_accel_mm_s2"]
-        self.acceleration_mm_s2 = settings["acceleration_mm_s2"]
-        self.retract_acceleration_mm_s2 = settings["retract_acceleration_mm_s2"]
-        self.junction_deviation_mm = settings["junction_deviation_mm"]
-        self.set_min_segment_time(settings["min_segment_time_us"])
+        # The speed and acceleration _base_floats worked out its words for (see
+        # add_move): a list changed in place, as a tuple a new F would be garbage on
+        # the chips.
+        self._base_of = [None, None]
+        self.set_limits(settings)
         tick_us = settings["tick_us"]
         self.tick_s = tick_us * 1e-6
         self.set_steps_per_mm(settings["steps_per_mm"])
-        # The speed, acceleration, limits, minimum segment time and junction
-        # deviation _base_floats worked out its words for (see add_move): a list
-        # changed in place, as a tuple a new F would be garbage on the chips.
-        self._base_of = [None] * 6
         self._min_mm_f = array("f", bytes(4))  # SLOWDOWN's length (see _min_bits)
         self.position_steps = [0, 0, 0, 0]
         # Per-slot planning data in integers, for the look-ahead (see lookahead.py).
@@ -690,12 +685,23 @@ class Planner:
         for i in range(4):
             self._geo_f[geometry.GF_SCALE + i] = 1.0 / self.steps_per_mm[i]
 
-    def set_min_segment_time(self, us):
-        """Marlin's SLOWDOWN: while fewer than half the queue's blocks wait, a move
-        shorter than this (in time) is slowed toward it, the more the fewer wait, so
-        that the step path does not run dry between lines a host or the planner is
-        slow to bring (a stop and a blob on every short curve segment). 0: off."""
-        self.min_segment_s = us * 1e-6
+    def set_limits(self, settings):
+        """The axes' limits (M201, M203), the accelerations (M204), the junction
+        deviation and the minimum segment time (M205), from settings' keys. Set here
+        only: add_move works out its floats again for the next move.
+
+        min_segment_time_us is Marlin's SLOWDOWN: while fewer than half the queue's
+        blocks wait, a move shorter than this (in time) is slowed toward it, the more
+        the fewer wait, so that the step path does not run dry between lines a host or
+        the planner is slow to bring (a stop and a blob on every short curve segment).
+        0: off."""
+        self.max_feed_mm_s = settings["max_feed_mm_s"]
+        self.max_accel_mm_s2 = settings["max_accel_mm_s2"]
+        self.acceleration_mm_s2 = settings["acceleration_mm_s2"]
+        self.retract_acceleration_mm_s2 = settings["retract_acceleration_mm_s2"]
+        self.junction_deviation_mm = settings["junction_deviation_mm"]
+        self.min_segment_s = settings["min_segment_time_us"] * 1e-6
+        self._base_of[0] = None
 
     def set_mix(self, mix_id, weights, tool=-1):
         """The mix for E moves queued from now on (already normalised weights). The
@@ -966,13 +972,11 @@ class Planner:
         else:
             Planner._plan_e(self, e_nm, mix[1] if mix else None)
         # The speed and acceleration in floats, worked out again only when one of them
-        # or a limit changes (a new F, M201, M203, M204, M205): most lines keep them.
+        # or a limit changes (a new F; M201, M203, M204, M205: set_limits): most lines
+        # keep them.
         accel = self.acceleration_mm_s2 if neg & 0x70 else self.retract_acceleration_mm_s2
         base = self._base_of
-        if (feed_mm_s is not base[0] or accel is not base[1]
-                or self.max_feed_mm_s is not base[2] or self.max_accel_mm_s2 is not base[3]
-                or self.min_segment_s is not base[4]
-                or self.junction_deviation_mm is not base[5]):
+        if feed_mm_s is not base[0] or accel is not base[1]:
             Planner._base_floats(self, feed_mm_s, accel)
         # The DIR pins to set and clear for each pattern of the axes' signs, worked out
         # once for these masks.
@@ -1028,10 +1032,6 @@ class Planner:
         base = self._base_of
         base[0] = speed
         base[1] = accel
-        base[2] = max_feed
-        base[3] = max_accel
-        base[4] = min_s
-        base[5] = self.junction_deviation_mm
         Planner._set_floats(self, speed, accel)
         words[_S_F_BASE] = _F_BASE_BOTH
 
@@ -1066,7 +1066,7 @@ class Planner:
         if min_s:
             bits = words[_S_MIN_BITS] if speed is asked else Planner._min_bits(self, speed)
             if bits > words[_S_DIST_BITS]:
-                # Marlin's SLOWDOWN (set_min_segment_time), with its bounds: 2 to half
+                # Marlin's SLOWDOWN (set_limits), with its bounds: 2 to half
                 # the queue's blocks waiting, and 2 (min_s - t) / waiting added to the
                 # time t.
                 waiting = waiting_blocks(self.mem)
