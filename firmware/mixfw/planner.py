@@ -287,7 +287,7 @@ def _steps_to(targets_buf, steps_buf, counts_buf, n: int):
 # _plan_move's answers besides 1 (queued) and 0 (shorter than a step: nothing to do),
 # each with nothing queued, for add_move to do in Python and ask again.
 _RING_WAIT = const(-1)  # the ring is full, or the step path idle (see _new_slot)
-_FLOATS = const(-2)  # an axis's limit binds, or SLOWDOWN may: speed in floats
+_FLOATS = const(-2)  # a limit binds, SLOWDOWN may, or the floats are another move's
 _SCALE = const(-3)  # too many steps for the mixer's weights (see _scaled)
 _EXTRUDED = const(2)  # queued, with filament forward
 # What add_move has done of that (_plan_move's `how`), and whether the move may join
@@ -334,7 +334,6 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     moving = neg >> 4
     neg &= 7
     n = words[_S_N_XYZ]
-    along_xyz = n
     e_abs = e_steps
     if e_steps < 0:
         neg |= 8
@@ -1066,9 +1065,8 @@ class Planner:
         if min_s:
             bits = words[_S_MIN_BITS] if speed is asked else Planner._min_bits(self, speed)
             if bits > words[_S_DIST_BITS]:
-                # Marlin's SLOWDOWN (set_limits), with its bounds: 2 to half
-                # the queue's blocks waiting, and 2 (min_s - t) / waiting added to the
-                # time t.
+                # Marlin's SLOWDOWN (set_limits), with its bounds: 2 to half the
+                # queue's blocks waiting, and 2 (min_s - t) / waiting added to the time t.
                 waiting = waiting_blocks(self.mem)
                 if 2 <= waiting < self.queue // 2:
                     dist = self._plan_f[_F_MM]
