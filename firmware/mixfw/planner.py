@@ -320,10 +320,19 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     slot where _HOW_SLOT. One call for the lengths, the axes' limits, SLOWDOWN's check,
     the junction, the block's weights and its words, where each was a call and the
     glue between them native code on objects, at 1 to 2 us an attribute or an
-    operation on the chips."""
+    operation on the chips.
+
+    Each of io's arrays is taken out of the tuple once: a subscript of an object
+    costs the chip about 1.5 us from viper, as much as a dozen operations on words."""
+    mem_buf = io[0]
+    geo_buf = io[10]
+    geo_f = io[11]
+    f_buf = io[2]
+    counts_buf = io[12]
+    weights_buf = io[8]
     words = ptr32(io[3])
-    counts = ptr32(io[12])
-    geo = ptr32(io[10])
+    counts = ptr32(counts_buf)
+    geo = ptr32(geo_buf)
     drives = words[_S_DRIVES]
     e_steps = 0
     for i in range(drives):
@@ -345,9 +354,9 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
         n = e_abs
     if n == 0:
         return 0  # less than a step: the filament counts toward the next move
-    mem = ptr32(io[0])
+    mem = ptr32(mem_buf)
     if not (how & _HOW_SLOT):
-        slot = int(_ring_room(io[0]))
+        slot = int(_ring_room(mem_buf))
         if slot < 0 or slot & _RING_IDLE:
             return _RING_WAIT
     if e_nm:
@@ -361,7 +370,7 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     if how & _HOW_LENGTHS:
         dist_bits = words[_S_DIST_BITS]  # worked out by the call before, for this move
     else:
-        dist_bits = int(_lengths(io[10], io[11], io[2], geo_flags))
+        dist_bits = int(_lengths(geo_buf, geo_f, f_buf, geo_flags))
         words[_S_DIST_BITS] = dist_bits
     if not (how & _HOW_FLOATS):
         # An axis's share of the path is at most 1 (always on X Y Z), so its limits
@@ -384,20 +393,20 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
         slow = 0
         if words[_S_MIN_BITS] > dist_bits:
             # Marlin's bounds: 2 to half the queue's blocks waiting.
-            waiting = int(waiting_blocks(io[0]))
+            waiting = int(waiting_blocks(mem_buf))
             if 2 <= waiting and waiting < mem[_S_QUEUE] // 2:
                 slow = 1
         if over or slow or words[_S_F_BASE] != _F_BASE_BOTH:
             words[_S_OVER] = over
             return _FLOATS
     mix_id = -1
-    given = io[12]
+    given = counts_buf
     if e_steps:
         # Exact per-drive counts as the block's mix; a fresh id, so the step loop
         # starts its schedule anew and gives each drive exactly its count.
         given = io[13]
         if not (how & _HOW_SCALED):
-            if int(block_weights(io[12], io[8], given, drives)) == 0:
+            if int(block_weights(counts_buf, weights_buf, given, drives)) == 0:
                 return _SCALE
         if e_steps < 0:
             g = ptr32(given)
@@ -409,7 +418,7 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     # as the look-ahead's V2.
     if how & _HOW_JOIN:
         geo_flags |= _FL_JOIN
-    entry_v2 = int(_junction(io[10], io[11], geo_flags))
+    entry_v2 = int(_junction(geo_buf, geo_f, geo_flags))
     # The block's words, then its look-ahead words and the records it changes
     # (lookahead.plan_words, recalculate), S_HEAD past it, and the planner's position:
     # X Y Z from target, E plus e_steps, and the drives' plus given, each drive's steps.
@@ -424,7 +433,7 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     if mix_id >= 0:
         w = b + _B_MIX
         mem[w] = mix_id
-        weights = ptr32(io[8])
+        weights = ptr32(weights_buf)
         for i in range(_MAX_DRIVES):
             mem[w + 1 + i] = weights[i] if i < drives else 0
     lk = io[1]
@@ -436,8 +445,8 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     prev_v2 = ptr32(lk)[prev * _L_WORDS + _L_NOMINAL]
     if prev_v2 < entry_v2:
         entry_v2 = prev_v2
-    _plan_words(lk, slot * _L_WORDS, io[2], n, io[5], entry_v2, words[_S_RATE_CAP])
-    _recalculate(lk, io[0], slot, io[4])
+    _plan_words(lk, slot * _L_WORDS, f_buf, n, io[5], entry_v2, words[_S_RATE_CAP])
+    _recalculate(lk, mem_buf, slot, io[4])
     slot += 1  # committed: the step loop may start it
     if slot >= mem[_S_QUEUE]:
         slot = 0
