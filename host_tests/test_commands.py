@@ -154,6 +154,22 @@ def test_m17_m18_drive_the_enable_pins(session, board):
     assert list(y) == [1, 0, 1]  # ... and every driver off when the main loop ends
 
 
+def test_a_move_turns_on_the_drivers_it_needs_while_others_stay_off(session, board):
+    """Each move turns on its own axes' drivers, and E's the drives': also where a
+    driver no move names (Z here) stays off, so not every driver is on."""
+    session.send("G1 X1 Y1 F600", "G1 X2 E1", "M18 X", "G1 X3")
+    session.finish()
+    pins = board["PINS"]
+    _, x = session.edges_of(pins["x_enable"])
+    _, y = session.edges_of(pins["y_enable"])
+    _, z = session.edges_of(pins["z_enable"])
+    _, e5 = session.edges_of(pins["e5_enable"])
+    assert list(x) == [1, 0, 1, 0, 1]  # active low: on at G1 X1, off at M18 X, on again
+    assert list(y) == [1, 0, 1]
+    assert list(e5) == [1, 0, 1]  # every drive, at G1 X2 E1: E may be mixed over all
+    assert list(z) == [1]  # never on
+
+
 def test_look_ahead_keeps_speed_through_collinear_segments(session, board):
     # The look-ahead alone: M205 B0 turns off Marlin's SLOWDOWN, which would slow the
     # moves planned while the queue fills (test_planner.py has it).

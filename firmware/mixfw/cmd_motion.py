@@ -176,7 +176,7 @@ class Motion:
         self.drives = settings["drives"]
         self.dir_masks = pins.axis_dir_masks()
         self.enabled = 0  # bit per driver: X Y Z then drives
-        self._all_enabled = (1 << (3 + self.drives)) - 1
+        self._drive_bits = ((1 << self.drives) - 1) << 3
         self.soft_limits = settings.get("soft_limits", True)
         # Longest E move accepted, as Marlin's PREVENT_LENGTHY_EXTRUDE.
         self.max_extrude_mm = settings.get("max_extrude_mm", 200.0)
@@ -347,7 +347,10 @@ class Motion:
                                  % (abs(e_nm) / NM_PER_MM, self.max_extrude_mm))
             for guard in self.extrusion_guards:
                 guard()
-        if self.enabled != self._all_enabled:  # mostly all are on already
+        # Mostly the move's drivers are on already. Not all of them may be: a print
+        # that never moves Z left it off, and enable_for's bytecode call then cost
+        # the chip 35 us a line.
+        if (xyz | (self._drive_bits if e_nm else 0)) & ~self.enabled:
             self.enable_for(xyz | (8 if e_nm else 0))
         q = self.queue
         policy = self.retract_policy
