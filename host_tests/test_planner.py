@@ -413,7 +413,7 @@ def test_positions_become_the_same_steps_in_small_ints(mp):
 XYZ_CASES = """
 import sys, json
 from mixfw.gcode import Parser
-from mixfw.cmd_motion import xyz_targets, _MOVE_BITS, SPM_WORDS
+from mixfw.cmd_motion import xyz_targets, MOVE_BITS, SPM_WORDS
 from mixfw.planner import spm_digits
 from array import array
 p = Parser()
@@ -426,7 +426,7 @@ for text, pos, relative, travel, at in json.loads(sys.stdin.read()):
     b = text.encode()
     line = p.parse(b, len(b))
     target = array("i", bytes(12))
-    got = xyz_targets(line.mant, line.decimals, line.present & _MOVE_BITS, array("i", pos),
+    got = xyz_targets(line.mant, line.decimals, line.present & MOVE_BITS, array("i", pos),
                       target, relative, array("i", bytes(12)), travel and array("i", travel),
                       spm, steps, at)
     out.append([got, list(target), list(steps)])

@@ -9,15 +9,17 @@ from mixfw.compat import const, micropython, ptr8, ptr32
 
 AXIS_LETTERS = "XYZE"
 _AXIS_INDEX = tuple(letter_index(ch) for ch in AXIS_LETTERS)
-_AXIS_BITS = sum(1 << i for i in _AXIS_INDEX)  # in a parsed line's present mask
-_F_INDEX = letter_index("F")
-_NM_DECIMALS = 6  # axis words are read as exact nanometres
+# Constants, which the compiler folds: a module's global costs every line a lookup.
+_F_INDEX = const(5)  # letter_index("F")
+_NM_DECIMALS = const(6)  # axis words are read as exact nanometres
 _X_INDEX = const(23)  # letter_index("X"), then Y and Z
 _E_INDEX = const(4)  # letter_index("E")
 _NM_MAX = const(0x3FFFFFFF)  # a position's nanometres: a 32-bit chip's small ints
 assert (_X_INDEX, _X_INDEX + 1, _X_INDEX + 2, _E_INDEX) == _AXIS_INDEX
-_XYZ_BITS = 7 << _X_INDEX
-_MOVE_BITS = _XYZ_BITS | 1 << _E_INDEX  # the words xyz_targets reads
+assert _F_INDEX == letter_index("F")
+_XYZ_BITS = const(7 << _X_INDEX)
+# X Y Z E in a parsed line's masks: the words a G0/G1 moves by, which xyz_targets reads.
+MOVE_BITS = const(_XYZ_BITS | 1 << _E_INDEX)
 # xyz_targets's verdicts on a word, for axis a: -_BEYOND - a, -_OUTSIDE - a.
 _BEYOND = const(1)
 _OUTSIDE = const(4)
@@ -32,9 +34,9 @@ SPM_WORDS = const(16)
 # retract_policy: retractions follow the mix and run it exactly backwards, or pull every
 # drive equally (and push them back equally), or take back exactly the steps each drive
 # made in the latest extrusion (and push exactly those back).
-RETRACT_FOLLOW_MIX = 0
-RETRACT_EQUAL = 1
-RETRACT_REPLAY = 2
+RETRACT_FOLLOW_MIX = const(0)
+RETRACT_EQUAL = const(1)
+RETRACT_REPLAY = const(2)
 
 
 @micropython.viper
@@ -289,7 +291,7 @@ class Motion:
             if f <= 0:
                 raise GcodeError("feed rate F must be > 0, got %s" % f)
             self.feed_mm_s = f / 60.0
-        if not present & _AXIS_BITS:
+        if not present & MOVE_BITS:
             return None
         # The target goes in an array made once, which then becomes pos_nm, and pos_nm
         # the spare: an array a line would be garbage on the chips. pos_nm stays as it was
@@ -301,7 +303,7 @@ class Motion:
             for k in _AXIS_INDEX:
                 line.fixed_at(k, _NM_DECIMALS)  # raises for the word with no number
         steps = self._steps_out
-        moved = xyz_targets(line.mant, line.decimals, valued & _MOVE_BITS, pos, target,
+        moved = xyz_targets(line.mant, line.decimals, valued & MOVE_BITS, pos, target,
                             not self.absolute, self.offset_nm,
                             self._travel_nm if self.soft_limits else None,
                             self._xyz_spm, steps, self.queue.position_steps)
