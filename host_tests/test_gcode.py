@@ -74,3 +74,39 @@ micropython.heap_unlock()
 print("done")
 """)
     assert out.strip() == "done"
+
+
+def test_each_line_keeps_nothing_of_the_line_before(mp):
+    """The parser stores a line's command, N word and text arguments only where they
+    differ from the line before's: each line still reads as itself, also after one
+    with an N word, one with text arguments, or one whose command key is the same
+    number (G70000 and M10000)."""
+    lines = ["N5 G1 X1", "G1 X2", "M23 part.gcode", "G1 X3", "N6 M23 b.gcode", "M23 c",
+             "G1 E1", "G70000", "M10000", "T1", "", "G1 X4"]
+    got = mp.json("""
+import json
+from mixfw.gcode import Parser
+p = Parser((("M", 23),))
+out = []
+for s in json.loads(%r):
+    b = s.encode()
+    l = p.parse(b, len(b))
+    out.append([l.letter, l.number, l.has_line_number, l.line_number, l.args_text,
+                l.present])
+print(json.dumps(out))
+""" % json.dumps(lines))
+    x, e = 1 << 23, 1 << 4
+    assert got == [
+        ["G", 1, True, 5, "", x],
+        ["G", 1, False, 0, "", x],
+        ["M", 23, False, 0, "part.gcode", 0],
+        ["G", 1, False, 0, "", x],
+        ["M", 23, True, 6, "b.gcode", 0],
+        ["M", 23, False, 0, "c", 0],
+        ["G", 1, False, 0, "", e],
+        ["G", 70000, False, 0, "", 0],
+        ["M", 10000, False, 0, "", 0],
+        ["T", 1, False, 0, "", 0],
+        ["", 0, False, 0, "", 0],
+        ["G", 1, False, 0, "", x],
+    ]

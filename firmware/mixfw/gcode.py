@@ -102,6 +102,7 @@ _R_VALUED = const(1)
 _R_LETTER = const(2)  # command letter's code (G, M or T), 0 for none
 _R_NUMBER = const(3)
 _R_KEY = const(11)  # command_key of the command, 0 for none
+_R_HELD = const(12)  # 1 while the Line holds an N word or text arguments (see parse)
 _R_HAS_N = const(4)
 _R_N = const(5)
 _R_ARGS = const(6)  # raw-argument commands: index of the text after the command; else -1
@@ -109,7 +110,7 @@ _R_AT = const(7)  # the letter or character an error is about
 _R_NEG = const(8)  # an unsupported command's sign, mantissa and decimals
 _R_M = const(9)
 _R_D = const(10)
-_R_WORDS = const(12)
+_R_WORDS = const(13)
 
 # _scan's verdicts on bad input.
 _E_UNCLOSED = const(1)
@@ -121,14 +122,17 @@ _E_NEEDS_NUMBER = const(6)
 _E_UNSUPPORTED = const(7)
 _E_FIRST = const(8)
 _E_TWICE = const(9)
+# Not bad input: the line has an N word or text arguments, or the line before had
+# them (parse stores them then).
+_RARE = const(16)
 
 
 @micropython.viper
 def _scan(buf: ptr8, n: int, words) -> int:
     """Words of buf[:n] into mant/decimals (only those present are written) and the
     result words r, with words = (mant, decimals, raw, r). raw: a count, then the keys
-    of the commands whose arguments are text. Returns 0, or an _E_ code with r[_R_AT]
-    naming the letter or character."""
+    of the commands whose arguments are text. Returns 0, _RARE, or an _E_ code with
+    r[_R_AT] naming the letter or character."""
     mant = ptr32(words[0])
     decimals = ptr8(words[1])
     raw = ptr32(words[2])
@@ -141,6 +145,7 @@ def _scan(buf: ptr8, n: int, words) -> int:
     r[_R_HAS_N] = 0
     r[_R_N] = 0
     r[_R_ARGS] = -1
+    rare = r[_R_HELD]
     first = 1
     i = 0
     while i < n:
@@ -216,6 +221,7 @@ def _scan(buf: ptr8, n: int, words) -> int:
                 if not has_number or d:
                     return _E_LINE_NUMBER
                 r[_R_HAS_N] = 1
+                rare = 1
                 r[_R_N] = -m if neg else m
                 first = 1
                 continue
@@ -235,6 +241,7 @@ def _scan(buf: ptr8, n: int, words) -> int:
                 while k > 0:
                     if raw[k] == key:
                         r[_R_ARGS] = i
+                        rare = 1
                         break
                     k -= 1
                 if k > 0:
@@ -252,6 +259,8 @@ def _scan(buf: ptr8, n: int, words) -> int:
             decimals[letter - 65] = d
     r[_R_PRESENT] = present
     r[_R_VALUED] = valued
+    if rare:
+        return _RARE
     return 0
 
 
@@ -276,21 +285,31 @@ class Parser:
         r = self.result
         err = _scan(buf, n, self._words)
         if err:
-            raise WordsError(self._reason(err))
+            if err != _RARE:
+                raise WordsError(self._reason(err))
+            self._rare_words(buf, n)
         ln.present = r[_R_PRESENT]
         ln.valued = r[_R_VALUED]
-        code = r[_R_LETTER]
-        ln.letter = "G" if code == 71 else ("M" if code == 77 else ("T" if code == 84 else ""))
-        ln.number = r[_R_NUMBER]
-        ln.key = r[_R_KEY]
-        # The N word and the text arguments are rare: stored only where they change
-        # (each store costs the chips microseconds, on every line).
-        if r[_R_HAS_N] or ln.has_line_number:
-            ln.has_line_number = r[_R_HAS_N] == 1
-            ln.line_number = r[_R_N]
-        if r[_R_ARGS] >= 0 or ln.args_text:
-            self.args_text(buf, n)
+        # Mostly the command of the line before (G1), whose words then stand: each
+        # store costs the chips microseconds, on every line. (A key alone may be two
+        # commands': G70000 and M10000.)
+        key = r[_R_KEY]
+        if key != ln.key or r[_R_NUMBER] != ln.number:
+            ln.letter = "G" if r[_R_LETTER] == 71 else (
+                "M" if r[_R_LETTER] == 77 else ("T" if r[_R_LETTER] == 84 else ""))
+            ln.number = r[_R_NUMBER]
+            ln.key = key
         return ln
+
+    def _rare_words(self, buf, n):
+        """The N word and the text arguments, which are rare: stored only where a line
+        has them or the line before had them (_scan answers _RARE then)."""
+        ln = self.line
+        r = self.result
+        ln.has_line_number = r[_R_HAS_N] == 1
+        ln.line_number = r[_R_N]
+        self.args_text(buf, n)
+        r[_R_HELD] = 1 if ln.has_line_number or ln.args_text else 0
 
     def args_text(self, buf, n):
         """The text after a raw-argument command, up to a comment or checksum."""
