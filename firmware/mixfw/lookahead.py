@@ -110,6 +110,9 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     lk = ptr32(lk_buf)
     w = ptr32(w_buf)
     f = ptr32(f_buf)
+    # A local: a call of a module's function looks it up by name first, about 1 us
+    # on the chip, and a line makes five or six products.
+    prod = product
     # Every word: those worked out below, then the rest (a loop turn costs the chip
     # about as much as a store).
     lk[at + L_GAIN] = 0
@@ -148,11 +151,11 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     m_a = w[_W_M + F_ACCEL]
     e_a = w[_W_E + F_ACCEL] - _BIAS
     # GAIN = 2 V2_SCALE a mm (V2_SCALE = 2**6)
-    x = int(product(w_buf, m_a, m_mm, 1, e_a + e_mm + 7, _P_ROUND))
+    x = int(prod(w_buf, m_a, m_mm, 1, e_a + e_mm + 7, _P_ROUND))
     lk[at + L_GAIN] = x if x < _V2_MAX else _V2_MAX
     bits = f[F_NOMINAL2]
     if bits != w[_W_N2_BITS]:
-        x = int(product(w_buf, w[_W_M + F_NOMINAL2], 1, 1,
+        x = int(prod(w_buf, w[_W_M + F_NOMINAL2], 1, 1,
                         w[_W_E + F_NOMINAL2] - _BIAS + 6, _P_ROUND))
         w[_W_N2_V2] = x if x < _V2_MAX else _V2_MAX
         w[_W_N2_BITS] = bits
@@ -171,23 +174,23 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
         b = b >> 1
     if ns < 0:
         ns = 0
-    ke = int(product(w_buf, w[_W_M + F_TICK_ONE] << 6, n << ns, m_mm, 26, _P_TOP))
+    ke = int(prod(w_buf, w[_W_M + F_TICK_ONE] << 6, n << ns, m_mm, 26, _P_TOP))
     ke += w[_W_E + F_TICK_ONE] - _BIAS - 6 - ns - e_mm
     km = w[_LO]
     # RATE_NOM = nominal k, truncated.
-    r_nom = int(product(w_buf, w[_W_M + F_NOMINAL], km, 1,
+    r_nom = int(prod(w_buf, w[_W_M + F_NOMINAL], km, 1,
                         w[_W_E + F_NOMINAL] - _BIAS + ke, _P_TRUNC))
     # acc = k a TICK_S, the rate change per tick, as km * m_at 2**s (a TICK_S comes
     # in as one float, worked out where the acceleration changes: a product less a
     # line): ACC rounded, at least 1.
     m_at = w[_W_M + F_ACCEL_TICK]
     s = ke + w[_W_E + F_ACCEL_TICK] - _BIAS
-    acc = int(product(w_buf, km, m_at, 1, s, _P_ROUND))
+    acc = int(prod(w_buf, km, m_at, 1, s, _P_ROUND))
     lk[at + L_ACC] = acc if acc > 1 else 1
     # FLOOR, the slowest rate a block may fall to: reached from rest within half a
     # step, so a block that ends at a stop still finishes. sqrt(acc ONE), ONE = 2**28:
     # the root of acc taken to 54 bits, or 55 for an even exponent, truncated.
-    t = int(product(w_buf, km, m_at, 1, 54, _P_TOP)) + s + 28
+    t = int(prod(w_buf, km, m_at, 1, 54, _P_TOP)) + s + 28
     if t & 1:
         hi = w[_HI]
         lo = w[_LO]
@@ -204,7 +207,7 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     # rate = k sqrt(V2 / V2_SCALE) = isqrt(V2 * K2) scaled by 2**K_SHIFT, with K2 in
     # [2**24, 2**26): V2 * K2 stays below 2**55, and the root keeps 15 bits or more.
     # k**2 / 2**6 = km**2 2**(2 ke - 6) = K2 4**K_SHIFT with K2 = km**2 >> 26.
-    k2 = int(product(w_buf, km, km, 1, -26, _P_TRUNC))
+    k2 = int(prod(w_buf, km, km, 1, -26, _P_TRUNC))
     lk[at + L_K2] = k2
     shift = ke + 10
     lk[at + L_K_SHIFT] = shift + _SHIFT_BIAS
@@ -218,7 +221,7 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
         elif shift > -30 and (rate_cap >> (30 + shift)) == 0:
             a = rate_cap << (0 - shift)
         if a:  # else the cap's V2 is past any V2 kept
-            x = int(product(w_buf, a, a, k2, 0, _P_TRUNC))
+            x = int(prod(w_buf, a, a, k2, 0, _P_TRUNC))
             if x < lk[at + L_NOMINAL]:
                 lk[at + L_NOMINAL] = x
                 if x < lk[at + L_MAX_ENTRY]:
@@ -286,6 +289,10 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
     io = ptr32(io_buf)
     mask = ptr32(hooks[3])
     bit = mask[2]
+    # Locals, as in plan_words: a line rewrites two records or more, each with a root
+    # or two and a schedule.
+    isqrt = isqrt_limbs
+    schedule = ramp_into
     while True:
         at = k * L_WORDS
         nk = k + 1
@@ -339,7 +346,7 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
                     lo = ((mid & 0x7FFF) << 15) + a0 * b0
                     io[_HI] = a1 * b1 + (mid >> 15) + (lo >> 30)
                     io[_LO] = lo & _CAP
-                    r = int(isqrt_limbs(io_buf))
+                    r = int(isqrt(io_buf))
                     if shift >= 0:
                         r = r << shift
                     else:
@@ -364,7 +371,7 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
                 io[2] = r_nom
                 io[3] = r1
                 io[4] = lk[at + L_ACC]
-                ramp_into(io_buf)
+                schedule(io_buf)
                 lk[at + _L_UNTIL] = io[5]
                 lk[at + _L_AFTER] = io[6]
                 lk[at + _L_RATE_DECEL] = io[7]
