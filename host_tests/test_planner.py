@@ -578,6 +578,40 @@ def test_a_move_keeps_each_axis_within_its_limits_by_its_share(mp):
     assert abs(z_only - 10.0 ** 2 * 64) <= 2
 
 
+def test_a_feed_rate_taken_again_plans_as_it_did_the_first_time(mp):
+    """A print's retractions, travels and extrusions take turns at a few feed rates, and
+    the planner keeps the latest four's floats (Planner._base_floats' memo): a move at a
+    feed rate it planned before, kept or long gone from the memo, along X and as a
+    retraction of E alone (its own acceleration), plans as the first move at it did."""
+    feeds = [600, 1200, 1800, 2400, 3000]  # within E's own limit too
+    lines = ["M302 P1", "G92 X0 Y0 Z0 E0", "G90", "M82", "M205 B0"]
+    x = 0
+    for f in feeds + feeds[::-1] + feeds[1:3] * 3:
+        x += 5
+        lines += ["G1 X%d F%d" % (x, f), "G1 E%d F%d" % (x % 2, f)]
+    plans = mp.json(PLANS, stdin=json.dumps(lines).encode())
+    assert len(plans) == len(lines) - 5
+    first = {}
+    for text, (_, v2, rate, acc) in zip(lines[5:], plans):
+        move, f = text.split(" F")
+        kind = "E" if " E" in move else "X"
+        first.setdefault((kind, f), (v2, rate, acc))
+        assert (v2, rate, acc) == first[(kind, f)], text
+        # The first moves' own: the feed rate's V2, and each kind its acceleration.
+        assert abs(v2 - (int(f) / 60.0) ** 2 * 64) <= 1, text
+    assert len(first) == 10
+    # Each kind its own acceleration, though X planned every feed rate first: the rate
+    # change a tick goes as the acceleration times the lead axis's steps/mm.
+    from mixfw.defaults import SETTINGS
+    accs = {kind: {acc for (k, _), (_, _, acc) in first.items() if k == kind}
+            for kind in "XE"}
+    assert len(accs["X"]) == len(accs["E"]) == 1
+    spm = SETTINGS["steps_per_mm"]
+    want = (SETTINGS["retract_acceleration_mm_s2"] * spm[3]
+            / (SETTINGS["acceleration_mm_s2"] * spm[0]))
+    assert abs(accs["E"].pop() / accs["X"].pop() / want - 1) < 0.02
+
+
 def test_short_moves_slow_down_while_the_queue_is_under_half_full(mp):
     """As Marlin's SLOWDOWN: with 2 to 7 of the 16 blocks waiting, a move shorter than
     min_segment_time_us (20 ms) takes t + 2 (20 ms - t) / waiting; fewer or more

@@ -500,6 +500,9 @@ def _xyz_steps(pos, target, steps_buf, geo_buf) -> int:
     return neg
 
 
+_MEMO = const(4)  # pairs of speed and acceleration _base_floats keeps
+
+
 @micropython.viper
 def _half_bits(f_buf) -> int:
     """A positive float32's bits halved (a small int), as geometry.lengths returns a
@@ -710,6 +713,7 @@ class Planner:
         self.junction_deviation_mm = settings["junction_deviation_mm"]
         self.min_segment_s = settings["min_segment_time_us"] * 1e-6
         self._base_of[0] = None
+        self._memo = [(None,) * 7] * _MEMO
 
     def set_mix(self, mix_id, weights, tool=-1):
         """The mix for E moves queued from now on (already normalised weights). The
@@ -1024,7 +1028,37 @@ class Planner:
         """For add_move: what the move's speed and acceleration are within (the axes'
         limits, bit i, and bit 4 within eight times E's) and SLOWDOWN's shortest length
         at that speed, in the planner's words; and the speed and acceleration as the
-        look-ahead and the junction take them, in floats."""
+        look-ahead and the junction take them, in floats.
+
+        Mostly a pair worked out before, taken from the memo: a print's retractions,
+        travels and extrusions take turns at three or four of them, and working them out
+        costs the chip about 0.2 ms (each float operation allocates)."""
+        base = self._base_of
+        base[0] = speed
+        base[1] = accel
+        for got in self._memo:
+            if got[1] is accel and got[0] == speed:
+                Planner._memo_load(self, got)
+                return
+        Planner._work_base_floats(self, speed, accel)
+
+    def _memo_load(self, got):
+        """A memo's pair's words and floats (see _work_base_floats) into the planner's."""
+        words = self._abs_steps
+        words[_S_WITHIN] = got[2]
+        words[_S_MIN_BITS] = got[3]
+        f = self._plan_f
+        f[_F_ACCEL] = got[1]
+        f[_F_NOMINAL] = got[0]
+        f[_F_NOMINAL2] = got[4]
+        f[_F_ACCEL_TICK] = got[5]
+        self._geo_f[_GF_ACCEL_JD] = got[6]
+        words[_S_F_BASE] = _F_BASE_BOTH
+
+    def _work_base_floats(self, speed, accel):
+        """_base_floats' words and floats worked out, and kept in the memo (the oldest
+        pair goes), as (speed, accel, within, SLOWDOWN's bits, then the floats
+        _set_floats works out)."""
         max_feed = self.max_feed_mm_s
         max_accel = self.max_accel_mm_s2
         within = 0
@@ -1037,11 +1071,13 @@ class Planner:
         words[_S_WITHIN] = within
         min_s = self.min_segment_s
         words[_S_MIN_BITS] = Planner._min_bits(self, speed) if min_s else 0
-        base = self._base_of
-        base[0] = speed
-        base[1] = accel
         Planner._set_floats(self, speed, accel)
         words[_S_F_BASE] = _F_BASE_BOTH
+        f = self._plan_f
+        memo = self._memo
+        memo.pop()
+        memo.insert(0, (speed, accel, within, words[_S_MIN_BITS], f[_F_NOMINAL2],
+                        f[_F_ACCEL_TICK], self._geo_f[_GF_ACCEL_JD]))
 
     def _min_bits(self, speed):
         """SLOWDOWN's shortest length at speed, as geometry.lengths gives a length."""
