@@ -364,22 +364,33 @@ def test_block_weights_are_the_steps_over_their_gcd(mp):
             assert weights == [c // g if g else 0 for c in want], counts
 
 
+# X's step at each position, by xyz_targets with no word named (X stays where it is:
+# at the position), and by scaled_round.
 STEPS_OF_NM = """
 import sys, json
 from array import array
-from mixfw.planner import steps_of_nm, spm_digits, scaled_round, steps_per_nm
-digits = array("i", bytes(4 * 3))
+from mixfw.cmd_motion import xyz_targets, SPM_WORDS
+from mixfw.planner import spm_digits, scaled_round, steps_per_nm
+nm = array("i", bytes(12))
+zeros = array("i", bytes(12))
+steps = array("i", bytes(4 * 5))
 out = []
-for spm, xs in json.loads(sys.stdin.read()):
-    spm_digits(spm, digits, 0)
-    p, q = steps_per_nm(spm)
-    out.append([[steps_of_nm(x, digits, 0) for x in xs], [scaled_round(x, p, q) for x in xs]])
+for s, xs in json.loads(sys.stdin.read()):
+    spm = array("i", bytes(4 * SPM_WORDS))  # and no step kept
+    spm_digits(s, spm, 0)
+    p, q = steps_per_nm(s)
+    got = []
+    for x in xs:
+        nm[0] = x
+        xyz_targets(spm, spm, 0, nm, array("i", bytes(12)), 0, zeros, None, spm, steps, None)
+        got.append(steps[0])
+    out.append([got, [scaled_round(x, p, q) for x in xs]])
 print(json.dumps(out))
 """
 
 
 def test_positions_become_the_same_steps_in_small_ints(mp):
-    """X Y Z's positions to steps in viper (planner.steps_of_nm, 15-bit digits and
+    """X Y Z's positions to steps in viper (cmd_motion.xyz_targets, 15-bit digits and
     30-bit limbs): the integer scaled_round gives, halves away from zero included, over
     the options' whole range of steps/mm and positions within +-2**30 nm, on both
     builds."""

@@ -2,8 +2,8 @@
 # Handlers parse and check; the planner does the work.
 from array import array
 from mixfw.gcode import GcodeError, letter_index
-from mixfw.planner import (nm_from_mm, scaled_round, spm_digits, steps_of_nm,
-                           steps_per_nm, NM_PER_MM)
+from mixfw.planner import (nm_from_mm, scaled_round, spm_digits, steps_per_nm,
+                           NM_PER_MM, SPM_SCALE)
 from mixfw import stepper as st
 from mixfw.compat import const, micropython, ptr8, ptr32
 
@@ -31,6 +31,12 @@ _AXIS_MOVED = const(16)
 _SPM_LAST = const(9)
 _SPM_HELD = const(15)
 SPM_WORDS = const(16)
+# 10**12 (NM_PER_MM * SPM_SCALE) in 30-bit limbs, and 2 * 10**12 = 2**13 * (5**6)**2.
+_E12_HI = const(931)
+_E12_LO = const(346361856)
+_FIVE6 = const(15625)
+_M30 = const(0x3FFFFFFF)
+assert (_E12_HI << 30) + _E12_LO == NM_PER_MM * SPM_SCALE == _FIVE6 ** 2 << 12
 # retract_policy: retractions follow the mix and run it exactly backwards, or pull every
 # drive equally (and push them back equally), or take back exactly the steps each drive
 # made in the latest extrusion (and push exactly those back).
@@ -46,11 +52,16 @@ def xyz_targets(mant_buf, dec_buf, named: int, pos_buf, target_buf, relative: in
     from its parsed words (gcode.Line's mant and decimals), as exact nanometres into
     target: pos's where not named, added to pos's if relative. Further decimals round
     half away from zero, as Line.fixed_at. Then each axis's absolute step at its
-    machine position (target + off) into steps_buf (array 'i'), by planner.steps_of_nm
-    with the steps/mm spm_digits put in spm_buf (SPM_WORDS: the step an axis had at
-    the same position is taken again, as a line mostly leaves Z, and a call costs the
-    chip 15 us). An E word named goes, as nanometres, into steps_buf[4] where it is
-    within +-_NM_MAX.
+    machine position (target + off) into steps_buf (array 'i'), with the steps/mm
+    planner.spm_digits put in spm_buf (SPM_WORDS: the step an axis had at the same
+    position is taken again, as a line mostly leaves Z). An E word named goes, as
+    nanometres, into steps_buf[4] where it is within +-_NM_MAX.
+
+    A step is div_round(nm * spm_fixed, NM_PER_MM * SPM_SCALE), the integer
+    planner.scaled_round gives, in small ints where scaled_round's products pass them
+    for most steps/mm: (2 |nm| spm + 10**12) in three 30-bit limbs, shifted right 13
+    bits, then over 5**6 twice, each in three machine divisions. Written out here, as
+    a call of its own cost the chip about 5 us an axis.
 
     Returns bits: the axes named (X=1, Y=2, Z=4), _E_READ if steps_buf[4] holds E's
     word, and (_AXIS_MOVED << a) for each axis a whose step differs from at[a] (at:
@@ -137,7 +148,44 @@ def xyz_targets(mant_buf, dec_buf, named: int, pos_buf, target_buf, relative: in
         if (spm[_SPM_HELD] >> a) & 1 and spm[last] == nm:
             s = spm[last + 1]
         else:
-            s = int(steps_of_nm(nm, spm_buf, 3 * a))
+            # |nm| * spm in limbs (h2, h1, h0), from 15-bit digit products.
+            x = nm if nm >= 0 else 0 - nm
+            x1 = x >> 15
+            x0 = x & 0x7FFF
+            j = 3 * a
+            d1 = x1 * spm[j] + x0 * spm[j + 1]
+            d3 = x1 * spm[j + 2]
+            h0 = x0 * spm[j] + ((d1 & 0x7FFF) << 15)
+            h1 = x1 * spm[j + 1] + x0 * spm[j + 2] + (d1 >> 15) + (h0 >> 30)
+            h0 &= _M30
+            h2 = h1 >> 30
+            h1 = (h1 & _M30) + ((d3 & 0x7FFF) << 15)
+            h2 += (h1 >> 30) + (d3 >> 15)
+            h1 &= _M30
+            # times 2, plus 10**12
+            h0 = h0 << 1
+            h1 = (h1 << 1) + (h0 >> 30)
+            h0 = (h0 & _M30) + _E12_LO
+            h2 = (h2 << 1) + (h1 >> 30)
+            h1 = (h1 & _M30) + _E12_HI + (h0 >> 30)
+            h0 &= _M30
+            h2 += h1 >> 30
+            h1 &= _M30
+            # >> 13, then // 5**6 twice (remainders below 2**14, 15-bit digits): below
+            # 2**27
+            hi = (h1 >> 13) | (h2 << 17)
+            s = (h0 >> 13) | ((h1 & 0x1FFF) << 17)
+            for _ in range(2):
+                q = hi // _FIVE6
+                r = hi - q * _FIVE6
+                hi = q
+                x = (r << 15) | (s >> 15)
+                q = x // _FIVE6
+                r = x - q * _FIVE6
+                x = (r << 15) | (s & 0x7FFF)
+                s = (q << 15) | (x // _FIVE6)
+            if nm < 0:
+                s = 0 - s
             spm[last] = nm
             spm[last + 1] = s
             spm[_SPM_HELD] |= 1 << a

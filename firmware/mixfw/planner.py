@@ -143,69 +143,11 @@ def scaled_round(x, p, q):
 
 def spm_digits(steps_per_mm, out, at):
     """Steps/mm as spm_fixed in three 15-bit digits, lowest first (below 2**37: the
-    options' largest steps/mm is 100,000), into out[at:at + 3], for steps_of_nm."""
+    options' largest steps/mm is 100,000), into out[at:at + 3], for
+    cmd_motion.xyz_targets."""
     s = spm_fixed(steps_per_mm)
     for k in range(3):
         out[at + k] = (s >> (15 * k)) & 0x7FFF
-
-
-# 10**12 (NM_PER_MM * SPM_SCALE) in 30-bit limbs, and 2 * 10**12 = 2**13 * (5**6)**2.
-_E12_HI = const(931)
-_E12_LO = const(346361856)
-_FIVE6 = const(15625)
-assert (_E12_HI << 30) + _E12_LO == NM_PER_MM * SPM_SCALE == _FIVE6 ** 2 << 12
-
-
-@micropython.viper
-def steps_of_nm(x: int, spm_buf, at: int) -> int:
-    """The step of position x nm (within +-2**30), with steps/mm as spm_digits put
-    them at spm_buf[at]: div_round(x * spm_fixed, NM_PER_MM * SPM_SCALE), the integer
-    scaled_round gives, in small ints where scaled_round's products pass them for most
-    steps/mm. (2 |x| spm + 10**12) in three 30-bit limbs, shifted right 13 bits, then
-    over 5**6 twice, each in three machine divisions."""
-    spm = ptr32(spm_buf)
-    a = x
-    if x < 0:
-        a = 0 - x
-    a1 = a >> 15
-    a0 = a & 0x7FFF
-    s0 = spm[at]
-    s1 = spm[at + 1]
-    s2 = spm[at + 2]
-    # a * s in limbs (h2, h1, h0), from its 15-bit digit products.
-    d1 = a1 * s0 + a0 * s1
-    d3 = a1 * s2
-    h0 = a0 * s0 + ((d1 & 0x7FFF) << 15)
-    h1 = a1 * s1 + a0 * s2 + (d1 >> 15) + (h0 >> 30)
-    h0 &= _CAP
-    h2 = h1 >> 30
-    h1 = (h1 & _CAP) + ((d3 & 0x7FFF) << 15)
-    h2 += (h1 >> 30) + (d3 >> 15)
-    h1 &= _CAP
-    # times 2, plus 10**12
-    h0 = h0 << 1
-    h1 = (h1 << 1) + (h0 >> 30)
-    h0 = (h0 & _CAP) + _E12_LO
-    h2 = (h2 << 1) + (h1 >> 30)
-    h1 = (h1 & _CAP) + _E12_HI + (h0 >> 30)
-    h0 &= _CAP
-    h2 += h1 >> 30
-    h1 &= _CAP
-    # >> 13, then // 5**6 twice (remainders below 2**14, 15-bit digits): below 2**27
-    hi = (h1 >> 13) | (h2 << 17)
-    lo = (h0 >> 13) | ((h1 & 0x1FFF) << 17)
-    for _ in range(2):
-        q = hi // _FIVE6
-        r = hi - q * _FIVE6
-        hi = q
-        cur = (r << 15) | (lo >> 15)
-        q = cur // _FIVE6
-        r = cur - q * _FIVE6
-        cur = (r << 15) | (lo & 0x7FFF)
-        lo = (q << 15) | (cur // _FIVE6)
-    if x < 0:
-        return 0 - lo
-    return lo
 
 
 @micropython.viper
