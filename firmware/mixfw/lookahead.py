@@ -156,7 +156,7 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     bits = f[F_NOMINAL2]
     if bits != w[_W_N2_BITS]:
         x = int(prod(w_buf, w[_W_M + F_NOMINAL2], 1, 1,
-                        w[_W_E + F_NOMINAL2] - _BIAS + 6, _P_ROUND))
+                     w[_W_E + F_NOMINAL2] - _BIAS + 6, _P_ROUND))
         w[_W_N2_V2] = x if x < _V2_MAX else _V2_MAX
         w[_W_N2_BITS] = bits
     x = w[_W_N2_V2]
@@ -179,7 +179,7 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     km = w[_LO]
     # RATE_NOM = nominal k, truncated.
     r_nom = int(prod(w_buf, w[_W_M + F_NOMINAL], km, 1,
-                        w[_W_E + F_NOMINAL] - _BIAS + ke, _P_TRUNC))
+                     w[_W_E + F_NOMINAL] - _BIAS + ke, _P_TRUNC))
     # acc = k a TICK_S, the rate change per tick, as km * m_at 2**s (a TICK_S comes
     # in as one float, worked out where the acceleration changes: a product less a
     # line): ACC rounded, at least 1.
