@@ -248,6 +248,7 @@ _S_DIST_BITS = const(11)  # and the move's length, as lengths' bits
 _S_F_BASE = const(12)  # which floats hold _base_floats' own: _F_BASE_ACCEL the
 _F_BASE_ACCEL = const(2)  # acceleration's, _F_BASE_BOTH its speed's too
 _F_BASE_BOTH = const(3)
+_MEMO = const(4)  # pairs of speed and acceleration _base_floats keeps
 _S_WORDS = const(13)
 
 
@@ -440,9 +441,6 @@ def _xyz_steps(pos, target, steps_buf, geo_buf) -> int:
             n = d
     steps[_S_N_XYZ] = n
     return neg
-
-
-_MEMO = const(4)  # pairs of speed and acceleration _base_floats keeps
 
 
 @micropython.viper
@@ -981,8 +979,10 @@ class Planner:
         for got in self._memo:
             if got[1] is accel and got[0] == speed:
                 Planner._memo_load(self, got)
-                return
-        Planner._work_base_floats(self, speed, accel)
+                break
+        else:
+            Planner._work_base_floats(self, speed, accel)
+        self._abs_steps[_S_F_BASE] = _F_BASE_BOTH
 
     def _memo_load(self, got):
         """A memo's pair's words and floats (see _work_base_floats) into the planner's."""
@@ -995,7 +995,6 @@ class Planner:
         f[_F_NOMINAL2] = got[4]
         f[_F_ACCEL_TICK] = got[5]
         self._geo_f[_GF_ACCEL_JD] = got[6]
-        words[_S_F_BASE] = _F_BASE_BOTH
 
     def _work_base_floats(self, speed, accel):
         """_base_floats' words and floats worked out, and kept in the memo (the oldest
@@ -1014,7 +1013,6 @@ class Planner:
         min_s = self.min_segment_s
         words[_S_MIN_BITS] = Planner._min_bits(self, speed) if min_s else 0
         Planner._set_floats(self, speed, accel)
-        words[_S_F_BASE] = _F_BASE_BOTH
         f = self._plan_f
         memo = self._memo
         memo.pop()
