@@ -5,8 +5,9 @@
 #   retire_all: every queued block at once, the cheapest look-ahead.
 #   make_room:  retire_one's work as a function a bench calls itself between lines,
 #               so that the planner finds room and never waits: on a board the step
-#               path retires blocks at no cost to the planner, and the hook's calls
-#               (the planner's wait method, then this closure) are not planning.
+#               path retires blocks, and the hook's calls (the planner's wait method,
+#               then this closure) are not planning. It does what the step path does
+#               for a block besides stepping it: it works out its ramp schedule.
 # Homing ends at once: every endstop is hit as the block is retired.
 from mixfw.compat import const, micropython, ptr32
 from mixfw import stepper as st
@@ -20,8 +21,13 @@ _S_TAIL = const(1)
 _S_ACTIVE = const(2)
 _S_HOME_STOP = const(27)
 _S_QUEUE = const(26)
-assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _S_HOME_STOP, _S_QUEUE) == (
-    st.S_HEAD, st.S_TAIL, st.S_ACTIVE, st.S_HOME_STOP, st.S_QUEUE)
+_BLOCK_BASE = const(112)
+_B_WORDS = const(24)
+assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _S_HOME_STOP, _S_QUEUE, _BLOCK_BASE, _B_WORDS) == (
+    st.S_HEAD, st.S_TAIL, st.S_ACTIVE, st.S_HOME_STOP, st.S_QUEUE, st.BLOCK_BASE,
+    st.B_WORDS)
+schedule = st.schedule
+_RAMP_IO = st.ramp_scratch()
 
 
 @micropython.viper
@@ -36,6 +42,8 @@ def make_room(mem_buf, full: int):
     if count < 0:
         count += q
     if count and count >= full:
+        # The step path's work on the block: its schedule, as it starts.
+        schedule(mem_buf, _BLOCK_BASE + tail * _B_WORDS, _RAMP_IO)
         tail += 1
         mem[_S_TAIL] = 0 if tail >= q else tail
     mem[_S_ACTIVE] = 0

@@ -9,7 +9,7 @@
 from mixfw.compat import const, micropython, ptr32
 from mixfw import ramp
 from mixfw import stepper as st
-from mixfw.ramp import isqrt_limbs, product, ramp_into
+from mixfw.ramp import isqrt_limbs, product
 
 V2_SCALE = 64
 _V2_MAX = const(0x1FFFFFFF)
@@ -26,17 +26,11 @@ L_K_SHIFT = const(7)  # plus _SHIFT_BIAS: a 64-bit build's viper reads words uns
 L_RATE_NOM = const(8)  # the nominal speed's rate
 L_FLOOR = const(9)  # the slowest rate: reached from rest within half a step
 L_ACC = const(10)
-_L_R0 = const(11)  # the rates of the record's schedule (R_NOM -1: none yet)
-L_RN = const(12)
-_L_R1 = const(13)
-_L_UNTIL = const(14)
-_L_AFTER = const(15)
-_L_RATE_DECEL = const(16)
-L_DWELL = const(17)
-_L_V0 = const(18)  # the V2 whose rate _L_RATE_V0 is (-1: none): an entry's rate, kept
-_L_RATE_V0 = const(19)  # as the entry mostly stays when the block is rewritten
-L_WORDS = const(20)
-assert L_WORDS == 20  # plan_words clears each word by name
+L_DWELL = const(11)
+_L_V0 = const(12)  # the V2 whose rate _L_RATE_V0 is (-1: none): an entry's rate, kept
+_L_RATE_V0 = const(13)  # as the entry mostly stays when the block is rewritten
+L_WORDS = const(14)
+assert L_WORDS == 14  # plan_words clears each word by name
 SHIFT_BIAS = const(64)
 _SHIFT_BIAS = const(SHIFT_BIAS)
 
@@ -49,19 +43,16 @@ _S_QUEUE = const(26)
 _BLOCK_BASE = const(112)
 _B_WORDS = const(24)
 _B_N = const(0)
+_B_FLAGS = const(7)
 _B_RATE_INIT = const(8)
 _B_RATE_NOM = const(9)
 _B_RATE_FINAL = const(10)
 _B_ACCEL = const(11)
-_B_ACCEL_UNTIL = const(12)
-_B_DECEL_AFTER = const(13)
-_B_RATE_DECEL = const(22)
-assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _S_QUEUE, _BLOCK_BASE, _B_WORDS, _B_N, _B_RATE_INIT,
-        _B_RATE_NOM, _B_RATE_FINAL, _B_ACCEL, _B_ACCEL_UNTIL, _B_DECEL_AFTER,
-        _B_RATE_DECEL) == (
-    st.S_HEAD, st.S_TAIL, st.S_ACTIVE, st.S_QUEUE, st.BLOCK_BASE, st.B_WORDS, st.B_N,
-    st.B_RATE_INIT, st.B_RATE_NOM, st.B_RATE_FINAL, st.B_ACCEL, st.B_ACCEL_UNTIL,
-    st.B_DECEL_AFTER, st.B_RATE_DECEL)
+_F_SCHEDULE = const(2048)
+assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _S_QUEUE, _BLOCK_BASE, _B_WORDS, _B_FLAGS,
+        _B_RATE_INIT, _B_RATE_NOM, _B_RATE_FINAL, _B_ACCEL, _F_SCHEDULE) == (
+    st.S_HEAD, st.S_TAIL, st.S_ACTIVE, st.S_QUEUE, st.BLOCK_BASE, st.B_WORDS, st.B_FLAGS,
+    st.B_RATE_INIT, st.B_RATE_NOM, st.B_RATE_FINAL, st.B_ACCEL, st.F_SCHEDULE)
 
 
 # A block's planning data comes in as float32 in an array('f'), whose bits viper reads
@@ -126,12 +117,6 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     lk[at + _L_BACK] = 0
     lk[at + L_ENTRY] = 0
     lk[at + L_EXIT] = 0
-    lk[at + _L_R0] = 0
-    lk[at + L_RN] = -1  # no schedule worked out yet
-    lk[at + _L_R1] = 0
-    lk[at + _L_UNTIL] = 0
-    lk[at + _L_AFTER] = 0
-    lk[at + _L_RATE_DECEL] = 0
     lk[at + L_DWELL] = 0
     lk[at + _L_V0] = -1
     lk[at + _L_RATE_V0] = 0
@@ -289,10 +274,9 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
     io = ptr32(io_buf)
     mask = ptr32(hooks[3])
     bit = mask[2]
-    # Locals, as in plan_words: a line rewrites two records or more, each with a root
-    # or two and a schedule.
+    # A local, as in plan_words: a line rewrites two records or more, each with a root
+    # or two.
     isqrt = isqrt_limbs
-    schedule = ramp_into
     while True:
         at = k * L_WORDS
         nk = k + 1
@@ -363,21 +347,6 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
                 lk[at + _L_V0] = v0
                 lk[at + _L_RATE_V0] = r0
             b = _BLOCK_BASE + k * _B_WORDS
-            # The look-ahead rewrites every waiting block for each new one, mostly with
-            # the same rates: the schedule is worked out again only when they change.
-            if lk[at + _L_R0] != r0 or lk[at + L_RN] != r_nom or lk[at + _L_R1] != r1:
-                io[0] = mem[b + _B_N]  # ramp.IO_N .. IO_ACC, checked in planner.py
-                io[1] = r0
-                io[2] = r_nom
-                io[3] = r1
-                io[4] = lk[at + L_ACC]
-                schedule(io_buf)
-                lk[at + _L_UNTIL] = io[5]
-                lk[at + _L_AFTER] = io[6]
-                lk[at + _L_RATE_DECEL] = io[7]
-                lk[at + _L_R0] = r0
-                lk[at + L_RN] = r_nom
-                lk[at + _L_R1] = r1
             # The step loop must not start the block half written: its interrupt held
             # back, in the NVIC where one IRQ runs it (ISER reads which are enabled),
             # else all.
@@ -393,9 +362,9 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
                 mem[b + _B_RATE_NOM] = r_nom
                 mem[b + _B_RATE_FINAL] = r1
                 mem[b + _B_ACCEL] = lk[at + L_ACC]
-                mem[b + _B_ACCEL_UNTIL] = lk[at + _L_UNTIL]
-                mem[b + _B_DECEL_AFTER] = lk[at + _L_AFTER]
-                mem[b + _B_RATE_DECEL] = lk[at + _L_RATE_DECEL]
+                # The schedule of these rates: the step loop works it out as the block
+                # starts (stepper.schedule), once, however often it is rewritten here.
+                mem[b + _B_FLAGS] |= _F_SCHEDULE
                 lk[at + L_EXIT] = v1
             if bit:
                 if was:

@@ -66,7 +66,7 @@ assert (_F_MM, _F_ACCEL, _F_NOMINAL, _F_NOMINAL2, _F_ACCEL_TICK) == (
     lookahead.F_MM, lookahead.F_ACCEL, lookahead.F_NOMINAL, lookahead.F_NOMINAL2,
     lookahead.F_ACCEL_TICK)
 assert _F_MM == 0  # where geometry.lengths writes a move's length
-_L_WORDS = const(20)
+_L_WORDS = const(14)
 _L_NOMINAL = const(2)
 assert (_L_WORDS, _L_NOMINAL) == (lookahead.L_WORDS, lookahead.L_NOMINAL)
 _G_D = const(11)
@@ -488,13 +488,10 @@ def ramp_ticks(n, r0, r_nom, r1, acc, out=None, at=0):
 
 # The limbs' scratch words: ramp.py's io, and lookahead.plan_words' words after them.
 _RAMP_IO = array("i", bytes(4 * lookahead.W_WORDS))
-_ramp_into = ramp.ramp_into
 _recalculate = lookahead.recalculate
 _plan_words = lookahead.plan_words
 _lengths = geometry.lengths
 _junction = geometry.junction
-assert (ramp.IO_N, ramp.IO_R0, ramp.IO_RNOM, ramp.IO_R1, ramp.IO_ACC, ramp.IO_ACCEL_UNTIL,
-        ramp.IO_DECEL_AFTER, ramp.IO_RATE_DECEL) == tuple(range(8))  # as recalculate has
 
 
 class PlanError(ValueError):

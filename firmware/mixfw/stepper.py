@@ -15,6 +15,8 @@
 from mixfw.compat import micropython, const, ptr32
 from mixfw import mixer
 from mixfw.mixer import mix_load
+from mixfw import ramp
+from mixfw.ramp import ramp_into
 
 # Fixed point for rates: lead-axis steps per tick times 2**28. A rate is at most
 # half a step per tick, so rate + phase stays below 2**30 (the chips' small ints).
@@ -152,6 +154,12 @@ F_DWELL = const(1)
 F_HOMING = const(2)
 F_NEG = const(4)  # shifted by axis: F_NEG << X .. F_NEG << E are negative moves
 F_HOME_SHIFT = const(8)  # homing axis mask (X=1, Y=2, Z=4) << F_HOME_SHIFT
+# The record's ramp schedule (ACCEL_UNTIL, DECEL_AFTER, RATE_DECEL) is still to be
+# worked out from its rates: the look-ahead changes a waiting block's entry and exit
+# as more blocks come (on curves a dozen times a line), and a schedule worked out at
+# each change was most of its time. The step loop works it out once, as the block
+# starts (schedule).
+F_SCHEDULE = const(2048)
 
 
 assert mixer.M_ID == 0  # the step loop reads the loaded mix id at MIX_BASE
@@ -202,6 +210,41 @@ def _finish(mem: ptr32):
 
 
 @micropython.viper
+def schedule(mem_buf, b: int, io_buf):
+    """The ramp schedule of the record at word b, if it has none yet (F_SCHEDULE),
+    by ramp.ramp_into in io_buf (ramp.IO_WORDS words of scratch of the caller's own:
+    the step loop's interrupt may come in between the main loop's)."""
+    mem = ptr32(mem_buf)
+    flags = mem[b + B_FLAGS]
+    if flags & F_SCHEDULE:
+        io = ptr32(io_buf)
+        io[0] = mem[b + B_N]  # ramp.IO_N .. IO_RATE_DECEL: checked below
+        io[1] = mem[b + B_RATE_INIT]
+        io[2] = mem[b + B_RATE_NOM]
+        io[3] = mem[b + B_RATE_FINAL]
+        io[4] = mem[b + B_ACCEL]
+        ramp_into(io_buf)
+        mem[b + B_ACCEL_UNTIL] = io[5]
+        mem[b + B_DECEL_AFTER] = io[6]
+        mem[b + B_RATE_DECEL] = io[7]
+        mem[b + B_FLAGS] = flags ^ F_SCHEDULE
+
+
+assert (ramp.IO_N, ramp.IO_R0, ramp.IO_RNOM, ramp.IO_R1, ramp.IO_ACC, ramp.IO_ACCEL_UNTIL,
+        ramp.IO_DECEL_AFTER, ramp.IO_RATE_DECEL) == tuple(range(8))
+
+
+def ramp_scratch():
+    """Scratch words for schedule(): one array for each context that calls it."""
+    from array import array
+    return array("i", bytes(4 * ramp.IO_WORDS))
+
+
+# The step loop's own scratch: its interrupts do not nest.
+_TICK_RAMP_IO = ramp_scratch()
+
+
+@micropython.viper
 def _start(mem_buf, b: int) -> int:
     """Begin the block at word b. Returns the DIR pins whose level changed."""
     mem = ptr32(mem_buf)
@@ -212,6 +255,8 @@ def _start(mem_buf, b: int) -> int:
     if flags & F_DWELL:
         mem[S_WAIT] = mem[b + B_DWELL]
         return 0
+    if flags & F_SCHEDULE:
+        schedule(mem_buf, b, _TICK_RAMP_IO)
     n = mem[b + B_N]
     half = n - (n >> 1)
     mem[_S_ERR + 0] = half
