@@ -103,6 +103,93 @@ def test_any_planned_trapezoid_is_stepped_within_a_tick_of_its_ideal_times(mp, r
     assert late.max() <= 1.02
 
 
+# One block run through the DMA ring's batches twice: by the step loop, and by a copy
+# of it compiled with no ramp tick passed over at once (_RAMP_SKIP_MAX 0). The record
+# leaves its schedule to the step loop (F_SCHEDULE), as the look-ahead's do.
+RING_TWICE = """
+import sys, json
+from array import array
+from mixfw import stepper as st
+
+src = open(st.__file__).read()
+cut = src.replace("_RAMP_SKIP_MAX = const(1024)", "_RAMP_SKIP_MAX = const(0)")
+assert cut != src
+tick_by_tick = {"__name__": "tick_by_tick"}
+exec(cut, tick_by_tick)
+
+n, r0, r_nom, r1, acc, phase = json.loads(sys.stdin.read())
+
+def printer():
+    mem = array("i", bytes(4 * st.mem_words(2)))
+    mem[st.S_QUEUE] = 2
+    mem[st.S_PULSE_TICKS] = 1
+    mem[st.S_DIR_TICKS] = 1
+    mem[st.MASK_BASE + st.X] = 1
+    mem[st.S_PIO] = 2
+    mem[st.R_TC] = 80  # 10 us ticks of the PIO's 8 MHz
+    mem[st.R_BATCH_TICKS] = 200
+    mem[st.R_PULSE_CYC] = 16
+    mem[st.R_LEVEL_BITS] = 9
+    b = st.BLOCK_BASE
+    mem[b + st.B_N] = mem[b + st.B_STEPS + st.X] = n
+    mem[b + st.B_RATE_INIT] = r0
+    mem[b + st.B_RATE_NOM] = r_nom
+    mem[b + st.B_RATE_FINAL] = r1
+    mem[b + st.B_ACCEL] = acc
+    mem[b + st.B_FLAGS] = st.F_SCHEDULE
+    mem[st.S_PHASE] = phase
+    mem[st.S_HEAD] = 1
+    return mem, array("i", bytes(4 * 400))
+
+# In lockstep, batch by batch: a slow block is millions of ticks.
+skipping = printer()
+stepping = printer()
+same = True
+batches = words = 0
+while skipping[0][st.S_BLOCKS_DONE] == 0 or batches < 2:
+    got = []
+    for (mem, ring), tick in ((skipping, st.tick), (stepping, tick_by_tick["tick"])):
+        mem[st.R_W] = 0
+        w = tick((mem, ring, None))
+        got.append(ring[:w])
+    words += len(got[0])
+    batches += 1
+    if got[0] != got[1] or batches > 100000:
+        same = False
+        break
+mem = skipping[0]
+print(json.dumps({"same": same, "steps": mem[st.S_POS + st.X], "ticks": mem[st.S_TICKS],
+                  "words": words, "batches": batches}))
+"""
+
+
+@st.composite
+def long_ramps(draw):
+    """Records with ramps of hundreds to thousands of 10 us ticks, at the accelerations a
+    print's moves have there (planner.py's ACC: a rate of tens a tick each tick), and
+    any the skip takes (below _RAMP_SKIP_ACC)."""
+    acc = draw(st.one_of(st.integers(1, 200), st.integers(200, 0x7FFFF)))
+    floor = isqrt(acc * ONE)
+    assume(floor < ONE // 2)
+    rate = st.integers(floor, ONE // 2)
+    r_nom = draw(rate)
+    r0 = min(draw(rate), r_nom)
+    r1 = min(draw(rate), r_nom)
+    n = draw(st.integers(1, 3000))
+    assume(abs(r0 * r0 - r1 * r1) <= 2 * acc * n * ONE)
+    assume(n * ONE // min(r0, r1) <= 4000000)  # ticks: a few thousand batches
+    phase = draw(st.integers(0, ONE // 2 - 1))
+    return n, r0, r_nom, r1, acc, phase
+
+
+@settings(max_examples=40, deadline=None)
+@given(long_ramps())
+def test_a_ramps_ticks_passed_over_at_once_make_the_words_tick_by_tick_makes(mp, record):
+    got = mp.json(RING_TWICE, stdin=json.dumps(record).encode())
+    assert got["steps"] == record[0]
+    assert got["same"], (record, got)
+
+
 @settings(max_examples=200, deadline=None)
 @given(trapezoids())
 def test_the_trapezoid_formulas_agree_with_the_motions_physics(record):
