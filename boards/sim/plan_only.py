@@ -59,8 +59,9 @@ def retire_one(mem, queue_blocks):
 
 def retire_all(mem, queue_blocks):
     def wait():
-        mem[_S_TAIL] = mem[_S_HEAD]
-        mem[_S_ACTIVE] = 0
+        # Each block's schedule, as the step path works it out at its start.
+        while mem[_S_TAIL] != mem[_S_HEAD]:
+            make_room(mem, 1)
         mem[_S_HOME_STOP] = 7
 
     return wait
