@@ -256,8 +256,9 @@ def bench_planner(res):
                            "example and %s, with the block ring kept full (after each "
                            "line the oldest block retired where the ring is full, by "
                            "boards/sim/plan_only.py's make_room: full look-ahead, and "
-                           "the planner never waits); _queue_emptied: every block "
-                           "retired at each wait" % SLICER_100K.name)
+                           "the planner never waits; it works out the retired block's "
+                           "ramp schedule, as the step path does at a block's start); "
+                           "_queue_emptied: every block retired at each wait" % SLICER_100K.name)
 
 
 # --- step timing -----------------------------------------------------------------
