@@ -34,30 +34,44 @@ def test_steps_of_a_real_print_fall_within_a_tick_of_the_plan(tmp_path, gcode, l
 
 # One block run by the step loop with the schedule the planner gives its record; the
 # ticks (from 1, the first ramp tick) at which the lead axis (X) stepped.
-ONE_BLOCK = """
+# A step loop's array holding one block of n lead-axis (X) steps with the record's
+# rates, queued, and the phase it inherits (a MicroPython function, for the scripts
+# below).
+X_BLOCK = """
 import sys, json
 from array import array
 from mixfw import stepper as st
-from mixfw.planner import ramp_ticks
 
 n, r0, r_nom, r1, acc, phase = json.loads(sys.stdin.read())
-mem = array("i", bytes(4 * st.mem_words(2)))
-mem[st.S_QUEUE] = 2
-mem[st.S_PULSE_TICKS] = 1  # as on the simulated board: high one tick, low one tick
-mem[st.MASK_BASE + st.X] = 1
+
+def x_block():
+    mem = array("i", bytes(4 * st.mem_words(2)))
+    mem[st.S_QUEUE] = 2
+    mem[st.S_PULSE_TICKS] = 1  # as on the simulated board: high one tick, low one tick
+    mem[st.MASK_BASE + st.X] = 1
+    b = st.BLOCK_BASE
+    mem[b + st.B_N] = mem[b + st.B_STEPS + st.X] = n
+    mem[b + st.B_RATE_INIT] = r0
+    mem[b + st.B_RATE_NOM] = r_nom
+    mem[b + st.B_RATE_FINAL] = r1
+    mem[b + st.B_ACCEL] = acc
+    mem[st.S_PHASE] = phase
+    mem[st.S_HEAD] = 1
+    return mem
+"""
+
+# One block run by the step loop with the schedule the planner gives its record; the
+# ticks (from 1, the first ramp tick) at which the lead axis (X) stepped.
+ONE_BLOCK = X_BLOCK + """
+from mixfw.planner import ramp_ticks
+
+mem = x_block()
 regs = array("i", bytes(12))  # scratch set/clear registers at words 1, 2
 mem[st.S_REG_SET] = 1
 mem[st.S_REG_CLR] = 2
 b = st.BLOCK_BASE
-mem[b + st.B_N] = mem[b + st.B_STEPS + st.X] = n
-mem[b + st.B_RATE_INIT] = r0
-mem[b + st.B_RATE_NOM] = r_nom
-mem[b + st.B_RATE_FINAL] = r1
-mem[b + st.B_ACCEL] = acc
 mem[b + st.B_ACCEL_UNTIL], mem[b + st.B_DECEL_AFTER], mem[b + st.B_RATE_DECEL] = \\
     ramp_ticks(n, r0, r_nom, r1, acc)
-mem[st.S_PHASE] = phase
-mem[st.S_HEAD] = 1
 ticks = []
 t = 0
 io = (mem, regs, None)
@@ -76,13 +90,18 @@ def trapezoids(draw):
     """Records as the planner writes them: rates between the slowest it allows (at rest
     within half a step) and half a step per tick, entry and exit reachable in n steps;
     the phase a block inherits is below a step's rate."""
-    acc = draw(st.integers(500, 20000))
+    return _record(draw, draw(st.integers(500, 20000)), 300)
+
+
+def _record(draw, acc, most_steps):
+    """A record of up to most_steps steps at acc, as trapezoids() says."""
     floor = isqrt(acc * ONE)
+    assume(floor < ONE // 2)
     rate = st.integers(floor, ONE // 2)
     r_nom = draw(rate)
     r0 = min(draw(rate), r_nom)
     r1 = min(draw(rate), r_nom)
-    n = draw(st.integers(1, 300))
+    n = draw(st.integers(1, most_steps))
     assume(abs(r0 * r0 - r1 * r1) <= 2 * acc * n * ONE)
     phase = draw(st.integers(0, ONE // 2 - 1))
     return n, r0, r_nom, r1, acc, phase
@@ -106,39 +125,22 @@ def test_any_planned_trapezoid_is_stepped_within_a_tick_of_its_ideal_times(mp, r
 # One block run through the DMA ring's batches twice: by the step loop, and by a copy
 # of it compiled with no ramp tick passed over at once (_RAMP_SKIP_MAX 0). The record
 # leaves its schedule to the step loop (F_SCHEDULE), as the look-ahead's do.
-RING_TWICE = """
-import sys, json
-from array import array
-from mixfw import stepper as st
-
+RING_TWICE = X_BLOCK + """
 src = open(st.__file__).read()
 cut = src.replace("_RAMP_SKIP_MAX = const(1024)", "_RAMP_SKIP_MAX = const(0)")
 assert cut != src
 tick_by_tick = {"__name__": "tick_by_tick"}
 exec(cut, tick_by_tick)
 
-n, r0, r_nom, r1, acc, phase = json.loads(sys.stdin.read())
-
 def printer():
-    mem = array("i", bytes(4 * st.mem_words(2)))
-    mem[st.S_QUEUE] = 2
-    mem[st.S_PULSE_TICKS] = 1
+    mem = x_block()
     mem[st.S_DIR_TICKS] = 1
-    mem[st.MASK_BASE + st.X] = 1
     mem[st.S_PIO] = 2
     mem[st.R_TC] = 80  # 10 us ticks of the PIO's 8 MHz
     mem[st.R_BATCH_TICKS] = 200
     mem[st.R_PULSE_CYC] = 16
     mem[st.R_LEVEL_BITS] = 9
-    b = st.BLOCK_BASE
-    mem[b + st.B_N] = mem[b + st.B_STEPS + st.X] = n
-    mem[b + st.B_RATE_INIT] = r0
-    mem[b + st.B_RATE_NOM] = r_nom
-    mem[b + st.B_RATE_FINAL] = r1
-    mem[b + st.B_ACCEL] = acc
-    mem[b + st.B_FLAGS] = st.F_SCHEDULE
-    mem[st.S_PHASE] = phase
-    mem[st.S_HEAD] = 1
+    mem[st.BLOCK_BASE + st.B_FLAGS] = st.F_SCHEDULE
     return mem, array("i", bytes(4 * 400))
 
 # In lockstep, batch by batch: a slow block is millions of ticks.
@@ -169,16 +171,8 @@ def long_ramps(draw):
     print's moves have there (planner.py's ACC: a rate of tens a tick each tick), and
     any the skip takes (below _RAMP_SKIP_ACC)."""
     acc = draw(st.one_of(st.integers(1, 200), st.integers(200, 0x7FFFF)))
-    floor = isqrt(acc * ONE)
-    assume(floor < ONE // 2)
-    rate = st.integers(floor, ONE // 2)
-    r_nom = draw(rate)
-    r0 = min(draw(rate), r_nom)
-    r1 = min(draw(rate), r_nom)
-    n = draw(st.integers(1, 3000))
-    assume(abs(r0 * r0 - r1 * r1) <= 2 * acc * n * ONE)
+    n, r0, r_nom, r1, acc, phase = _record(draw, acc, 3000)
     assume(n * ONE // min(r0, r1) <= 4000000)  # ticks: a few thousand batches
-    phase = draw(st.integers(0, ONE // 2 - 1))
     return n, r0, r_nom, r1, acc, phase
 
 
