@@ -263,6 +263,8 @@ def product(w_buf, a: int, b: int, c: int, s: int, how: int) -> int:
 
 
 _FRAC_MAX = const(0x8000000)
+# A cruise's high limb below this (2**14) leaves room for its FRAC bits in two limbs.
+_CRUISE_ONE_DIV = const(0x4000)
 
 
 @micropython.viper
@@ -378,16 +380,31 @@ def ramp_into(io_buf):
     a_rem = (vn - r0) - a_int * acc
     c_int = 0
     c_rem = -1  # none: no cruise
+    c_frac = -1  # the cruise's FRAC bits, where one division gave them
     if c_hi or c_lo:
-        io[_HI] = c_hi
-        io[_LO] = c_lo
-        div_limbs(io_buf, vn)
-        if io[_HI]:
-            c_int = _MAX_TICK
+        if c_hi < _CRUISE_ONE_DIV:
+            # (cruise << FRAC) // vn in one division: its whole ticks and fraction
+            # (a cruise below 65,536 steps, most of them).
+            io[_HI] = (c_hi << _FRAC) | (c_lo >> (30 - _FRAC))
+            io[_LO] = (c_lo << _FRAC) & _M30
+            div_limbs(io_buf, vn)
+            if io[_HI] >> (30 - _FRAC):  # 2**30 ticks or more: as below, no fraction
+                c_int = _MAX_TICK
+            else:
+                c_int = (io[_HI] << (30 - _FRAC)) | (io[_LO] >> _FRAC)
+                c_frac = io[_LO] & (_ONE_FRAC - 1)
         else:
-            c_int = io[_LO]
-            c_rem = io[_REM]
+            io[_HI] = c_hi
+            io[_LO] = c_lo
+            div_limbs(io_buf, vn)
+            if io[_HI]:
+                c_int = _MAX_TICK
+            else:
+                c_int = io[_LO]
+                c_rem = io[_REM]
     frac = 0
+    if c_frac >= 0:
+        frac = c_frac
     for k in range(2):
         x = a_rem
         c = acc
