@@ -34,14 +34,17 @@ class StreamConsole:
         limit = len(mv)
         one = self.one_mv
         byte = self.one
+        # Locals: an attribute of self costs the chip a lookup a byte.
+        poller = self.poller
+        rx = self.rx
         while n < limit:
             if n or not block:
                 ready = 0
-                for _obj, ev in self.poller.ipoll(0):
+                for _obj, ev in poller.ipoll(0):
                     ready = ev & _READY
                 if not ready:
                     break
-            if not self.rx.readinto(one):
+            if not rx.readinto(one):
                 return n if n else -1
             c = byte[0]
             mv[n] = c
