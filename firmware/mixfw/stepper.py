@@ -11,7 +11,8 @@
 #
 # Rules (see DESIGN.md): no allocation, no floats, nothing that can raise. All state
 # lives in one preallocated array('i') whose layout is defined here; the planner
-# writes only block records and S_HEAD, the step loop writes everything else.
+# writes only block records and S_HEAD, the step loop writes everything else, and a
+# record's ramp schedule as it starts the block (F_SCHEDULE).
 from mixfw.compat import micropython, const, ptr32
 from mixfw import mixer
 from mixfw.mixer import mix_load
