@@ -56,6 +56,9 @@ MIX = "M567 P6 E0.1:0.15:0.2:0.25:0.12:0.18"
 CPU_RATE = 20000  # total steps/s of the CPU-share move
 CPU_MOVE_S = 1.0
 CPU_WINDOW = (0.25, 0.85)  # seconds after the move's ok: its cruise
+# The same move accelerating to that rate over this long (M204 P), for the CPU share on
+# a ramp, in the same window: inside its acceleration.
+RAMP_S = 1.0
 # The step-rate search: total steps/s tried, doubling from the first, then halving the
 # gap between the highest passing and lowest failing rate this many times.
 SWEEP_START = 2500
@@ -108,6 +111,12 @@ NOTES = {
         "line, as the 16-block queue is too short to reach the segments' speed. "
         "Both printers at %d us ticks: two pio_dma rings for shorter ticks do not fit "
         "in the heap beside each other. " % ((BOARD,) + PLAN_LINES + (PLANNER_TICK_US,))),
+    "chip_cpu_left_while_ramping": (
+        "Share of the emulated CPU time in thread mode, as chip_cpu_left_while_stepping, "
+        "while the same six-drive mixed move accelerates towards its 20,000 steps/s over "
+        "RAMP_S (1 s, M204 P), in the same window after its ok (0.25-0.85 s): "
+        "chip_cpu_left_while_ramping_steps_per_s is the steps/s it made there. Curves' "
+        "short segments never stop accelerating or braking."),
     "chip_cpu_left_while_stepping": (
         "Share of the emulated CPU time in thread mode (the main loop; interrupts "
         "excluded, from the harness's time per exception) during the cruise of one move "
@@ -387,6 +396,22 @@ def chip_stepping(res, work, sweep=True):
         late = _diagnose(chip, []).get("late_refills")
         if late is not None:
             res["chip_late_refills"] = late
+        # CPU share on a ramp: curves' short segments never stop accelerating or
+        # braking, and until stop 32 the step path ran a ramp tick by tick.
+        ramp_a = v / RAMP_S
+        _command(chip, "M204 P%.3f" % ramp_a)
+        _command(chip, _move(CPU_RATE, 0, sign=-1, accel=ramp_a)[0])
+        chip.run(for_s=CPU_WINDOW[0])
+        a = chip.cpu()
+        chip.run(for_s=CPU_WINDOW[1] - CPU_WINDOW[0])
+        b = chip.cpu()
+        span = b["nanos"] - a["nanos"]
+        res["chip_cpu_left_while_ramping"] = (b["exc"][0] - a["exc"][0]) / span
+        win = _window(chip.edges(), a["nanos"] / 1e9, b["nanos"] / 1e9)
+        res["chip_cpu_left_while_ramping_steps_per_s"] = sum(
+            len(_rises(win, pins[m + "_step"])) for m in motors) / (span / 1e9)
+        _command(chip, "M400", max_s=30)
+        _command(chip, "M204 P%g" % settings["acceleration_mm_s2"])
         if not sweep:
             return
         # The highest step rate in spec.
