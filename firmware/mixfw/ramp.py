@@ -379,8 +379,8 @@ def ramp_into(io_buf):
     a_int = (vn - r0) // acc
     a_rem = (vn - r0) - a_int * acc
     c_int = 0
-    c_rem = -1  # none: no cruise
-    c_frac = -1  # the cruise's FRAC bits, where one division gave them
+    c_rem = -1  # none: no cruise, or its fraction is in frac already
+    frac = 0
     if c_hi or c_lo:
         if c_hi < _CRUISE_ONE_DIV:
             # (cruise << FRAC) // vn in one division: its whole ticks and fraction
@@ -392,7 +392,7 @@ def ramp_into(io_buf):
                 c_int = _MAX_TICK
             else:
                 c_int = (io[_HI] << (30 - _FRAC)) | (io[_LO] >> _FRAC)
-                c_frac = io[_LO] & (_ONE_FRAC - 1)
+                frac = io[_LO] & (_ONE_FRAC - 1)
         else:
             io[_HI] = c_hi
             io[_LO] = c_lo
@@ -402,9 +402,6 @@ def ramp_into(io_buf):
             else:
                 c_int = io[_LO]
                 c_rem = io[_REM]
-    frac = 0
-    if c_frac >= 0:
-        frac = c_frac
     for k in range(2):
         x = a_rem
         c = acc

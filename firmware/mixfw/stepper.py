@@ -447,47 +447,39 @@ def tick(io) -> int:
                 gap = ONE - 1 - phase
                 acc = mem[b + B_ACCEL]
                 skip = 0
-                if gap > 0 and rate > 0 and acc < _RAMP_SKIP_ACC:
-                    skip = gap // rate  # no more at the fastest rate of a deceleration
-                    if skip > _RAMP_SKIP_MAX:
-                        skip = _RAMP_SKIP_MAX
-                    if skip > 2:
-                        up = 0
-                        x = skip
+                da = 0  # the rate's change a tick over the ticks passed over
+                if gap > 0 and rate > 0 and acc > 0 and acc < _RAMP_SKIP_ACC:
+                    most = gap // rate  # no more at the fastest rate of a deceleration
+                    if most > _RAMP_SKIP_MAX:
+                        most = _RAMP_SKIP_MAX
+                    x = 0
+                    if most > 2:
                         if ramp + 1 < mem[b + B_ACCEL_UNTIL]:
                             # Accelerating: rate + acc (j - 1) at the j-th, so k ticks
                             # add k rate + acc k (k - 1) / 2, below gap while
-                            # k (rate + acc skip) is, for k <= skip; short of the
+                            # k (rate + acc most) is, for k <= most; short of the
                             # nominal rate and of ACCEL_UNTIL.
-                            up = 1
-                            skip = gap // (rate + acc * skip)
-                            if skip > x:
-                                skip = x
+                            da = acc
+                            skip = gap // (rate + acc * most)
+                            if skip > most:
+                                skip = most
                             x = mem[b + B_ACCEL_UNTIL] - 1 - ramp
                             if skip > x:
                                 skip = x
-                            if acc > 0:
-                                x = (mem[b + B_RATE_NOM] - rate) // acc
-                        elif ramp >= mem[b + B_DECEL_AFTER] and acc > 0:
+                            x = (mem[b + B_RATE_NOM] - rate) // acc
+                        elif ramp >= mem[b + B_DECEL_AFTER]:
                             # Decelerating: short of the final rate.
+                            da = 0 - acc
+                            skip = most
                             x = (rate - mem[b + B_RATE_FINAL]) // acc
-                        else:
-                            x = 0
-                        if skip > x:
-                            skip = x
-                        if skip > ticks_left - 1:
-                            skip = ticks_left - 1
-                    else:
-                        skip = 0
+                    if skip > x:
+                        skip = x
+                    if skip > ticks_left - 1:
+                        skip = ticks_left - 1
                 if skip > 0:
-                    # Each below gap (see above), so in a machine word.
-                    bend = ((skip * (skip - 1)) >> 1) * acc
-                    if up:
-                        phase += skip * rate + bend
-                        rate += skip * acc
-                    else:
-                        phase += skip * rate - bend
-                        rate -= skip * acc
+                    # Each term below gap (see above), so in a machine word.
+                    phase += skip * rate + ((skip * (skip - 1)) >> 1) * da
+                    rate += skip * da
                     ramp += skip
                     mem[S_PHASE] = phase
                     mem[_S_RATE] = rate
