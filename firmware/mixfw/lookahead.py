@@ -191,8 +191,14 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     lk[at + L_FLOOR] = floor
     # rate = k sqrt(V2 / V2_SCALE) = isqrt(V2 * K2) scaled by 2**K_SHIFT, with K2 in
     # [2**24, 2**26): V2 * K2 stays below 2**55, and the root keeps 15 bits or more.
-    # k**2 / 2**6 = km**2 2**(2 ke - 6) = K2 4**K_SHIFT with K2 = km**2 >> 26.
-    k2 = int(prod(w_buf, km, km, 1, -26, _P_TRUNC))
+    # k**2 / 2**6 = km**2 2**(2 ke - 6) = K2 4**K_SHIFT with K2 = km**2 >> 26: the
+    # square in two limbs as product() makes them, written out (a call costs the chip
+    # about 6 us; km has 26 bits, so the high limb has 22 and nothing is capped).
+    a = km >> 15
+    b = km & 0x7FFF
+    x = 2 * a * b
+    lo = ((x & 0x7FFF) << 15) + b * b
+    k2 = ((a * a + (x >> 15) + (lo >> 30)) << 4) | ((lo & _CAP) >> 26)
     lk[at + L_K2] = k2
     shift = ke + 10
     lk[at + L_K_SHIFT] = shift + _SHIFT_BIAS

@@ -550,8 +550,10 @@ def tick(io) -> int:
                 drives = mem[_MIX_N]
                 q = mem[_MIX_Q]
                 best = -1
-                best_num = 0
-                best_w = 1
+                # Sentinels that the first drive with a weight beats, so the loops
+                # need no test of best (backward, best_num is 0 there).
+                best_num = 1
+                best_w = 0
                 i = 0
                 if flags & (F_NEG << E):
                     if q <= 0:  # a new period, walked backwards from its end
@@ -560,11 +562,12 @@ def tick(io) -> int:
                             i += 1
                         q = mem[_MIX_SUM]
                         i = 0
+                    best_num = 0
                     while i < drives:
                         w = mem[_MIX_W + i]
                         if w > 0:
                             num = 2 * mem[_MIX_C + i] - 1
-                            if best < 0 or num * best_w >= best_num * w:
+                            if num * best_w >= best_num * w:
                                 best = i
                                 best_num = num
                                 best_w = w
@@ -586,7 +589,7 @@ def tick(io) -> int:
                         w = mem[_MIX_W + i]
                         if w > 0:
                             num = 2 * mem[_MIX_C + i] + 1
-                            if best < 0 or num * best_w < best_num * w:
+                            if num * best_w < best_num * w:
                                 best = i
                                 best_num = num
                                 best_w = w
