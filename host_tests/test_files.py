@@ -115,3 +115,54 @@ def test_a_file_without_a_last_newline_prints_whole_and_m26_prints_it_again(tmp_
     p.send("M400")
     assert p.send("M114")[0].startswith("X:30.00")
     p.finish()
+
+
+def test_a_hosts_line_waits_at_most_four_lines_of_a_file_print(mp, tmp_path):
+    """While a file prints, the main loop reads the hosts every few of its lines
+    (printer._FILE_LINES_PER_READ), not before each one: a host's line that is
+    waiting as the print starts runs after the file's fourth line. Every line of both
+    runs once, in order. The real Printer and Job, with handlers that only record."""
+    gcode = paths.ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
+    (tmp_path / "part.gcode").write_bytes(b"".join(gcode.read_bytes().splitlines(True)[:60]))
+    commands = [l.split(";")[0].split() for l in gcode.read_text().splitlines()[:60]]
+    commands = [w[0] for w in commands if w]
+    names = sorted(set(c if c[0] != "T" else "T" for c in commands))
+    got = mp.json("""
+        import json
+        from mixfw.printer import Printer
+        from mixfw.files import Job
+
+        class Host:  # one line, there from the start, then the end of its stream
+            def __init__(self):
+                self.data = b"M115\\n"
+            def readinto(self, mv, block=False):
+                if not self.data:
+                    return -1
+                n = len(self.data)
+                mv[:n] = self.data
+                self.data = b""
+                return n
+            def write(self, text):
+                pass
+
+        ran = []
+        p = Printer(96, lambda: None, ())
+        job = Job(%r, "part.gcode", lambda text: None, 96)
+
+        def record(line):
+            ran.append(["%%s%%d" %% (line.letter, line.number), job.line])
+
+        for name in %r:
+            p.register(name, record)
+        p.register("M115", lambda line: ran.append(["host", job.line]))
+        p.add_channel(Host())
+        p.job = job
+        job.paused = False
+        p.serve()
+        print(json.dumps(ran))
+    """ % (str(tmp_path / "part.gcode"), names + ["G92"]))
+    assert ["host", 4] in got
+    file_lines = [(c, n) for c, n in got if c != "host"]
+    assert [c for c, _ in file_lines] == commands
+    numbers = [n for _, n in file_lines]
+    assert numbers == sorted(set(numbers))

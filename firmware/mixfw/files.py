@@ -18,54 +18,49 @@ def _check_name(name):
 
 
 class Job:
-    """A file being printed, read a line at a time into an Intake, as a console's lines
-    are: in chunks into buffers made once (a bytes object a line would be garbage on
-    the chips), with the same comment stripping and the same limit on a line's words."""
+    """A file being printed, read a line at a time through an Intake, as a console's
+    lines are, with the same comment stripping and the same limit on a line's words:
+    the file is read straight into the intake's ring, which holds several lines, so
+    that most lines cost a call into it and no more (a chunk of its own, copied into
+    the ring a line at a time, cost the chip about 0.3 ms a line)."""
 
     def __init__(self, path, name, announce, line_bytes):
         self.name = name
         self.f = open(path, "rb")
         self.size = os.stat(path)[6]
-        self.pos = 0  # bytes handed to the intake: the end of the line being run
+        self.read = 0  # bytes of the file read into the intake's ring
         self.line = 0
         self.paused = True
         self.announce = announce
         self.intake = Intake(line_bytes)
-        self.chunk = bytearray(256)  # read from the file at a time
-        self.at = self.end = 0  # chunk[at:end] is yet to go to the intake
+
+    @property
+    def pos(self):
+        """The end of the line being run: what was read less what the ring holds."""
+        return self.read - self.intake.waiting
 
     def next_line(self):
         """The next line into self.intake: its status (intake.LINE_OK, or a fault such as
         a line too long), or 0 at the end of the file. The caller takes the line."""
         # In small methods: a bytecode function whose locals and stack pass 11 words
         # takes its frame from the heap at every call (see printer.answer).
-        status = self.intake.next_line()
+        intake = self.intake
+        status = intake.next_line()
         while not status:
-            if not self.feed():
-                if not (self.intake.n or self.intake.fault):
+            # The ring is empty: next_line takes bytes until a line ends.
+            n = intake.fill_from(self.f)
+            if not n:
+                if not (intake.n or intake.fault):
                     return 0
-                self.intake.put(b"\n", 0, 1)  # a last line with no newline
-            status = self.intake.next_line()
+                intake.put(b"\n", 0, 1)  # a last line with no newline
+            self.read += n
+            status = intake.next_line()
         self.line += 1
         return status
 
-    def feed(self):
-        """More of the file into the intake, up to a line's end; False at the file's."""
-        if self.at >= self.end:
-            self.end = self.f.readinto(self.chunk) or 0
-            self.at = 0
-            if not self.end:
-                return False
-        end = min(self.end, self.at + self.intake.room())
-        at = self.intake.put(self.chunk, self.at, end)
-        self.pos += at - self.at
-        self.at = at
-        return True
-
     def seek(self, pos):
         self.f.seek(pos)
-        self.pos = pos
-        self.at = self.end = 0
+        self.read = pos
         self.intake.reset()
 
     def done(self):

@@ -127,6 +127,16 @@ class Intake:
         is its start (end_scan starts the next line's anew)."""
         return _put(self.ring, self.st, src, at, end, self.scan)
 
+    def fill_from(self, f):
+        """For a file: its next bytes into the ring, which must be empty (next_line
+        takes bytes until a line ends or none are left), as many as it holds. Returns
+        the count read, 0 at the file's end."""
+        n = f.readinto(self.ring) or 0
+        st = self.st
+        st[_HEAD] = 0
+        st[_COUNT] = n
+        return n
+
     def end_scan(self):
         n = self.st[_SCAN_N]
         self.st[_SCAN_N] = 0
