@@ -27,10 +27,8 @@ L_RATE_NOM = const(8)  # the nominal speed's rate
 L_FLOOR = const(9)  # the slowest rate: reached from rest within half a step
 L_ACC = const(10)
 L_DWELL = const(11)
-_L_V0 = const(12)  # the V2 whose rate _L_RATE_V0 is (-1: none): an entry's rate, kept
-_L_RATE_V0 = const(13)  # as the entry mostly stays when the block is rewritten
-L_WORDS = const(14)
-assert L_WORDS == 14  # plan_words clears each word by name
+L_WORDS = const(12)
+assert L_WORDS == 12  # plan_words clears each word by name
 SHIFT_BIAS = const(64)
 _SHIFT_BIAS = const(SHIFT_BIAS)
 
@@ -48,11 +46,19 @@ _B_RATE_INIT = const(8)
 _B_RATE_NOM = const(9)
 _B_RATE_FINAL = const(10)
 _B_ACCEL = const(11)
+_B_ACCEL_UNTIL = const(12)
+_B_DECEL_AFTER = const(13)
+_B_RATE_DECEL = const(22)
 _F_SCHEDULE = const(2048)
+_F_RATES = const(4096)
+_V2_AT_NOMINAL = const(0x20000000)
 assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _S_QUEUE, _BLOCK_BASE, _B_WORDS, _B_FLAGS,
-        _B_RATE_INIT, _B_RATE_NOM, _B_RATE_FINAL, _B_ACCEL, _F_SCHEDULE) == (
+        _B_RATE_INIT, _B_RATE_NOM, _B_RATE_FINAL, _B_ACCEL, _B_ACCEL_UNTIL, _B_DECEL_AFTER,
+        _B_RATE_DECEL, _F_SCHEDULE, _F_RATES, _V2_AT_NOMINAL, _SHIFT_BIAS) == (
     st.S_HEAD, st.S_TAIL, st.S_ACTIVE, st.S_QUEUE, st.BLOCK_BASE, st.B_WORDS, st.B_FLAGS,
-    st.B_RATE_INIT, st.B_RATE_NOM, st.B_RATE_FINAL, st.B_ACCEL, st.F_SCHEDULE)
+    st.B_RATE_INIT, st.B_RATE_NOM, st.B_RATE_FINAL, st.B_ACCEL, st.B_ACCEL_UNTIL,
+    st.B_DECEL_AFTER, st.B_RATE_DECEL, st.F_SCHEDULE, st.F_RATES, st.V2_AT_NOMINAL,
+    st.SHIFT_BIAS)
 
 
 # A block's planning data comes in as float32 in an array('f'), whose bits viper reads
@@ -118,8 +124,6 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     lk[at + L_ENTRY] = 0
     lk[at + L_EXIT] = 0
     lk[at + L_DWELL] = 0
-    lk[at + _L_V0] = -1
-    lk[at + _L_RATE_V0] = 0
     if n <= 0:
         lk[at + L_DWELL] = 1
         return
@@ -224,7 +228,7 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
 def recalculate(lk_buf, mem_buf, newest: int, hooks):
     """Bring the look-ahead up to date after `newest` was queued (it stops at its end)
     and rewrite the records of the blocks not yet started whose entry or exit changed.
-    hooks: (irq_off, irq_on, io array for ramp, NVIC mask words: see planner.Planner).
+    hooks: (irq_off, irq_on, NVIC mask words: see planner.Planner).
 
     BACK of a slot, the fastest it may enter and still stop by the end of the queue,
     only grows as blocks are queued. The backward pass stops at the first block whose
@@ -276,13 +280,8 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
             v0 = handed_over
     else:
         v0 = lk[at + L_ENTRY]
-    io_buf = hooks[2]
-    io = ptr32(io_buf)
-    mask = ptr32(hooks[3])
+    mask = ptr32(hooks[2])
     bit = mask[2]
-    # A local, as in plan_words: a line rewrites two records or more, each with a root
-    # or two.
-    isqrt = isqrt_limbs
     while True:
         at = k * L_WORDS
         nk = k + 1
@@ -302,56 +301,15 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
             lk[at + L_ENTRY] = v0
             changed = 1 - lk[at + L_DWELL]
         if changed:
-            # The step loop's rates for V2 v0 and v1, within the floor and the nominal
-            # rate: rate = isqrt(V2 * K2) scaled by 2**K_SHIFT. In one loop, as a call
-            # for each costs the chip about 6 us. The top rate is the nominal one:
-            # where the ramps meet below it (on curves, most blocks), ramp_into finds
-            # their peak in the rates themselves, and the step loop's clamp at the
-            # nominal rate never binds. (A peak worked out here as well, from V2,
-            # took a third root a record and mostly disagreed with ramp_into's by its
-            # rounding.)
-            r_nom = lk[at + L_RATE_NOM]
+            # The rates of V2 v0 and v1 are the step loop's to work out, once, as the
+            # block starts (stepper.schedule, F_RATES): the record gets the two V2s
+            # (V2_AT_NOMINAL where the nominal rate is theirs) and what a rate comes
+            # from. On curves, whose queue is shorter than the braking distance, a
+            # line rewrites a dozen records, and their roots here cost the chip about
+            # 0.3 ms a line.
             nominal = lk[at + L_NOMINAL]
-            floor = lk[at + L_FLOOR]
-            k2 = lk[at + L_K2]
-            shift = lk[at + L_K_SHIFT] - _SHIFT_BIAS
-            r0 = 0
-            r1 = 0
-            for j in range(2):
-                x = v0 if j == 0 else v1
-                if j == 0 and x == lk[at + _L_V0]:
-                    r = lk[at + _L_RATE_V0]  # the entry's rate, mostly as before
-                elif x >= nominal:
-                    r = r_nom
-                elif x <= 0:
-                    r = floor  # a stop: the root below would take 30 turns to say 0
-                else:
-                    # x * K2 (below 2**29 and 2**26) in two 30-bit limbs, as product()
-                    # gives them.
-                    a1 = x >> 15
-                    a0 = x & 0x7FFF
-                    b1 = k2 >> 15
-                    b0 = k2 & 0x7FFF
-                    mid = a1 * b0 + a0 * b1
-                    lo = ((mid & 0x7FFF) << 15) + a0 * b0
-                    io[_HI] = a1 * b1 + (mid >> 15) + (lo >> 30)
-                    io[_LO] = lo & _CAP
-                    r = int(isqrt(io_buf))
-                    if shift >= 0:
-                        r = r << shift
-                    else:
-                        r = r >> (0 - shift)
-                    if r > r_nom:
-                        r = r_nom
-                    if r < floor:
-                        r = floor
-                if j == 0:
-                    r0 = r
-                else:
-                    r1 = r
-            if v0 != lk[at + _L_V0]:
-                lk[at + _L_V0] = v0
-                lk[at + _L_RATE_V0] = r0
+            c0 = v0 if v0 < nominal else _V2_AT_NOMINAL
+            c1 = v1 if v1 < nominal else _V2_AT_NOMINAL
             b = _BLOCK_BASE + k * _B_WORDS
             # The step loop must not start the block half written: its interrupt held
             # back, in the NVIC where one IRQ runs it (ISER reads which are enabled),
@@ -364,13 +322,16 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
             else:
                 state = hooks[0]()
             if not (k == mem[_S_TAIL] and mem[_S_ACTIVE]):  # else too late to change
-                mem[b + _B_RATE_INIT] = r0
-                mem[b + _B_RATE_NOM] = r_nom
-                mem[b + _B_RATE_FINAL] = r1
+                mem[b + _B_RATE_INIT] = c0
+                mem[b + _B_RATE_NOM] = lk[at + L_RATE_NOM]
+                mem[b + _B_RATE_FINAL] = c1
                 mem[b + _B_ACCEL] = lk[at + L_ACC]
-                # The schedule of these rates: the step loop works it out as the block
-                # starts (stepper.schedule), once, however often it is rewritten here.
-                mem[b + _B_FLAGS] |= _F_SCHEDULE
+                # Until the schedule is worked out, its words hold the rates' K2,
+                # K_SHIFT (biased, as here) and FLOOR.
+                mem[b + _B_ACCEL_UNTIL] = lk[at + L_K2]
+                mem[b + _B_DECEL_AFTER] = lk[at + L_K_SHIFT]
+                mem[b + _B_RATE_DECEL] = lk[at + L_FLOOR]
+                mem[b + _B_FLAGS] |= _F_SCHEDULE | _F_RATES
                 lk[at + L_EXIT] = v1
             if bit:
                 if was:

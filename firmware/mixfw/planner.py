@@ -66,7 +66,7 @@ assert (_F_MM, _F_ACCEL, _F_NOMINAL, _F_NOMINAL2, _F_ACCEL_TICK) == (
     lookahead.F_MM, lookahead.F_ACCEL, lookahead.F_NOMINAL, lookahead.F_NOMINAL2,
     lookahead.F_ACCEL_TICK)
 assert _F_MM == 0  # where geometry.lengths writes a move's length
-_L_WORDS = const(14)
+_L_WORDS = const(12)
 _L_NOMINAL = const(2)
 assert (_L_WORDS, _L_NOMINAL) == (lookahead.L_WORDS, lookahead.L_NOMINAL)
 _G_D = const(11)
@@ -536,7 +536,7 @@ class Planner:
         self._plan_f[lookahead.F_TICK_ONE] = self.tick_s * st.ONE
         self.lk = lk or heap.zeros(lk_words(q))
         # The last: irq, or a bit of 0 for irq_off and irq_on.
-        self._hooks = (irq_off, irq_on, _RAMP_IO, irq or array("i", bytes(12)))
+        self._hooks = (irq_off, irq_on, irq or array("i", bytes(12)))
         # The latest block is a move the next one may join at speed (geometry.junction
         # has its direction); False after a stop.
         self.joins = False

@@ -17,7 +17,7 @@ from mixfw.compat import micropython, const, ptr32
 from mixfw import mixer
 from mixfw.mixer import mix_load
 from mixfw import ramp
-from mixfw.ramp import ramp_into
+from mixfw.ramp import isqrt_limbs, ramp_into
 
 # Fixed point for rates: lead-axis steps per tick times 2**28. A rate is at most
 # half a step per tick, so rate + phase stays below 2**30 (the chips' small ints).
@@ -166,6 +166,18 @@ F_HOME_SHIFT = const(8)  # homing axis mask (X=1, Y=2, Z=4) << F_HOME_SHIFT
 # each change was most of its time. The step loop works it out once, as the block
 # starts (schedule).
 F_SCHEDULE = const(2048)
+# And its rates too (with F_SCHEDULE): RATE_INIT and RATE_FINAL hold the entry's and
+# the exit's V2 (lookahead.py; V2_AT_NOMINAL: the nominal rate's), and the schedule's
+# words ACCEL_UNTIL, DECEL_AFTER and RATE_DECEL what a rate comes from: K2, K_SHIFT
+# plus SHIFT_BIAS, and FLOOR. The look-ahead rewrites a waiting block's entry and exit
+# a dozen times a line on curves, and a root or two for each cost the chip most of a
+# rewrite.
+F_RATES = const(4096)
+V2_AT_NOMINAL = const(0x20000000)  # above any V2 the look-ahead keeps
+SHIFT_BIAS = const(64)
+_IO_HI = const(8)
+_IO_LO = const(9)
+_M30 = const(0x3FFFFFFF)
 
 
 assert mixer.M_ID == 0  # the step loop reads the loaded mix id at MIX_BASE
@@ -219,25 +231,64 @@ def _finish(mem: ptr32):
 def schedule(mem_buf, b: int, io_buf):
     """The ramp schedule of the record at word b, if it has none yet (F_SCHEDULE),
     by ramp.ramp_into in io_buf (ramp.IO_WORDS words of scratch of the caller's own:
-    the step loop's interrupt may come in between the main loop's)."""
+    the step loop's interrupt may come in between the main loop's); first its rates,
+    if it has none yet either (F_RATES)."""
     mem = ptr32(mem_buf)
     flags = mem[b + B_FLAGS]
     if flags & F_SCHEDULE:
         io = ptr32(io_buf)
+        r_nom = mem[b + B_RATE_NOM]
+        if flags & F_RATES:
+            # rate = isqrt(V2 * K2) scaled by 2**K_SHIFT, within FLOOR and the nominal
+            # rate. The top rate is the nominal one: where the ramps meet below it (on
+            # curves, most blocks), ramp_into finds their peak in the rates themselves.
+            k2 = mem[b + B_ACCEL_UNTIL]
+            shift = mem[b + B_DECEL_AFTER] - SHIFT_BIAS
+            floor = mem[b + B_RATE_DECEL]
+            w = B_RATE_INIT
+            for _ in range(2):
+                x = mem[b + w]
+                if x >= V2_AT_NOMINAL:
+                    r = r_nom
+                elif x <= 0:
+                    r = floor  # a stop: the root below would take 30 turns to say 0
+                else:
+                    # x * K2 (below 2**29 and 2**26) in two 30-bit limbs, as
+                    # ramp.product() gives them.
+                    a1 = x >> 15
+                    a0 = x & 0x7FFF
+                    b1 = k2 >> 15
+                    b0 = k2 & 0x7FFF
+                    mid = a1 * b0 + a0 * b1
+                    lo = ((mid & 0x7FFF) << 15) + a0 * b0
+                    io[_IO_HI] = a1 * b1 + (mid >> 15) + (lo >> 30)
+                    io[_IO_LO] = lo & _M30
+                    r = int(isqrt_limbs(io_buf))
+                    if shift >= 0:
+                        r = r << shift
+                    else:
+                        r = r >> (0 - shift)
+                    if r > r_nom:
+                        r = r_nom
+                    if r < floor:
+                        r = floor
+                mem[b + w] = r
+                w = B_RATE_FINAL
         io[0] = mem[b + B_N]  # ramp.IO_N .. IO_RATE_DECEL: checked below
         io[1] = mem[b + B_RATE_INIT]
-        io[2] = mem[b + B_RATE_NOM]
+        io[2] = r_nom
         io[3] = mem[b + B_RATE_FINAL]
         io[4] = mem[b + B_ACCEL]
         ramp_into(io_buf)
         mem[b + B_ACCEL_UNTIL] = io[5]
         mem[b + B_DECEL_AFTER] = io[6]
         mem[b + B_RATE_DECEL] = io[7]
-        mem[b + B_FLAGS] = flags ^ F_SCHEDULE
+        mem[b + B_FLAGS] = flags & (0 - 1 - (F_SCHEDULE | F_RATES))
 
 
 assert (ramp.IO_N, ramp.IO_R0, ramp.IO_RNOM, ramp.IO_R1, ramp.IO_ACC, ramp.IO_ACCEL_UNTIL,
-        ramp.IO_DECEL_AFTER, ramp.IO_RATE_DECEL) == tuple(range(8))
+        ramp.IO_DECEL_AFTER, ramp.IO_RATE_DECEL, ramp.IO_HI, ramp.IO_LO, ramp.CAP) == tuple(
+    range(10)) + (_M30,)
 
 
 def ramp_scratch():
