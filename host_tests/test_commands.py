@@ -212,4 +212,8 @@ def test_m119_reports_endstops_and_soft_limits_guard_moves(session):
     assert session.send("G1 Z-1")[0].startswith("Error:move to Z-1.000 is outside the soft limits")
     session.send("M211 S0")
     assert session.send("G1 X251") == ["ok"]
-    assert session.finish()["x"] == 251 * 80
+    # M211 S0 holds while other settings change (each change applies them all).
+    assert session.send("M203 X400", "M201 X2000") == ["ok"]
+    assert session.send("M211") == ["echo:Soft endstops: Off", "ok"]
+    assert session.send("G1 X252") == ["ok"]
+    assert session.finish()["x"] == 252 * 80

@@ -227,7 +227,7 @@ class Motion:
         self.dir_masks = pins.axis_dir_masks()
         self.enabled = 0  # bit per driver: X Y Z then drives
         self._drive_bits = ((1 << self.drives) - 1) << 3
-        self.soft_limits = settings.get("soft_limits", True)
+        self.soft_limits = self._soft_option = settings.get("soft_limits", True)
         # Longest E move accepted, as Marlin's PREVENT_LENGTHY_EXTRUDE.
         self.max_extrude_mm = settings.get("max_extrude_mm", 200.0)
         self._max_extrude_nm = nm_from_mm(self.max_extrude_mm)
@@ -253,7 +253,11 @@ class Motion:
         p.set_position_steps(self.machine_steps())
         self._travel(settings["travel_mm"])
         self.homing_feed_mm_s = settings["homing_feed_mm_s"]
-        self.soft_limits = settings.get("soft_limits", True)
+        # M211 holds until M211 or a restart, as Marlin's does: the option changes it
+        # only when the option itself changes (any setting's change applies them all).
+        option = settings.get("soft_limits", True)
+        if option != self._soft_option:
+            self.soft_limits = self._soft_option = option
         self.max_extrude_mm = settings.get("max_extrude_mm", 200.0)
         self._max_extrude_nm = nm_from_mm(self.max_extrude_mm)
         self._retraction_settings(settings)
