@@ -23,7 +23,8 @@ is slower. Three emulator sessions, one at a time:
 
 `cpu` is the stepping part without its step-rate search. `profile` plans the planner
 part's lines with the planner's functions timed (bench/chip_profile.py): microseconds
-per G1 line in each, inclusive of what it calls and of the timing's own cost. --board and --set run the
+per G1 line in each, inclusive of what it calls and of the timing's own cost (about 15 us
+for each timed call below it). --board and --set run the
 rows on another board or with settings laid over the board's (as `mixstep emu --set`),
 e.g. `--set step_backend=timer` for the hard-timer path, or `--board pico`; the move
 is then mixed over the board's drives.
