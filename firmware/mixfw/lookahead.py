@@ -29,8 +29,8 @@ L_ACC = const(10)
 L_DWELL = const(11)
 L_WORDS = const(12)
 assert L_WORDS == 12  # plan_words clears each word by name
-SHIFT_BIAS = const(64)
-_SHIFT_BIAS = const(SHIFT_BIAS)
+SHIFT_BIAS = st.SHIFT_BIAS  # the step loop reads K_SHIFT from a record too
+_SHIFT_BIAS = const(64)  # checked below
 
 # The step loop's words (checked against stepper.py below: viper folds only this
 # module's constants).
