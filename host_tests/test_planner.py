@@ -730,7 +730,12 @@ from mixfw import ramp
 w = array("i", bytes(4 * ramp.IO_WORDS))
 out = []
 for a, b, c, s, how in json.loads(sys.stdin.read()):
-    x = ramp.product(w, a, b, c, s, how)
+    w[ramp.IO_A] = a
+    w[ramp.IO_B] = b
+    w[ramp.IO_C] = c
+    w[ramp.IO_S] = s
+    w[ramp.IO_HOW] = how
+    x = ramp.product(w)
     out.append([x, w[ramp.IO_HI], w[ramp.IO_LO]])
 print(json.dumps(out))
 """

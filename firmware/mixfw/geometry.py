@@ -16,15 +16,15 @@ from mixfw.ramp import div_limbs, isqrt_limbs, product
 
 # Words of the geometry array g (array 'i', G_WORDS): first ramp.py's io words, which
 # product() and isqrt_limbs() use as scratch, then these.
-G_D = const(11)  # the move: |X| |Y| |Z| steps, then |E| in steps or nm (see GF_E_NM)
-G_C = const(15)  # its components: |X| |Y| |Z| |E| in the move's unit
-G_LEN = const(19)  # its length in X Y Z E, in that unit
-G_DIST = const(20)  # its length in X Y Z, or |E| for a move of E alone
-_G_SIGNS = const(21)  # bit i: component i is negative
-_G_PREV_C = const(22)  # the move before's components, signs and length (4 + 2 words)
-_G_PREV_SIGNS = const(26)
-_G_PREV_LEN = const(27)
-G_WORDS = const(28)
+G_D = const(16)  # the move: |X| |Y| |Z| steps, then |E| in steps or nm (see GF_E_NM)
+G_C = const(20)  # its components: |X| |Y| |Z| |E| in the move's unit
+G_LEN = const(24)  # its length in X Y Z E, in that unit
+G_DIST = const(25)  # its length in X Y Z, or |E| for a move of E alone
+_G_SIGNS = const(26)  # bit i: component i is negative
+_G_PREV_C = const(27)  # the move before's components, signs and length (4 + 2 words)
+_G_PREV_SIGNS = const(31)
+_G_PREV_LEN = const(32)
+G_WORDS = const(33)
 # Words of the geometry floats (array 'f', GF_WORDS): mm per unit.
 GF_SCALE = const(0)  # X Y Z E: mm per step
 GF_E_NM = const(4)  # E: mm per nanometre
@@ -36,6 +36,11 @@ FL_JOIN = const(32)  # the move follows one it may join at speed: work out the j
 
 _IO_HI = const(8)
 _IO_LO = const(9)
+_IO_A = const(11)
+_IO_B = const(12)
+_IO_C = const(13)
+_IO_S = const(14)
+_IO_HOW = const(15)
 _P_TRUNC = const(1)
 _P_ROUND = const(2)
 _BIAS = const(150)  # float32's exponent bias and its 23 fraction bits
@@ -44,8 +49,9 @@ _ONE = const(0x10000000)  # the cosine's and the sine's fixed point: 2**28
 # a reversal to a stop.
 _STRAIGHT = const(268)
 _V2_MAX = const(0x1FFFFFFF)  # lookahead's V2 range
-assert (_IO_HI, _IO_LO, _P_TRUNC, _P_ROUND) == (
-    ramp.IO_HI, ramp.IO_LO, ramp.P_TRUNC, ramp.P_ROUND)
+assert (_IO_HI, _IO_LO, _IO_A, _IO_B, _IO_C, _IO_S, _IO_HOW, _P_TRUNC, _P_ROUND) == (
+    ramp.IO_HI, ramp.IO_LO, ramp.IO_A, ramp.IO_B, ramp.IO_C, ramp.IO_S, ramp.IO_HOW,
+    ramp.P_TRUNC, ramp.P_ROUND)
 assert G_D >= ramp.IO_WORDS
 
 
@@ -260,8 +266,12 @@ def junction(g_buf, gf_buf, flags: int) -> int:
             bits = ptr32(gf_buf)[GF_ACCEL_JD]
             ex = (bits >> 23) & 0xFF
             if ex:
-                v2 = int(product(g_buf, (bits & 0x7FFFFF) | 0x800000, s, _ONE - s,
-                                 ex - _BIAS + 6, _P_ROUND))
+                g[_IO_A] = (bits & 0x7FFFFF) | 0x800000
+                g[_IO_B] = s
+                g[_IO_C] = _ONE - s
+                g[_IO_S] = ex - _BIAS + 6
+                g[_IO_HOW] = _P_ROUND
+                v2 = int(product(g_buf))
             if v2 > _V2_MAX:
                 v2 = _V2_MAX
     for i in range(4):

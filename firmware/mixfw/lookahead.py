@@ -71,24 +71,30 @@ F_TICK_ONE = const(4)  # the step loop's tick in s, times ONE (its rate of a ste
 F_ACCEL_TICK = const(5)  # F_ACCEL times the tick in s: the speed gained a tick
 F_WORDS = const(6)
 # Scratch words of the planning io array, after the limbs ramp.py uses.
-_W_M = const(11)  # F_WORDS mantissas (with the hidden bit; 0 for 0)
-_W_E = const(17)  # and their exponent fields: x = m * 2**(field - _BIAS)
+_W_M = const(16)  # F_WORDS mantissas (with the hidden bit; 0 for 0)
+_W_E = const(22)  # and their exponent fields: x = m * 2**(field - _BIAS)
 _BIAS = const(150)  # float32's exponent bias and its 23 fraction bits
 # The latest nominal speed's V2 and the float32 bits of the square it came from: most
 # lines keep the feed rate of the line before.
-_W_N2_BITS = const(23)
-_W_N2_V2 = const(24)
-W_WORDS = const(25)
+_W_N2_BITS = const(28)
+_W_N2_V2 = const(29)
+W_WORDS = const(30)
 _CAP = const(0x3FFFFFFF)
 _HI = const(8)
 _LO = const(9)
+_A = const(11)
+_B = const(12)
+_C = const(13)
+_S = const(14)
+_HOW = const(15)
 _P_LIMBS = const(0)
 _P_TRUNC = const(1)
 _P_ROUND = const(2)
 _P_TOP = const(3)
-assert (_HI, _LO, _W_M, _CAP, _P_LIMBS, _P_TRUNC, _P_ROUND, _P_TOP) == (
-    ramp.IO_HI, ramp.IO_LO, ramp.IO_WORDS, ramp.CAP, ramp.P_LIMBS, ramp.P_TRUNC,
-    ramp.P_ROUND, ramp.P_TOP)
+assert (_HI, _LO, _A, _B, _C, _S, _HOW, _W_M, _CAP, _P_LIMBS, _P_TRUNC, _P_ROUND,
+        _P_TOP) == (
+    ramp.IO_HI, ramp.IO_LO, ramp.IO_A, ramp.IO_B, ramp.IO_C, ramp.IO_S, ramp.IO_HOW,
+    ramp.IO_WORDS, ramp.CAP, ramp.P_LIMBS, ramp.P_TRUNC, ramp.P_ROUND, ramp.P_TOP)
 
 
 @micropython.viper
@@ -140,12 +146,19 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     m_a = w[_W_M + F_ACCEL]
     e_a = w[_W_E + F_ACCEL] - _BIAS
     # GAIN = 2 V2_SCALE a mm (V2_SCALE = 2**6)
-    x = int(prod(w_buf, m_a, m_mm, 1, e_a + e_mm + 7, _P_ROUND))
+    w[_A] = m_a
+    w[_B] = m_mm
+    w[_C] = 1
+    w[_S] = e_a + e_mm + 7
+    w[_HOW] = _P_ROUND
+    x = int(prod(w_buf))
     lk[at + L_GAIN] = x if x < _V2_MAX else _V2_MAX
     bits = f[F_NOMINAL2]
     if bits != w[_W_N2_BITS]:
-        x = int(prod(w_buf, w[_W_M + F_NOMINAL2], 1, 1,
-                     w[_W_E + F_NOMINAL2] - _BIAS + 6, _P_ROUND))
+        w[_A] = w[_W_M + F_NOMINAL2]
+        w[_B] = 1
+        w[_S] = w[_W_E + F_NOMINAL2] - _BIAS + 6
+        x = int(prod(w_buf))  # C and HOW as for GAIN
         w[_W_N2_V2] = x if x < _V2_MAX else _V2_MAX
         w[_W_N2_BITS] = bits
     x = w[_W_N2_V2]
@@ -163,23 +176,38 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
         b = b >> 1
     if ns < 0:
         ns = 0
-    ke = int(prod(w_buf, w[_W_M + F_TICK_ONE] << 6, n << ns, m_mm, 26, _P_TOP))
+    w[_A] = w[_W_M + F_TICK_ONE] << 6
+    w[_B] = n << ns
+    w[_C] = m_mm
+    w[_S] = 26
+    w[_HOW] = _P_TOP
+    ke = int(prod(w_buf))
     ke += w[_W_E + F_TICK_ONE] - _BIAS - 6 - ns - e_mm
     km = w[_LO]
     # RATE_NOM = nominal k, truncated.
-    r_nom = int(prod(w_buf, w[_W_M + F_NOMINAL], km, 1,
-                     w[_W_E + F_NOMINAL] - _BIAS + ke, _P_TRUNC))
+    w[_A] = w[_W_M + F_NOMINAL]
+    w[_B] = km
+    w[_C] = 1
+    w[_S] = w[_W_E + F_NOMINAL] - _BIAS + ke
+    w[_HOW] = _P_TRUNC
+    r_nom = int(prod(w_buf))
     # acc = k a TICK_S, the rate change per tick, as km * m_at 2**s (a TICK_S comes
     # in as one float, worked out where the acceleration changes: a product less a
     # line): ACC rounded, at least 1.
     m_at = w[_W_M + F_ACCEL_TICK]
     s = ke + w[_W_E + F_ACCEL_TICK] - _BIAS
-    acc = int(prod(w_buf, km, m_at, 1, s, _P_ROUND))
+    w[_A] = km
+    w[_B] = m_at
+    w[_S] = s
+    w[_HOW] = _P_ROUND
+    acc = int(prod(w_buf))  # C as for RATE_NOM
     lk[at + L_ACC] = acc if acc > 1 else 1
     # FLOOR, the slowest rate a block may fall to: reached from rest within half a
     # step, so a block that ends at a stop still finishes. sqrt(acc ONE), ONE = 2**28:
     # the root of acc taken to 54 bits, or 55 for an even exponent, truncated.
-    t = int(prod(w_buf, km, m_at, 1, 54, _P_TOP)) + s + 28
+    w[_S] = 54
+    w[_HOW] = _P_TOP
+    t = int(prod(w_buf)) + s + 28  # A B C as for ACC
     if t & 1:
         hi = w[_HI]
         lo = w[_LO]
@@ -216,7 +244,12 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
         elif shift > -30 and (rate_cap >> (30 + shift)) == 0:
             a = rate_cap << (0 - shift)
         if a:  # else the cap's V2 is past any V2 kept
-            x = int(prod(w_buf, a, a, k2, 0, _P_TRUNC))
+            w[_A] = a
+            w[_B] = a
+            w[_C] = k2
+            w[_S] = 0
+            w[_HOW] = _P_TRUNC
+            x = int(prod(w_buf))
             if x < lk[at + L_NOMINAL]:
                 lk[at + L_NOMINAL] = x
                 if x < lk[at + L_MAX_ENTRY]:

@@ -31,7 +31,19 @@ IO_LO = const(9)
 _HI = const(IO_HI)
 _LO = const(IO_LO)
 _REM = const(10)
-IO_WORDS = const(11)
+# product()'s operands (see there), stored by its callers: a viper call's int argument
+# costs the chip about 1 us, a store a few cycles.
+IO_A = const(11)
+IO_B = const(12)
+IO_C = const(13)
+IO_S = const(14)
+IO_HOW = const(15)
+_A = const(IO_A)
+_B = const(IO_B)
+_C = const(IO_C)
+_S = const(IO_S)
+_HOW = const(IO_HOW)
+IO_WORDS = const(16)
 
 
 @micropython.viper
@@ -162,11 +174,19 @@ CAP = const(0x3FFFFFFF)
 
 
 @micropython.viper
-def product(w_buf, a: int, b: int, c: int, s: int, how: int) -> int:
+def product(w_buf) -> int:
     """x = a * b // c, for 0 <= a, b < 2**30 and 0 < c < 2**29, in two limbs, then as
-    `how` says (P_*). One call where a call each for the product, its scaling and its
-    bit length cost the chip about 6 us apiece."""
+    `how` says (P_*), with a, b, c, s and how in w's words IO_A .. IO_HOW. One call
+    where a call each for the product, its scaling and its bit length cost the chip
+    about 6 us apiece."""
     w = ptr32(w_buf)
+    a = w[_A]
+    b = w[_B]
+    c = w[_C]
+    s = w[_S]
+    if s > CAP:  # negative: a 64-bit port's ptr32 reads it zero-extended
+        s = 0 - ((0 - s) & CAP)
+    how = w[_HOW]
     a1 = a >> 15
     a0 = a & 0x7FFF
     b1 = b >> 15
@@ -420,7 +440,12 @@ def ramp_into(io_buf):
                 x -= d * c
                 q = (q << 4) | d
         else:
-            product(io_buf, x, _ONE_FRAC, c, 0, P_LIMBS)
+            io[_A] = x
+            io[_B] = _ONE_FRAC
+            io[_C] = c
+            io[_S] = 0
+            io[_HOW] = P_LIMBS
+            product(io_buf)
             q = io[_LO]
         frac += q
     decel = a_int + c_int
@@ -443,7 +468,12 @@ def ramp_into(io_buf):
         if acc < 0x100000:
             fall = (acc * (late >> 8) + ((acc * (late & 0xFF) + _HALF) >> 8)) >> 8
         else:
-            product(io_buf, acc, late, 1, 0, P_LIMBS)
+            io[_A] = acc
+            io[_B] = late
+            io[_C] = 1
+            io[_S] = 0
+            io[_HOW] = P_LIMBS
+            product(io_buf)
             lo = io[_LO] + _HALF
             fall = (io[_HI] << 14) + (lo >> _FRAC)
         r_decel = vn - fall
