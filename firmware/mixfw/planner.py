@@ -250,6 +250,21 @@ _F_BASE_ACCEL = const(2)  # acceleration's, _F_BASE_BOTH its speed's too
 _F_BASE_BOTH = const(3)
 _MEMO = const(4)  # pairs of speed and acceleration _base_floats keeps
 _S_WORDS = const(13)
+_IO_AT = const(14)  # _plan_move's io: the addresses of the arrays before it
+
+
+def _addresses(arrays):
+    """The arrays' addresses, for viper to read as words (the high words are 0 but on
+    a 64-bit port): an array made once, whose arrays stay where they are (MicroPython
+    never moves an object) as long as the caller holds them. Anything else is 0."""
+    import uctypes
+    out = array("I", bytes(8 * len(arrays)))
+    for i, a in enumerate(arrays):
+        if isinstance(a, array):
+            address = uctypes.addressof(a)
+            out[2 * i] = address & 0xFFFFFFFF
+            out[2 * i + 1] = address >> 32
+    return out
 
 
 @micropython.viper
@@ -273,9 +288,13 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     f_buf = io[2]
     counts_buf = io[12]
     weights_buf = io[8]
-    words = ptr32(io[3])
-    counts = ptr32(counts_buf)
-    geo = ptr32(geo_buf)
+    # The arrays it reads and writes, from their addresses (_addresses): ptr32() of
+    # an array costs the chip about 1.4 us, of an address nothing. An address is two
+    # words, its high one 0 but on a 64-bit port, where `<< 16 << 16` moves it up.
+    at = ptr32(io[_IO_AT])
+    words = ptr32(at[6] | at[7] << 16 << 16)
+    counts = ptr32(at[24] | at[25] << 16 << 16)
+    geo = ptr32(at[20] | at[21] << 16 << 16)
     drives = words[_S_DRIVES]
     e_steps = 0
     for i in range(drives):
@@ -297,7 +316,7 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
         n = e_abs
     if n == 0:
         return 0  # less than a step: the filament counts toward the next move
-    mem = ptr32(mem_buf)
+    mem = ptr32(at[0] | at[1] << 16 << 16)
     if not (how & _HOW_SLOT):
         slot = int(_ring_room(mem_buf))
         if slot < 0 or slot & _RING_IDLE:
@@ -344,15 +363,17 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
             return _FLOATS
     mix_id = -1
     given = counts_buf
+    given_at = at[24] | at[25] << 16 << 16
     if e_steps:
         # Exact per-drive counts as the block's mix; a fresh id, so the step loop
         # starts its schedule anew and gives each drive exactly its count.
         given = io[13]
+        given_at = at[26] | at[27] << 16 << 16
         if not (how & _HOW_SCALED):
             if int(block_weights(counts_buf, weights_buf, given, drives)) == 0:
                 return _SCALE
         if e_steps < 0:
-            g = ptr32(given)
+            g = ptr32(given_at)
             for i in range(drives):
                 g[i] = 0 - g[i]
         mix_id = (words[_S_MIX_ID] + 1) & 0x3FFFFFF
@@ -370,13 +391,13 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     for i in range(4):
         mem[b + _B_STEPS + i] = words[i]
     mem[b + _B_FLAGS] = flags | neg * _F_NEG
-    mem[b + _B_DIR_SET] = ptr32(io[6])[neg]
-    mem[b + _B_DIR_CLR] = ptr32(io[7])[neg]
+    mem[b + _B_DIR_SET] = ptr32(at[12] | at[13] << 16 << 16)[neg]
+    mem[b + _B_DIR_CLR] = ptr32(at[14] | at[15] << 16 << 16)[neg]
     mem[b + _B_DWELL] = 0
     if mix_id >= 0:
         w = b + _B_MIX
         mem[w] = mix_id
-        weights = ptr32(weights_buf)
+        weights = ptr32(at[16] | at[17] << 16 << 16)
         for i in range(_MAX_DRIVES):
             mem[w + 1 + i] = weights[i] if i < drives else 0
     lk = io[1]
@@ -385,7 +406,7 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     prev = slot - 1
     if prev < 0:
         prev = mem[_S_QUEUE] - 1
-    prev_v2 = ptr32(lk)[prev * _L_WORDS + _L_NOMINAL]
+    prev_v2 = ptr32(at[2] | at[3] << 16 << 16)[prev * _L_WORDS + _L_NOMINAL]
     if prev_v2 < entry_v2:
         entry_v2 = prev_v2
     _plan_words(lk, slot * _L_WORDS, f_buf, n, io[5], entry_v2, words[_S_RATE_CAP])
@@ -400,8 +421,8 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     pos[3] = int(pos[3]) + e_steps
     # given, an array 'i': a 64-bit port's ptr32 reads a negative count zero-extended,
     # and the sum's low 32 bits, all the word keeps, are the same.
-    drive_steps = ptr32(io[9])
-    given_steps = ptr32(given)
+    drive_steps = ptr32(at[18] | at[19] << 16 << 16)
+    given_steps = ptr32(given_at)
     for i in range(drives):
         drive_steps[i] += given_steps[i]
     if e_steps > 0:
@@ -590,10 +611,10 @@ class Planner:
         self.underruns = 0
         # The arrays _plan_move works with, in one tuple: a viper call's arguments
         # cost the chip each.
-        self._queue_io = (mem, self.lk, self._plan_f, self._abs_steps, self._hooks,
-                          _RAMP_IO, self._dir_set, self._dir_clr, self._weights,
-                          self.drive_steps, self._geo, self._geo_f, self._counts,
-                          self._given)
+        io = (mem, self.lk, self._plan_f, self._abs_steps, self._hooks, _RAMP_IO,
+              self._dir_set, self._dir_clr, self._weights, self.drive_steps, self._geo,
+              self._geo_f, self._counts, self._given)
+        self._queue_io = io + (_addresses(io),)
 
     # --- queue state, shared with the step loop ---
     def busy(self):
