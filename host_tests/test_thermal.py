@@ -301,6 +301,11 @@ def test_cold_extrusion_is_refused(printer):
     assert printer.send("M302")[0] == "echo:Cold extrudes are disabled (min temp 170C)"
     printer.send("M109 S175")
     assert printer.send("G1 E5 F600") == ["ok"]
+    # Passed, the guard is not asked again until a control period's readings: which
+    # find the hot end cooling.
+    printer.send("M104 S0")
+    printer.send("G4 S20")
+    assert printer.send("G1 E10 F600")[0].startswith("Error:cold extrusion prevented")
     report = printer.close()
     assert report["steps"]["e0"] == 5 * 415
 

@@ -235,8 +235,11 @@ class Motion:
         self.fw_retracted = False
         self._retraction_settings(settings)
         # Called before a move that extrudes; each raises GcodeError to refuse it
-        # (cold extrusion, ...).
+        # (cold extrusion, ...). Once they have all passed, they are called again only
+        # after recheck_guards(), which their owners call where a verdict may change (a
+        # reading, a setting): a guard's call cost the chip 12 us a line and more.
         self.extrusion_guards = []
+        self._guards_passed = False
         # Called as fn(z2_nm, e_nm) before a move that extrudes (gradients set the mix):
         # twice the middle Z of the move, and its filament.
         self.before_extrude = []
@@ -382,6 +385,10 @@ class Motion:
         self._spare_nm = pos
         return None
 
+    def recheck_guards(self):
+        """The next extruding move calls the extrusion guards again."""
+        self._guards_passed = False
+
     def _refuse_target(self, target, verdict):
         if verdict <= -_OUTSIDE:
             i = -_OUTSIDE - verdict
@@ -399,8 +406,10 @@ class Motion:
             if e_nm > most or e_nm < -most:
                 raise GcodeError("extrusion of %.1f mm in one move is over max_extrude_mm %g"
                                  % (abs(e_nm) / NM_PER_MM, self.max_extrude_mm))
-            for guard in self.extrusion_guards:
-                guard()
+            if not self._guards_passed:
+                for guard in self.extrusion_guards:
+                    guard()
+                self._guards_passed = True
         # Mostly the move's drivers are on already. Not all of them may be: a print
         # that never moves Z left it off, and enable_for's bytecode call then cost
         # the chip 35 us a line.

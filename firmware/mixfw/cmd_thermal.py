@@ -130,6 +130,7 @@ class ThermalCommands:
             self.thermal.min_extrude_c = s
         if line.has("P"):
             self.cold_extrusion_allowed = line.int("P", lo=0, hi=1) == 1
+        self.thermal.changed()
         if not line.has("S") and not line.has("P"):
             self.printer.reply("echo:Cold extrudes are %s (min temp %.0fC)" % (
                 "enabled" if self.cold_extrusion_allowed else "disabled",
@@ -163,6 +164,7 @@ def register(printer, thermal, motion):
     ):
         printer.register(name, fn, guarded)
     motion.extrusion_guards.append(c.check_extrusion)
+    thermal.on_change.append(motion.recheck_guards)
     printer.add_background(c.autoreport)
     return c
 

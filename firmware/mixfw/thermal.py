@@ -264,6 +264,9 @@ class Thermal:
         if "part_fan" in pin_map:
             self.fan = machine.PWM(machine.Pin(pin_map["part_fan"]),
                                    freq=int(settings["fan_pwm_hz"]), duty_u16=0)
+        # Called where the extrusion guard's verdict may change: a control period's
+        # readings, a setting (the guard is not called every line: cmd_motion).
+        self.on_change = []
         self.apply(settings)
         now = time.ticks_ms()
         for h in self.heaters:
@@ -283,6 +286,11 @@ class Thermal:
         self.min_extrude_c = settings["min_extrude_c"]
         if self.fan is not None:
             self.fan.freq(int(_setting(settings, "fan_pwm_hz", 1)))
+        self.changed()
+
+    def changed(self):
+        for fn in self.on_change:
+            fn()
 
     def background(self, now_ms):
         # Runs at every turn of the main loop and of every wait: the control period's
@@ -300,11 +308,13 @@ class Thermal:
             reason = h.control(now_ms, dt_s)
             if reason:
                 self.printer.halt("%s: %s" % (h.name, reason))
+        self.changed()
 
     def refresh(self):
         """Read every sensor now, for reports between control periods."""
         for h in self.heaters:
             h.read_c()
+        self.changed()
 
     def all_off(self):
         for h in self.heaters:
@@ -312,6 +322,7 @@ class Thermal:
 
     def set_target(self, heater, target_c):
         heater.set_target(target_c, time.ticks_ms())
+        self.changed()  # a reading
 
     def rearm(self):
         """M922: forget heater faults. A fault that persists is found again at once.
