@@ -275,7 +275,6 @@ class Parser:
         self.result = array("i", bytes(4 * _R_WORDS))
         self._words = (self.line.mant, self.line.decimals, self.raw, self.result)
 
-    @micropython.native
     def parse(self, buf, n):
         """Parse buf[:n] into self.line. Raises GcodeError naming the problem."""
         # At most 11 words of locals and stack, here and in every function a line
