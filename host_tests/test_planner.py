@@ -730,11 +730,8 @@ from mixfw import ramp
 w = array("i", bytes(4 * ramp.IO_WORDS))
 out = []
 for a, b, c, s, how in json.loads(sys.stdin.read()):
-    w[ramp.IO_A] = a
-    w[ramp.IO_B] = b
-    w[ramp.IO_C] = c
-    w[ramp.IO_S] = s
-    w[ramp.IO_HOW] = how
+    for k, v in enumerate((a, b, c, s, how)):  # product()'s operands: w's last five
+        w[ramp.IO_WORDS - 5 + k] = v
     x = ramp.product(w)
     out.append([x, w[ramp.IO_HI], w[ramp.IO_LO]])
 print(json.dumps(out))

@@ -40,9 +40,9 @@ assert (_E12_HI << 30) + _E12_LO == NM_PER_MM * SPM_SCALE == _FIVE6 ** 2 << 12
 # retract_policy: retractions follow the mix and run it exactly backwards, or pull every
 # drive equally (and push them back equally), or take back exactly the steps each drive
 # made in the latest extrusion (and push exactly those back).
-RETRACT_FOLLOW_MIX = const(0)
-RETRACT_EQUAL = const(1)
-RETRACT_REPLAY = const(2)
+_RETRACT_FOLLOW_MIX = const(0)
+_RETRACT_EQUAL = const(1)
+_RETRACT_REPLAY = const(2)
 
 
 @micropython.viper
@@ -284,8 +284,8 @@ class Motion:
         return (n[0] / NM_PER_MM, n[1] / NM_PER_MM, n[2] / NM_PER_MM, self.e_nm / NM_PER_MM)
 
     def _retraction_settings(self, settings):
-        self.retract_policy = settings.get("retract_policy", RETRACT_FOLLOW_MIX)
-        self.planner.keep_extrusion = self.retract_policy == RETRACT_REPLAY
+        self.retract_policy = settings.get("retract_policy", _RETRACT_FOLLOW_MIX)
+        self.planner.keep_extrusion = self.retract_policy == _RETRACT_REPLAY
         self.retract_mm = settings.get("retract_mm", 2.0)
         self.retract_nm = nm_from_mm(self.retract_mm)
         self.retract_feed_mm_s = settings.get("retract_feed_mm_s", 40.0)
@@ -417,18 +417,18 @@ class Motion:
             self.enable_for(xyz | (8 if e_nm else 0))
         q = self.queue
         policy = self.retract_policy
-        if not xyz and policy == RETRACT_EQUAL and (e_nm < 0 or self.retracted_nm > 0):
+        if not xyz and policy == _RETRACT_EQUAL and (e_nm < 0 or self.retracted_nm > 0):
             # A retraction, or the unretraction after it: every drive pulls equally, and
             # as drives are planned from absolute positions, pushes back exactly.
             q.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_nm=e_nm,
                        mix=(q.mix_id, (1,) * self.drives))
             self.retracted_nm = max(0, self.retracted_nm - e_nm)
-        elif policy == RETRACT_REPLAY and (e_nm < 0 or (not xyz and self.retracted_nm > 0)):
+        elif policy == _RETRACT_REPLAY and (e_nm < 0 or (not xyz and self.retracted_nm > 0)):
             # Wipes (retraction while moving) count as retraction too.
             q.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_nm=e_nm, replay=True)
             self.retracted_nm = max(0, self.retracted_nm - e_nm)
         else:
-            if policy == RETRACT_REPLAY and e_nm > 0:
+            if policy == _RETRACT_REPLAY and e_nm > 0:
                 self.retracted_nm = 0  # as the planner forgets them on extrusion
             # Positional: a call with keywords costs the chip more.
             q.add_move(steps, feed_mm_s, self.dir_masks, e_nm)

@@ -130,7 +130,8 @@ class ThermalCommands:
             self.thermal.min_extrude_c = s
         if line.has("P"):
             self.cold_extrusion_allowed = line.int("P", lo=0, hi=1) == 1
-        self.thermal.changed()
+        for fn in self.thermal.on_change:
+            fn()
         if not line.has("S") and not line.has("P"):
             self.printer.reply("echo:Cold extrudes are %s (min temp %.0fC)" % (
                 "enabled" if self.cold_extrusion_allowed else "disabled",

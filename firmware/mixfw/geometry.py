@@ -49,9 +49,10 @@ _ONE = const(0x10000000)  # the cosine's and the sine's fixed point: 2**28
 # a reversal to a stop.
 _STRAIGHT = const(268)
 _V2_MAX = const(0x1FFFFFFF)  # lookahead's V2 range
-assert (_IO_HI, _IO_LO, _IO_A, _IO_B, _IO_C, _IO_S, _IO_HOW, _P_TRUNC, _P_ROUND) == (
-    ramp.IO_HI, ramp.IO_LO, ramp.IO_A, ramp.IO_B, ramp.IO_C, ramp.IO_S, ramp.IO_HOW,
-    ramp.P_TRUNC, ramp.P_ROUND)
+assert (_IO_HI, _IO_LO, _P_TRUNC, _P_ROUND) == (
+    ramp.IO_HI, ramp.IO_LO, ramp.P_TRUNC, ramp.P_ROUND)
+# product()'s operands: io's last five words
+assert (_IO_A, _IO_B, _IO_C, _IO_S, _IO_HOW) == tuple(range(ramp.IO_WORDS - 5, ramp.IO_WORDS))
 assert G_D >= ramp.IO_WORDS
 
 

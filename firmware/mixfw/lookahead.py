@@ -91,10 +91,11 @@ _P_LIMBS = const(0)
 _P_TRUNC = const(1)
 _P_ROUND = const(2)
 _P_TOP = const(3)
-assert (_HI, _LO, _A, _B, _C, _S, _HOW, _W_M, _CAP, _P_LIMBS, _P_TRUNC, _P_ROUND,
-        _P_TOP) == (
-    ramp.IO_HI, ramp.IO_LO, ramp.IO_A, ramp.IO_B, ramp.IO_C, ramp.IO_S, ramp.IO_HOW,
-    ramp.IO_WORDS, ramp.CAP, ramp.P_LIMBS, ramp.P_TRUNC, ramp.P_ROUND, ramp.P_TOP)
+assert (_HI, _LO, _W_M, _CAP, _P_LIMBS, _P_TRUNC, _P_ROUND, _P_TOP) == (
+    ramp.IO_HI, ramp.IO_LO, ramp.IO_WORDS, ramp.CAP, ramp.P_LIMBS, ramp.P_TRUNC,
+    ramp.P_ROUND, ramp.P_TOP)
+# product()'s operands: io's last five words
+assert (_A, _B, _C, _S, _HOW) == tuple(range(ramp.IO_WORDS - 5, ramp.IO_WORDS))
 
 
 @micropython.viper

@@ -253,20 +253,6 @@ _S_WORDS = const(13)
 _IO_AT = const(14)  # _plan_move's io: the addresses of the arrays before it
 
 
-def _addresses(arrays):
-    """The arrays' addresses, for viper to read as words (the high words are 0 but on
-    a 64-bit port): an array made once, whose arrays stay where they are (MicroPython
-    never moves an object) as long as the caller holds them. Anything else is 0."""
-    import uctypes
-    out = array("I", bytes(8 * len(arrays)))
-    for i, a in enumerate(arrays):
-        if isinstance(a, array):
-            address = uctypes.addressof(a)
-            out[2 * i] = address & 0xFFFFFFFF
-            out[2 * i + 1] = address >> 32
-    return out
-
-
 @micropython.viper
 def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
                target) -> int:
@@ -288,9 +274,10 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     f_buf = io[2]
     counts_buf = io[12]
     weights_buf = io[8]
-    # The arrays it reads and writes, from their addresses (_addresses): ptr32() of
-    # an array costs the chip about 1.4 us, of an address nothing. An address is two
-    # words, its high one 0 but on a 64-bit port, where `<< 16 << 16` moves it up.
+    # The arrays it reads and writes, from their addresses (io[_IO_AT], see
+    # Planner.__init__): ptr32() of an array costs the chip about 1.4 us, of an address
+    # nothing. An address is two words, its high one 0 but on a 64-bit port, where
+    # `<< 16 << 16` moves it up.
     at = ptr32(io[_IO_AT])
     words = ptr32(at[6] | at[7] << 16 << 16)
     counts = ptr32(at[24] | at[25] << 16 << 16)
@@ -614,7 +601,18 @@ class Planner:
         io = (mem, self.lk, self._plan_f, self._abs_steps, self._hooks, _RAMP_IO,
               self._dir_set, self._dir_clr, self._weights, self.drive_steps, self._geo,
               self._geo_f, self._counts, self._given)
-        self._queue_io = io + (_addresses(io),)
+        # And the arrays' addresses, for _plan_move to read as words: they stay where
+        # they are (MicroPython never moves an object) while the tuple holds them. In
+        # line, as every name a module keeps costs the chips' heap (README: the qstr
+        # pools).
+        import uctypes
+        at = array("I", bytes(8 * len(io)))
+        for i, a in enumerate(io):
+            if isinstance(a, array):
+                address = uctypes.addressof(a)
+                at[2 * i] = address & 0xFFFFFFFF
+                at[2 * i + 1] = address >> 32
+        self._queue_io = io + (at,)
 
     # --- queue state, shared with the step loop ---
     def busy(self):

@@ -31,19 +31,17 @@ IO_LO = const(9)
 _HI = const(IO_HI)
 _LO = const(IO_LO)
 _REM = const(10)
-# product()'s operands (see there), stored by its callers: a viper call's int argument
-# costs the chip about 1 us, a store a few cycles.
-IO_A = const(11)
-IO_B = const(12)
-IO_C = const(13)
-IO_S = const(14)
-IO_HOW = const(15)
-_A = const(IO_A)
-_B = const(IO_B)
-_C = const(IO_C)
-_S = const(IO_S)
-_HOW = const(IO_HOW)
+# The last five: product()'s operands a, b, c, s and how (see there), which its callers
+# store (a viper call's int argument costs the chip about 1 us, a store a few cycles).
+# Private, as every name a module keeps costs the chips' heap (README: the qstr pools):
+# the modules that store them check theirs against IO_WORDS.
+_A = const(11)
+_B = const(12)
+_C = const(13)
+_S = const(14)
+_HOW = const(15)
 IO_WORDS = const(16)
+assert _HOW == IO_WORDS - 1 and _A == IO_WORDS - 5
 
 
 @micropython.viper
@@ -176,7 +174,7 @@ CAP = const(0x3FFFFFFF)
 @micropython.viper
 def product(w_buf) -> int:
     """x = a * b // c, for 0 <= a, b < 2**30 and 0 < c < 2**29, in two limbs, then as
-    `how` says (P_*), with a, b, c, s and how in w's words IO_A .. IO_HOW. One call
+    `how` says (P_*), with a, b, c, s and how in w's last five words. One call
     where a call each for the product, its scaling and its bit length cost the chip
     about 6 us apiece."""
     w = ptr32(w_buf)

@@ -265,7 +265,7 @@ class Thermal:
             self.fan = machine.PWM(machine.Pin(pin_map["part_fan"]),
                                    freq=int(settings["fan_pwm_hz"]), duty_u16=0)
         # Called where the extrusion guard's verdict may change: a control period's
-        # readings, a setting (the guard is not called every line: cmd_motion).
+        # readings, the settings (the guard is not called every line: cmd_motion).
         self.on_change = []
         self.apply(settings)
         now = time.ticks_ms()
@@ -286,9 +286,6 @@ class Thermal:
         self.min_extrude_c = settings["min_extrude_c"]
         if self.fan is not None:
             self.fan.freq(int(_setting(settings, "fan_pwm_hz", 1)))
-        self.changed()
-
-    def changed(self):
         for fn in self.on_change:
             fn()
 
@@ -308,13 +305,13 @@ class Thermal:
             reason = h.control(now_ms, dt_s)
             if reason:
                 self.printer.halt("%s: %s" % (h.name, reason))
-        self.changed()
+        for fn in self.on_change:
+            fn()
 
     def refresh(self):
         """Read every sensor now, for reports between control periods."""
         for h in self.heaters:
             h.read_c()
-        self.changed()
 
     def all_off(self):
         for h in self.heaters:
@@ -322,7 +319,6 @@ class Thermal:
 
     def set_target(self, heater, target_c):
         heater.set_target(target_c, time.ticks_ms())
-        self.changed()  # a reading
 
     def rearm(self):
         """M922: forget heater faults. A fault that persists is found again at once.
