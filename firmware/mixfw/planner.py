@@ -250,7 +250,6 @@ _F_BASE_ACCEL = const(2)  # acceleration's, _F_BASE_BOTH its speed's too
 _F_BASE_BOTH = const(3)
 _MEMO = const(4)  # pairs of speed and acceleration _base_floats keeps
 _S_WORDS = const(13)
-_IO_AT = const(14)  # _plan_move's io: the addresses of the arrays before it
 
 
 @micropython.viper
@@ -274,14 +273,9 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     f_buf = io[2]
     counts_buf = io[12]
     weights_buf = io[8]
-    # The arrays it reads and writes, from their addresses (io[_IO_AT], see
-    # Planner.__init__): ptr32() of an array costs the chip about 1.4 us, of an address
-    # nothing. An address is two words, its high one 0 but on a 64-bit port, where
-    # `<< 16 << 16` moves it up.
-    at = ptr32(io[_IO_AT])
-    words = ptr32(at[6] | at[7] << 16 << 16)
-    counts = ptr32(at[24] | at[25] << 16 << 16)
-    geo = ptr32(at[20] | at[21] << 16 << 16)
+    words = ptr32(io[3])
+    counts = ptr32(counts_buf)
+    geo = ptr32(geo_buf)
     drives = words[_S_DRIVES]
     e_steps = 0
     for i in range(drives):
@@ -303,7 +297,7 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
         n = e_abs
     if n == 0:
         return 0  # less than a step: the filament counts toward the next move
-    mem = ptr32(at[0] | at[1] << 16 << 16)
+    mem = ptr32(mem_buf)
     if not (how & _HOW_SLOT):
         slot = int(_ring_room(mem_buf))
         if slot < 0 or slot & _RING_IDLE:
@@ -350,17 +344,15 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
             return _FLOATS
     mix_id = -1
     given = counts_buf
-    given_at = at[24] | at[25] << 16 << 16
     if e_steps:
         # Exact per-drive counts as the block's mix; a fresh id, so the step loop
         # starts its schedule anew and gives each drive exactly its count.
         given = io[13]
-        given_at = at[26] | at[27] << 16 << 16
         if not (how & _HOW_SCALED):
             if int(block_weights(counts_buf, weights_buf, given, drives)) == 0:
                 return _SCALE
         if e_steps < 0:
-            g = ptr32(given_at)
+            g = ptr32(given)
             for i in range(drives):
                 g[i] = 0 - g[i]
         mix_id = (words[_S_MIX_ID] + 1) & 0x3FFFFFF
@@ -378,13 +370,13 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     for i in range(4):
         mem[b + _B_STEPS + i] = words[i]
     mem[b + _B_FLAGS] = flags | neg * _F_NEG
-    mem[b + _B_DIR_SET] = ptr32(at[12] | at[13] << 16 << 16)[neg]
-    mem[b + _B_DIR_CLR] = ptr32(at[14] | at[15] << 16 << 16)[neg]
+    mem[b + _B_DIR_SET] = ptr32(io[6])[neg]
+    mem[b + _B_DIR_CLR] = ptr32(io[7])[neg]
     mem[b + _B_DWELL] = 0
     if mix_id >= 0:
         w = b + _B_MIX
         mem[w] = mix_id
-        weights = ptr32(at[16] | at[17] << 16 << 16)
+        weights = ptr32(weights_buf)
         for i in range(_MAX_DRIVES):
             mem[w + 1 + i] = weights[i] if i < drives else 0
     lk = io[1]
@@ -393,7 +385,7 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     prev = slot - 1
     if prev < 0:
         prev = mem[_S_QUEUE] - 1
-    prev_v2 = ptr32(at[2] | at[3] << 16 << 16)[prev * _L_WORDS + _L_NOMINAL]
+    prev_v2 = ptr32(lk)[prev * _L_WORDS + _L_NOMINAL]
     if prev_v2 < entry_v2:
         entry_v2 = prev_v2
     _plan_words(lk, slot * _L_WORDS, f_buf, n, io[5], entry_v2, words[_S_RATE_CAP])
@@ -408,8 +400,8 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     pos[3] = int(pos[3]) + e_steps
     # given, an array 'i': a 64-bit port's ptr32 reads a negative count zero-extended,
     # and the sum's low 32 bits, all the word keeps, are the same.
-    drive_steps = ptr32(at[18] | at[19] << 16 << 16)
-    given_steps = ptr32(given_at)
+    drive_steps = ptr32(io[9])
+    given_steps = ptr32(given)
     for i in range(drives):
         drive_steps[i] += given_steps[i]
     if e_steps > 0:
@@ -598,21 +590,10 @@ class Planner:
         self.underruns = 0
         # The arrays _plan_move works with, in one tuple: a viper call's arguments
         # cost the chip each.
-        io = (mem, self.lk, self._plan_f, self._abs_steps, self._hooks, _RAMP_IO,
-              self._dir_set, self._dir_clr, self._weights, self.drive_steps, self._geo,
-              self._geo_f, self._counts, self._given)
-        # And the arrays' addresses, for _plan_move to read as words: they stay where
-        # they are (MicroPython never moves an object) while the tuple holds them. In
-        # line, as every name a module keeps costs the chips' heap (README: the qstr
-        # pools).
-        import uctypes
-        at = array("I", bytes(8 * len(io)))
-        for i, a in enumerate(io):
-            if isinstance(a, array):
-                address = uctypes.addressof(a)
-                at[2 * i] = address & 0xFFFFFFFF
-                at[2 * i + 1] = address >> 32
-        self._queue_io = io + (at,)
+        self._queue_io = (mem, self.lk, self._plan_f, self._abs_steps, self._hooks,
+                          _RAMP_IO, self._dir_set, self._dir_clr, self._weights,
+                          self.drive_steps, self._geo, self._geo_f, self._counts,
+                          self._given)
 
     # --- queue state, shared with the step loop ---
     def busy(self):
