@@ -348,16 +348,20 @@ def tick(io) -> int:
     costs as much as a whole idle tick: the tick works out the levels (set_mask,
     clr_mask) first and writes them at one place, the end.
 
-    Viper keeps a function's first three locals (its arguments first) in registers on
-    ARMv6-M, and the rest on the stack: one argument, so that the two most used words,
-    mem and the block's base b, are the other two (the step path's share of the
-    emulated Pico's CPU at 20,000 steps/s: 0.196 -> 0.179).
+    On ARMv6-M viper keeps a function's first locals (its arguments first) in
+    registers, and the rest on the stack: one argument, so that mem, the most used,
+    is in a register (the step path's share of the emulated Pico's CPU at 20,000
+    steps/s: 0.196 -> 0.179). The disassembly of the emulated Pico's heap shows two:
+    io and mem; every other local costs a load or a store at each use.
 
     The helpers it calls get the array object (io[0]), never the ptr32: viper boxes
     a pointer it passes on as an int, and an address above 2**30 (any RAM of a 32-bit
     unix port, some chips' too) would be a big int allocated in the interrupt."""
     mem = ptr32(io[0])
-    b = 0  # the running block's first word
+    # The tail block's record: a pointer of its own, as an index into mem costs viper
+    # an addition and a shift at every word read; worked out again as a block starts
+    # (the tail moves on only as one ends).
+    blk = ptr32(int(mem) + 4 * (BLOCK_BASE + mem[S_TAIL] * B_WORDS))
     # The ring's loop costs the timer path a compare of a register per tick: where the
     # timer path returns, the ring goes on with the batch's next tick.
     # Locals only the ring reads are set only for it (each is a store per tick).
@@ -368,7 +372,14 @@ def tick(io) -> int:
         tc = mem[R_TC]
         ticks_left = mem[R_BATCH_TICKS]
         t0 = 0 - tc  # start of this tick, PIO cycles from the batch's start
-        w_first = mem[R_W]
+        # The ring's words in locals for the batch, stored at its end.
+        at = mem[R_W]  # the next ring word
+        at_first = at
+        last = mem[R_LAST]
+        lv = mem[S_LEVELS]
+        shift = mem[S_PIO_SHIFT]
+        bits = mem[R_LEVEL_BITS]
+        pulse_cyc = mem[R_PULSE_CYC]
         if mem[R_PENDING] > 0:
             mem[R_PENDING] -= 1
     cruise = 0
@@ -380,12 +391,12 @@ def tick(io) -> int:
                 cruise = 0
                 rate = mem[_S_RATE]
                 ramp = mem[_S_RAMP_TICKS]
-                if rate > 0 and rate == mem[b + B_RATE_NOM] and \
-                        ramp + 1 >= mem[b + B_ACCEL_UNTIL]:
+                if rate > 0 and rate == blk[B_RATE_NOM] and \
+                        ramp + 1 >= blk[B_ACCEL_UNTIL]:
                     phase = mem[S_PHASE]
                     skip = (ONE - 1 - phase) // rate
-                    if skip > mem[b + B_DECEL_AFTER] - 1 - ramp:
-                        skip = mem[b + B_DECEL_AFTER] - 1 - ramp
+                    if skip > blk[B_DECEL_AFTER] - 1 - ramp:
+                        skip = blk[B_DECEL_AFTER] - 1 - ramp
                     if skip > ticks_left:
                         skip = ticks_left
                     if skip > 0:
@@ -402,7 +413,7 @@ def tick(io) -> int:
             ticks_left -= 1
             t0 += tc
         mem[S_TICKS] = (mem[S_TICKS] + 1) & 0x3FFFFFFF
-        if mem[S_PIO] == 1:
+        if ring == 0 and mem[S_PIO] == 1:
             # The levels the last tick left, for the state machine; the burst goes on
             # while there is work.
             left = mem[_S_PIO_LEFT]
@@ -423,9 +434,9 @@ def tick(io) -> int:
             # goes the cheap way.
             if left == 0 and ring == 0:
                 clr_mask = mem[_S_PULSE_MASK]
-        b = BLOCK_BASE + mem[S_TAIL] * B_WORDS
         run = 1
         if mem[S_ACTIVE] == 0:
+            blk = ptr32(int(mem) + 4 * (BLOCK_BASE + mem[S_TAIL] * B_WORDS))
             if mem[S_TAIL] == mem[S_HEAD]:
                 # The axes have stopped (the planner ends the queue at rest): the next
                 # move's first step comes a whole step after its start, as the ideal
@@ -440,13 +451,13 @@ def tick(io) -> int:
                     continue
                 run = 0
             else:
-                changed = int(_start(io[0], b))
+                changed = int(_start(io[0], BLOCK_BASE + mem[S_TAIL] * B_WORDS))
                 if changed:
                     dirs = mem[S_DIR]
                     set_mask = dirs & changed
                     clr_mask |= changed & (0 - 1 - dirs)
                     run = 0
-        flags = mem[b + B_FLAGS]
+        flags = blk[B_FLAGS]
         if run:
             wait = mem[S_WAIT]
             if wait > 0:
@@ -464,19 +475,19 @@ def tick(io) -> int:
             rate = mem[_S_RATE]
             step_rate = rate
             phase = mem[S_PHASE] + rate
-            if ramp < mem[b + B_ACCEL_UNTIL]:
-                rate += mem[b + B_ACCEL]
-                if rate > mem[b + B_RATE_NOM]:
-                    rate = mem[b + B_RATE_NOM]
-            elif ramp >= mem[b + B_DECEL_AFTER]:
-                if ramp == mem[b + B_DECEL_AFTER]:
-                    rate = mem[b + B_RATE_DECEL]
+            if ramp < blk[B_ACCEL_UNTIL]:
+                rate += blk[B_ACCEL]
+                if rate > blk[B_RATE_NOM]:
+                    rate = blk[B_RATE_NOM]
+            elif ramp >= blk[B_DECEL_AFTER]:
+                if ramp == blk[B_DECEL_AFTER]:
+                    rate = blk[B_RATE_DECEL]
                 else:
-                    rate -= mem[b + B_ACCEL]
-                    if rate < mem[b + B_RATE_FINAL]:
-                        rate = mem[b + B_RATE_FINAL]
+                    rate -= blk[B_ACCEL]
+                    if rate < blk[B_RATE_FINAL]:
+                        rate = blk[B_RATE_FINAL]
             else:
-                rate = mem[b + B_RATE_NOM]
+                rate = blk[B_RATE_NOM]
             mem[_S_RATE] = rate
             # A step waits while a STEP pin is still high or has just fallen (its low time).
             if phase >= ONE and left == 0 and clr_mask == 0:
@@ -487,8 +498,8 @@ def tick(io) -> int:
             if clr_mask == 0:
                 if ring == 0:
                     return 0  # the most common tick while moving: no step due, no pin to write
-                if ticks_left <= 0 or (rate == mem[b + B_RATE_NOM] and
-                                       ramp + 1 >= mem[b + B_ACCEL_UNTIL]):
+                if ticks_left <= 0 or (rate == blk[B_RATE_NOM] and
+                                       ramp + 1 >= blk[B_ACCEL_UNTIL]):
                     cruise = 1  # the loop's top skips a cruise's ticks at once
                     break
                 # A ramp: the next tick has nothing else to do (no pin, no block to
@@ -498,7 +509,7 @@ def tick(io) -> int:
                 # tick each cost the chip about 1.7 us, a sixth of its time at 10 us
                 # ticks on curves, which never stop ramping.
                 gap = ONE - 1 - phase
-                acc = mem[b + B_ACCEL]
+                acc = blk[B_ACCEL]
                 skip = 0
                 da = 0  # the rate's change a tick over the ticks passed over
                 if gap > 0 and rate > 0 and acc > 0 and acc < _RAMP_SKIP_ACC:
@@ -507,7 +518,7 @@ def tick(io) -> int:
                         most = _RAMP_SKIP_MAX
                     x = 0
                     if most > 2:
-                        if ramp + 1 < mem[b + B_ACCEL_UNTIL]:
+                        if ramp + 1 < blk[B_ACCEL_UNTIL]:
                             # Accelerating: rate + acc (j - 1) at the j-th, so k ticks
                             # add k rate + acc k (k - 1) / 2, below gap while
                             # k (rate + acc most) is, for k <= most; short of the
@@ -516,15 +527,15 @@ def tick(io) -> int:
                             skip = gap // (rate + acc * most)
                             if skip > most:
                                 skip = most
-                            x = mem[b + B_ACCEL_UNTIL] - 1 - ramp
+                            x = blk[B_ACCEL_UNTIL] - 1 - ramp
                             if skip > x:
                                 skip = x
-                            x = (mem[b + B_RATE_NOM] - rate) // acc
-                        elif ramp >= mem[b + B_DECEL_AFTER]:
+                            x = (blk[B_RATE_NOM] - rate) // acc
+                        elif ramp >= blk[B_DECEL_AFTER]:
                             # Decelerating: short of the final rate.
                             da = 0 - acc
                             skip = most
-                            x = (rate - mem[b + B_RATE_FINAL]) // acc
+                            x = (rate - blk[B_RATE_FINAL]) // acc
                     if skip > x:
                         skip = x
                     if skip > ticks_left - 1:
@@ -562,9 +573,9 @@ def tick(io) -> int:
                 run = 0
         if run:
             stepped = 1
-            n = mem[b + B_N]
+            n = blk[B_N]
             # Bresenham for X, Y, Z, written out: constant offsets cost nothing.
-            err = mem[_S_ERR + X] + mem[b + B_STEPS + X]
+            err = mem[_S_ERR + X] + blk[B_STEPS + X]
             if err > n:
                 err -= n
                 if (stopped & 1) == 0:
@@ -574,7 +585,7 @@ def tick(io) -> int:
                     else:
                         mem[S_POS + X] += 1
             mem[_S_ERR + X] = err
-            err = mem[_S_ERR + Y] + mem[b + B_STEPS + Y]
+            err = mem[_S_ERR + Y] + blk[B_STEPS + Y]
             if err > n:
                 err -= n
                 if (stopped & 2) == 0:
@@ -584,7 +595,7 @@ def tick(io) -> int:
                     else:
                         mem[S_POS + Y] += 1
             mem[_S_ERR + Y] = err
-            err = mem[_S_ERR + Z] + mem[b + B_STEPS + Z]
+            err = mem[_S_ERR + Z] + blk[B_STEPS + Z]
             if err > n:
                 err -= n
                 if (stopped & 4) == 0:
@@ -594,7 +605,7 @@ def tick(io) -> int:
                     else:
                         mem[S_POS + Z] += 1
             mem[_S_ERR + Z] = err
-            err = mem[_S_ERR + E] + mem[b + B_STEPS + E]
+            err = mem[_S_ERR + E] + blk[B_STEPS + E]
             if err > n:
                 err -= n
                 # The mixer (see mixer.py): forward, the drive whose next step is due
@@ -604,7 +615,11 @@ def tick(io) -> int:
                 q = mem[_MIX_Q]
                 best = -1
                 # Sentinels that the first drive with a weight beats, so the loops
-                # need no test of best (backward, best_num is 0 there).
+                # need no test of best (backward, best_num is 0 there), nor of a
+                # weight: a drive without one never beats a drive with one (its count
+                # stays 0, its product against a weight is 0 forward, -best_w < 0
+                # backward), and one that beats the sentinels loses to the next with a
+                # weight. The test cost the six-drive scan 11 % on the emulated Pico.
                 best_num = 1
                 best_w = 0
                 i = 0
@@ -618,12 +633,11 @@ def tick(io) -> int:
                     best_num = 0
                     while i < drives:
                         w = mem[_MIX_W + i]
-                        if w > 0:
-                            num = 2 * mem[_MIX_C + i] - 1
-                            if num * best_w >= best_num * w:
-                                best = i
-                                best_num = num
-                                best_w = w
+                        num = 2 * mem[_MIX_C + i] - 1
+                        if num * best_w >= best_num * w:
+                            best = i
+                            best_num = num
+                            best_w = w
                         i += 1
                     if best >= 0:
                         mem[_MIX_C + best] -= 1
@@ -640,12 +654,11 @@ def tick(io) -> int:
                         i = 0
                     while i < drives:
                         w = mem[_MIX_W + i]
-                        if w > 0:
-                            num = 2 * mem[_MIX_C + i] + 1
-                            if num * best_w < best_num * w:
-                                best = i
-                                best_num = num
-                                best_w = w
+                        num = 2 * mem[_MIX_C + i] + 1
+                        if num * best_w < best_num * w:
+                            best = i
+                            best_num = num
+                            best_w = w
                         i += 1
                     if best >= 0:
                         mem[_MIX_C + best] += 1
@@ -695,35 +708,30 @@ def tick(io) -> int:
                 # A step at the time the phase crossed ONE inside the tick (the rate
                 # is the tick's mean speed), its fall a pulse later; DIR at the tick's
                 # start. Events are never closer than the program's own cycles.
-                lv = mem[S_LEVELS]
-                t = t0
-                if run:
-                    over = phase - ONE  # phase left over at the tick's end
-                    if over < step_rate:
-                        t = t0 + tc - (((over // ((step_rate >> 10) + 1)) * tc) >> 10)
-                nxt = (lv | set_mask) & (0 - 1 - clr_mask)
-                w = mem[R_W]
-                last = mem[R_LAST]
-                shift = mem[S_PIO_SHIFT]
-                bits = mem[R_LEVEL_BITS]
-                k = 0 if nxt != lv else 2  # else a pulse whose fall is written already
-                while k < 2:
+                nxt = (lv | set_mask) & ~clr_mask
+                if nxt != lv:  # else a pulse whose fall is written already
+                    t = t0
+                    if run:
+                        over = phase - ONE  # phase left over at the tick's end
+                        if over < step_rate:
+                            t = t0 + tc - (((over // ((step_rate >> 10) + 1)) * tc) >> 10)
+                    # The levels before, held to the edge; with a step, its levels
+                    # too, held to its fall a pulse later (written out: a loop's
+                    # counter costs viper more than the second copy).
                     if t < last + _EV_MIN_CYCLES:
                         t = last + _EV_MIN_CYCLES
-                    evr[w] = (lv >> shift) | ((t - last - _EV_MIN_CYCLES) << bits)
-                    w += 1
+                    evr[at] = (lv >> shift) | ((t - last - _EV_MIN_CYCLES) << bits)
+                    at += 1
                     last = t
                     lv = nxt
-                    k += 1
                     if run:
-                        t += mem[R_PULSE_CYC]
-                        nxt = lv & (0 - 1 - set_mask)
-                        run = 0
-                    else:
-                        k = 2
-                mem[R_W] = w
-                mem[R_LAST] = last
-                mem[S_LEVELS] = lv
+                        t += pulse_cyc
+                        if t < last + _EV_MIN_CYCLES:
+                            t = last + _EV_MIN_CYCLES
+                        evr[at] = (lv >> shift) | ((t - last - _EV_MIN_CYCLES) << bits)
+                        at += 1
+                        last = t
+                        lv = lv & ~set_mask
                 cruise = stepped & mem[S_ACTIVE]
                 continue
             if mem[_S_PIO_LEFT] == 0:
@@ -732,7 +740,7 @@ def tick(io) -> int:
                 fill = mem[S_PIO_LATENCY] - int(_pio_ahead(io[0]))
                 if fill > 0:
                     _pio_put(io[0], io[1], fill)
-            mem[S_LEVELS] = (mem[S_LEVELS] | set_mask) & (0 - 1 - clr_mask)
+            mem[S_LEVELS] = (mem[S_LEVELS] | set_mask) & ~clr_mask
             mem[_S_PIO_LEFT] = mem[S_PIO_LATENCY] + 2
             return stepped
         at = mem[S_REG_SET]
@@ -757,29 +765,27 @@ def tick(io) -> int:
     # The levels since the last edge hold to the batch's last cycle, in as many
     # pieces as make up BATCH_MIN_WORDS, and the next batch counts from there.
     end = mem[R_BATCH_TICKS] * tc
-    last = mem[R_LAST]
-    w = mem[R_W]
-    lv = mem[S_LEVELS] >> mem[S_PIO_SHIFT]
-    bits = mem[R_LEVEL_BITS]
-    edges = w - w_first
+    mem[S_LEVELS] = lv
+    lv = lv >> shift
+    edges = at - at_first
     pieces = BATCH_MIN_WORDS - edges
     if pieces < 1 or end - last < pieces * _EV_MIN_CYCLES:
         pieces = 1
     while pieces > 1:
         piece = (end - last) // pieces
-        evr[w] = lv | ((piece - _EV_MIN_CYCLES) << bits)
-        w += 1
+        evr[at] = lv | ((piece - _EV_MIN_CYCLES) << bits)
+        at += 1
         last += piece
         pieces -= 1
     t = end if end >= last + _EV_MIN_CYCLES else last + _EV_MIN_CYCLES
-    evr[w] = lv | ((t - last - _EV_MIN_CYCLES) << bits)
-    w += 1
-    mem[R_W] = w
+    evr[at] = lv | ((t - last - _EV_MIN_CYCLES) << bits)
+    at += 1
+    mem[R_W] = at
     mem[R_LAST] = t - end
     if edges or mem[S_ACTIVE] or mem[S_TAIL] != mem[S_HEAD] or mem[S_PULSE_LEFT]:
         mem[R_PENDING] = _PENDING_BATCHES
     mem[R_BATCHES] = (mem[R_BATCHES] + 1) & 0x3FFFFFFF
-    return w
+    return at
 
 
 def run_mix(weights, moves, out=None):
