@@ -111,7 +111,9 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     V2 whose rate it is. In integers here, as the rate is: the same limit in mm/s was
     a speed worked out in floats for every fast line (each float operation allocates
     on the chips)."""
-    lk = ptr32(lk_buf)
+    # The slot's words through a pointer of their own: an index into lk costs viper
+    # an addition and a shift at every use.
+    rec = ptr32(int(ptr32(lk_buf)) + 4 * at)
     w = ptr32(w_buf)
     f = ptr32(f_buf)
     # A local: a call of a module's function looks it up by name first, about 1 us
@@ -119,20 +121,20 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     prod = product
     # Every word: those worked out below, then the rest (a loop turn costs the chip
     # about as much as a store).
-    lk[at + L_GAIN] = 0
-    lk[at + L_MAX_ENTRY] = 0
-    lk[at + L_NOMINAL] = 0
-    lk[at + L_K2] = 0
-    lk[at + L_K_SHIFT] = 0
-    lk[at + L_RATE_NOM] = 0
-    lk[at + L_FLOOR] = 0
-    lk[at + L_ACC] = 0
-    lk[at + _L_BACK] = 0
-    lk[at + L_ENTRY] = 0
-    lk[at + L_EXIT] = 0
-    lk[at + L_DWELL] = 0
+    rec[L_GAIN] = 0
+    rec[L_MAX_ENTRY] = 0
+    rec[L_NOMINAL] = 0
+    rec[L_K2] = 0
+    rec[L_K_SHIFT] = 0
+    rec[L_RATE_NOM] = 0
+    rec[L_FLOOR] = 0
+    rec[L_ACC] = 0
+    rec[_L_BACK] = 0
+    rec[L_ENTRY] = 0
+    rec[L_EXIT] = 0
+    rec[L_DWELL] = 0
     if n <= 0:
-        lk[at + L_DWELL] = 1
+        rec[L_DWELL] = 1
         return
     for i in range(F_WORDS):
         bits = f[i]
@@ -153,7 +155,7 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     w[_S] = e_a + e_mm + 7
     w[_HOW] = _P_ROUND
     x = int(prod(w_buf))
-    lk[at + L_GAIN] = x if x < _V2_MAX else _V2_MAX
+    rec[L_GAIN] = x if x < _V2_MAX else _V2_MAX
     bits = f[F_NOMINAL2]
     if bits != w[_W_N2_BITS]:
         w[_A] = w[_W_M + F_NOMINAL2]
@@ -163,8 +165,8 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
         w[_W_N2_V2] = x if x < _V2_MAX else _V2_MAX
         w[_W_N2_BITS] = bits
     x = w[_W_N2_V2]
-    lk[at + L_NOMINAL] = x
-    lk[at + L_MAX_ENTRY] = entry_v2 if entry_v2 < x else x
+    rec[L_NOMINAL] = x
+    rec[L_MAX_ENTRY] = entry_v2 if entry_v2 < x else x
     # k = TICK_ONE n / mm as km 2**ke, km of 26 bits: n taken to 29 bits and TICK_ONE's
     # mantissa to 30 first, so the quotient has 33 bits or more.
     ns = 28  # 29 - bits(n), at least 0: halving the bits searched, five turns
@@ -202,7 +204,7 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     w[_S] = s
     w[_HOW] = _P_ROUND
     acc = int(prod(w_buf))  # C as for RATE_NOM
-    lk[at + L_ACC] = acc if acc > 1 else 1
+    rec[L_ACC] = acc if acc > 1 else 1
     # FLOOR, the slowest rate a block may fall to: reached from rest within half a
     # step, so a block that ends at a stop still finishes. sqrt(acc ONE), ONE = 2**28:
     # the root of acc taken to 54 bits, or 55 for an even exponent, truncated.
@@ -221,7 +223,7 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
         floor = _CAP if t > 30 or floor > (_CAP >> t) else floor << t
     else:
         floor = floor >> (0 - t) if t > -31 else 0
-    lk[at + L_FLOOR] = floor
+    rec[L_FLOOR] = floor
     # rate = k sqrt(V2 / V2_SCALE) = isqrt(V2 * K2) scaled by 2**K_SHIFT, with K2 in
     # [2**24, 2**26): V2 * K2 stays below 2**55, and the root keeps 15 bits or more.
     # k**2 / 2**6 = km**2 2**(2 ke - 6) = K2 4**K_SHIFT with K2 = km**2 >> 26: the
@@ -232,9 +234,9 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     x = 2 * a * b
     lo = ((x & 0x7FFF) << 15) + b * b
     k2 = ((a * a + (x >> 15) + (lo >> 30)) << 4) | ((lo & _CAP) >> 26)
-    lk[at + L_K2] = k2
+    rec[L_K2] = k2
     shift = ke + 10
-    lk[at + L_K_SHIFT] = shift + _SHIFT_BIAS
+    rec[L_K_SHIFT] = shift + _SHIFT_BIAS
     if rate_cap > 0 and r_nom > rate_cap:
         r_nom = rate_cap
         # The cap's V2, (cap / 2**K_SHIFT)**2 / K2 truncated: its rate by the root
@@ -251,11 +253,11 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
             w[_S] = 0
             w[_HOW] = _P_TRUNC
             x = int(prod(w_buf))
-            if x < lk[at + L_NOMINAL]:
-                lk[at + L_NOMINAL] = x
-                if x < lk[at + L_MAX_ENTRY]:
-                    lk[at + L_MAX_ENTRY] = x
-    lk[at + L_RATE_NOM] = r_nom if r_nom > floor else floor
+            if x < rec[L_NOMINAL]:
+                rec[L_NOMINAL] = x
+                if x < rec[L_MAX_ENTRY]:
+                    rec[L_MAX_ENTRY] = x
+    rec[L_RATE_NOM] = r_nom if r_nom > floor else floor
 
 
 @micropython.viper
@@ -280,32 +282,34 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
         if first >= q:
             first = 0
     # Backward pass.
+    # A slot's words through a pointer of their own (rec): an index into lk costs
+    # viper an addition and a shift at every use.
     k = newest
-    at = k * L_WORDS
-    e = lk[at + L_GAIN]
-    if lk[at + L_MAX_ENTRY] <= e:
-        e = lk[at + L_MAX_ENTRY]
-    lk[at + _L_BACK] = e
+    rec = ptr32(int(lk) + 4 * k * L_WORDS)
+    e = rec[L_GAIN]
+    if rec[L_MAX_ENTRY] <= e:
+        e = rec[L_MAX_ENTRY]
+    rec[_L_BACK] = e
     while k != first:
         j = k - 1
         if j < 0:
             j = q - 1
-        at = j * L_WORDS
-        e = e + lk[at + L_GAIN]
-        if lk[at + L_MAX_ENTRY] <= e:
-            e = lk[at + L_MAX_ENTRY]
+        rec = ptr32(int(lk) + 4 * j * L_WORDS)
+        e = e + rec[L_GAIN]
+        if rec[L_MAX_ENTRY] <= e:
+            e = rec[L_MAX_ENTRY]
         k = j
-        if e == lk[at + _L_BACK]:
+        if e == rec[_L_BACK]:
             break
-        lk[at + _L_BACK] = e
+        rec[_L_BACK] = e
     # Forward pass from block k, whose entry stands, then records.
-    at = k * L_WORDS
+    rec = ptr32(int(lk) + 4 * k * L_WORDS)
     if k == first:
         # The block before the first one is running or has run: the first one enters
         # at most at the exit baked into that record, also between blocks (tail
         # advanced, not yet started), where more look-ahead would otherwise raise it
         # above the speed the step loop left at. After a stop, MAX_ENTRY is 0 anyway.
-        v0 = lk[at + _L_BACK]
+        v0 = rec[_L_BACK]
         p = k - 1
         if p < 0:
             p = q - 1
@@ -313,11 +317,11 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
         if handed_over < v0:
             v0 = handed_over
     else:
-        v0 = lk[at + L_ENTRY]
+        v0 = rec[L_ENTRY]
     mask = ptr32(hooks[2])
     bit = mask[2]
     while True:
-        at = k * L_WORDS
+        rec = ptr32(int(lk) + 4 * k * L_WORDS)
         nk = k + 1
         if nk >= q:
             nk = 0
@@ -325,15 +329,15 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
             v1 = 0
         else:
             v1 = lk[nk * L_WORDS + _L_BACK]
-            reach = v0 + lk[at + L_GAIN]
+            reach = v0 + rec[L_GAIN]
             if v1 > reach:
                 v1 = reach
         # A record is a function of its entry and exit: rewrite changed ones (a dwell
         # has none).
         changed = 0
-        if k == newest or v0 != lk[at + L_ENTRY] or v1 != lk[at + L_EXIT]:
-            lk[at + L_ENTRY] = v0
-            changed = 1 - lk[at + L_DWELL]
+        if k == newest or v0 != rec[L_ENTRY] or v1 != rec[L_EXIT]:
+            rec[L_ENTRY] = v0
+            changed = 1 - rec[L_DWELL]
         if changed:
             # The rates of V2 v0 and v1 are the step loop's to work out, once, as the
             # block starts (stepper.schedule, F_RATES): the record gets the two V2s
@@ -341,10 +345,10 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
             # from. On curves, whose queue is shorter than the braking distance, a
             # line rewrites a dozen records, and their roots here cost the chip about
             # 0.3 ms a line.
-            nominal = lk[at + L_NOMINAL]
+            nominal = rec[L_NOMINAL]
             c0 = v0 if v0 < nominal else _V2_AT_NOMINAL
             c1 = v1 if v1 < nominal else _V2_AT_NOMINAL
-            b = _BLOCK_BASE + k * _B_WORDS
+            blk = ptr32(int(mem) + 4 * (_BLOCK_BASE + k * _B_WORDS))
             # The step loop must not start the block half written: its interrupt held
             # back, in the NVIC where one IRQ runs it (ISER reads which are enabled),
             # else all.
@@ -356,17 +360,17 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
             else:
                 state = hooks[0]()
             if not (k == mem[_S_TAIL] and mem[_S_ACTIVE]):  # else too late to change
-                mem[b + _B_RATE_INIT] = c0
-                mem[b + _B_RATE_NOM] = lk[at + L_RATE_NOM]
-                mem[b + _B_RATE_FINAL] = c1
-                mem[b + _B_ACCEL] = lk[at + L_ACC]
+                blk[_B_RATE_INIT] = c0
+                blk[_B_RATE_NOM] = rec[L_RATE_NOM]
+                blk[_B_RATE_FINAL] = c1
+                blk[_B_ACCEL] = rec[L_ACC]
                 # Until the schedule is worked out, its words hold the rates' K2,
                 # K_SHIFT (biased, as here) and FLOOR.
-                mem[b + _B_ACCEL_UNTIL] = lk[at + L_K2]
-                mem[b + _B_DECEL_AFTER] = lk[at + L_K_SHIFT]
-                mem[b + _B_RATE_DECEL] = lk[at + L_FLOOR]
-                mem[b + _B_FLAGS] |= _F_SCHEDULE | _F_RATES
-                lk[at + L_EXIT] = v1
+                blk[_B_ACCEL_UNTIL] = rec[L_K2]
+                blk[_B_DECEL_AFTER] = rec[L_K_SHIFT]
+                blk[_B_RATE_DECEL] = rec[L_FLOOR]
+                blk[_B_FLAGS] |= _F_SCHEDULE | _F_RATES
+                rec[L_EXIT] = v1
             if bit:
                 if was:
                     ptr32(mask[1])[0] = bit
@@ -377,6 +381,6 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
         # The step loop may have started block k meanwhile: then the next block enters
         # at most at the exit it was given before.
         v0 = v1
-        if v1 > lk[at + L_EXIT]:
-            v0 = lk[at + L_EXIT]
+        if v1 > rec[L_EXIT]:
+            v0 = rec[L_EXIT]
         k = nk

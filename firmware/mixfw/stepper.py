@@ -233,21 +233,23 @@ def schedule(mem_buf, b: int, io_buf):
     by ramp.ramp_into in io_buf (ramp.IO_WORDS words of scratch of the caller's own:
     the step loop's interrupt may come in between the main loop's); first its rates,
     if it has none yet either (F_RATES)."""
-    mem = ptr32(mem_buf)
-    flags = mem[b + B_FLAGS]
+    # The record's words through a pointer of their own: an index into mem costs viper
+    # an addition and a shift at every use.
+    blk = ptr32(int(ptr32(mem_buf)) + 4 * b)
+    flags = blk[B_FLAGS]
     if flags & F_SCHEDULE:
         io = ptr32(io_buf)
-        r_nom = mem[b + B_RATE_NOM]
+        r_nom = blk[B_RATE_NOM]
         if flags & F_RATES:
             # rate = isqrt(V2 * K2) scaled by 2**K_SHIFT, within FLOOR and the nominal
             # rate. The top rate is the nominal one: where the ramps meet below it (on
             # curves, most blocks), ramp_into finds their peak in the rates themselves.
-            k2 = mem[b + B_ACCEL_UNTIL]
-            shift = mem[b + B_DECEL_AFTER] - SHIFT_BIAS
-            floor = mem[b + B_RATE_DECEL]
+            k2 = blk[B_ACCEL_UNTIL]
+            shift = blk[B_DECEL_AFTER] - SHIFT_BIAS
+            floor = blk[B_RATE_DECEL]
             w = B_RATE_INIT
             for _ in range(2):
-                x = mem[b + w]
+                x = blk[w]
                 if x >= V2_AT_NOMINAL:
                     r = r_nom
                 elif x <= 0:
@@ -274,18 +276,18 @@ def schedule(mem_buf, b: int, io_buf):
                         r = r_nom
                     if r < floor:
                         r = floor
-                mem[b + w] = r
+                blk[w] = r
                 w = B_RATE_FINAL
-        io[0] = mem[b + B_N]  # ramp.IO_N .. IO_RATE_DECEL: checked below
-        io[1] = mem[b + B_RATE_INIT]
+        io[0] = blk[B_N]  # ramp.IO_N .. IO_RATE_DECEL: checked below
+        io[1] = blk[B_RATE_INIT]
         io[2] = r_nom
-        io[3] = mem[b + B_RATE_FINAL]
-        io[4] = mem[b + B_ACCEL]
+        io[3] = blk[B_RATE_FINAL]
+        io[4] = blk[B_ACCEL]
         ramp_into(io_buf)
-        mem[b + B_ACCEL_UNTIL] = io[5]
-        mem[b + B_DECEL_AFTER] = io[6]
-        mem[b + B_RATE_DECEL] = io[7]
-        mem[b + B_FLAGS] = flags & (0 - 1 - (F_SCHEDULE | F_RATES))
+        blk[B_ACCEL_UNTIL] = io[5]
+        blk[B_DECEL_AFTER] = io[6]
+        blk[B_RATE_DECEL] = io[7]
+        blk[B_FLAGS] = flags & (0 - 1 - (F_SCHEDULE | F_RATES))
 
 
 assert (ramp.IO_N, ramp.IO_R0, ramp.IO_RNOM, ramp.IO_R1, ramp.IO_ACC, ramp.IO_ACCEL_UNTIL,
@@ -307,16 +309,17 @@ _TICK_RAMP_IO = ramp_scratch()
 def _start(mem_buf, b: int) -> int:
     """Begin the block at word b. Returns the DIR pins whose level changed."""
     mem = ptr32(mem_buf)
+    blk = ptr32(int(mem) + 4 * b)  # as in schedule()
     mem[S_ACTIVE] = 1
     mem[_S_EVENT] = 0
     mem[S_HOME_STOP] = 0
-    flags = mem[b + B_FLAGS]
+    flags = blk[B_FLAGS]
     if flags & F_DWELL:
-        mem[S_WAIT] = mem[b + B_DWELL]
+        mem[S_WAIT] = blk[B_DWELL]
         return 0
     if flags & F_SCHEDULE:
         schedule(mem_buf, b, _TICK_RAMP_IO)
-    n = mem[b + B_N]
+    n = blk[B_N]
     half = n - (n >> 1)
     mem[_S_ERR + 0] = half
     mem[_S_ERR + 1] = half
@@ -324,12 +327,12 @@ def _start(mem_buf, b: int) -> int:
     mem[_S_ERR + 3] = half
     # A tick moves by its rate, so the rate must be the mean speed over the tick
     # (trapezoidal integration): half a tick of acceleration above the entry speed.
-    mem[_S_RATE] = mem[b + B_RATE_INIT] + (mem[b + B_ACCEL] >> 1)
+    mem[_S_RATE] = blk[B_RATE_INIT] + (blk[B_ACCEL] >> 1)
     mem[_S_RAMP_TICKS] = 0
-    if mem[b + B_STEPS + E] != 0 and mem[b + B_MIX] != mem[MIX_BASE]:
+    if blk[B_STEPS + E] != 0 and blk[B_MIX] != mem[MIX_BASE]:
         mix_load(mem_buf, MIX_BASE, b + B_MIX)
     old = mem[S_DIR]
-    new = (old & (0 - 1 - mem[b + B_DIR_CLR])) | mem[b + B_DIR_SET]
+    new = (old & (0 - 1 - blk[B_DIR_CLR])) | blk[B_DIR_SET]
     changed = old ^ new
     if changed:
         mem[S_DIR] = new
