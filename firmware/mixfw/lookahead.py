@@ -111,9 +111,7 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     V2 whose rate it is. In integers here, as the rate is: the same limit in mm/s was
     a speed worked out in floats for every fast line (each float operation allocates
     on the chips)."""
-    # The slot's words through a pointer of their own: an index into lk costs viper
-    # an addition and a shift at every use.
-    rec = ptr32(int(ptr32(lk_buf)) + 4 * at)
+    lk = ptr32(lk_buf)
     w = ptr32(w_buf)
     f = ptr32(f_buf)
     # A local: a call of a module's function looks it up by name first, about 1 us
@@ -121,20 +119,20 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     prod = product
     # Every word: those worked out below, then the rest (a loop turn costs the chip
     # about as much as a store).
-    rec[L_GAIN] = 0
-    rec[L_MAX_ENTRY] = 0
-    rec[L_NOMINAL] = 0
-    rec[L_K2] = 0
-    rec[L_K_SHIFT] = 0
-    rec[L_RATE_NOM] = 0
-    rec[L_FLOOR] = 0
-    rec[L_ACC] = 0
-    rec[_L_BACK] = 0
-    rec[L_ENTRY] = 0
-    rec[L_EXIT] = 0
-    rec[L_DWELL] = 0
+    lk[at + L_GAIN] = 0
+    lk[at + L_MAX_ENTRY] = 0
+    lk[at + L_NOMINAL] = 0
+    lk[at + L_K2] = 0
+    lk[at + L_K_SHIFT] = 0
+    lk[at + L_RATE_NOM] = 0
+    lk[at + L_FLOOR] = 0
+    lk[at + L_ACC] = 0
+    lk[at + _L_BACK] = 0
+    lk[at + L_ENTRY] = 0
+    lk[at + L_EXIT] = 0
+    lk[at + L_DWELL] = 0
     if n <= 0:
-        rec[L_DWELL] = 1
+        lk[at + L_DWELL] = 1
         return
     for i in range(F_WORDS):
         bits = f[i]
@@ -155,7 +153,7 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     w[_S] = e_a + e_mm + 7
     w[_HOW] = _P_ROUND
     x = int(prod(w_buf))
-    rec[L_GAIN] = x if x < _V2_MAX else _V2_MAX
+    lk[at + L_GAIN] = x if x < _V2_MAX else _V2_MAX
     bits = f[F_NOMINAL2]
     if bits != w[_W_N2_BITS]:
         w[_A] = w[_W_M + F_NOMINAL2]
@@ -165,8 +163,8 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
         w[_W_N2_V2] = x if x < _V2_MAX else _V2_MAX
         w[_W_N2_BITS] = bits
     x = w[_W_N2_V2]
-    rec[L_NOMINAL] = x
-    rec[L_MAX_ENTRY] = entry_v2 if entry_v2 < x else x
+    lk[at + L_NOMINAL] = x
+    lk[at + L_MAX_ENTRY] = entry_v2 if entry_v2 < x else x
     # k = TICK_ONE n / mm as km 2**ke, km of 26 bits: n taken to 29 bits and TICK_ONE's
     # mantissa to 30 first, so the quotient has 33 bits or more.
     ns = 28  # 29 - bits(n), at least 0: halving the bits searched, five turns
@@ -204,7 +202,7 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     w[_S] = s
     w[_HOW] = _P_ROUND
     acc = int(prod(w_buf))  # C as for RATE_NOM
-    rec[L_ACC] = acc if acc > 1 else 1
+    lk[at + L_ACC] = acc if acc > 1 else 1
     # FLOOR, the slowest rate a block may fall to: reached from rest within half a
     # step, so a block that ends at a stop still finishes. sqrt(acc ONE), ONE = 2**28:
     # the root of acc taken to 54 bits, or 55 for an even exponent, truncated.
@@ -223,7 +221,7 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
         floor = _CAP if t > 30 or floor > (_CAP >> t) else floor << t
     else:
         floor = floor >> (0 - t) if t > -31 else 0
-    rec[L_FLOOR] = floor
+    lk[at + L_FLOOR] = floor
     # rate = k sqrt(V2 / V2_SCALE) = isqrt(V2 * K2) scaled by 2**K_SHIFT, with K2 in
     # [2**24, 2**26): V2 * K2 stays below 2**55, and the root keeps 15 bits or more.
     # k**2 / 2**6 = km**2 2**(2 ke - 6) = K2 4**K_SHIFT with K2 = km**2 >> 26: the
@@ -234,9 +232,9 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     x = 2 * a * b
     lo = ((x & 0x7FFF) << 15) + b * b
     k2 = ((a * a + (x >> 15) + (lo >> 30)) << 4) | ((lo & _CAP) >> 26)
-    rec[L_K2] = k2
+    lk[at + L_K2] = k2
     shift = ke + 10
-    rec[L_K_SHIFT] = shift + _SHIFT_BIAS
+    lk[at + L_K_SHIFT] = shift + _SHIFT_BIAS
     if rate_cap > 0 and r_nom > rate_cap:
         r_nom = rate_cap
         # The cap's V2, (cap / 2**K_SHIFT)**2 / K2 truncated: its rate by the root
@@ -253,11 +251,11 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
             w[_S] = 0
             w[_HOW] = _P_TRUNC
             x = int(prod(w_buf))
-            if x < rec[L_NOMINAL]:
-                rec[L_NOMINAL] = x
-                if x < rec[L_MAX_ENTRY]:
-                    rec[L_MAX_ENTRY] = x
-    rec[L_RATE_NOM] = r_nom if r_nom > floor else floor
+            if x < lk[at + L_NOMINAL]:
+                lk[at + L_NOMINAL] = x
+                if x < lk[at + L_MAX_ENTRY]:
+                    lk[at + L_MAX_ENTRY] = x
+    lk[at + L_RATE_NOM] = r_nom if r_nom > floor else floor
 
 
 @micropython.viper

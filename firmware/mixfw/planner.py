@@ -249,7 +249,29 @@ _S_F_BASE = const(12)  # which floats hold _base_floats' own: _F_BASE_ACCEL the
 _F_BASE_ACCEL = const(2)  # acceleration's, _F_BASE_BOTH its speed's too
 _F_BASE_BOTH = const(3)
 _MEMO = const(4)  # pairs of speed and acceleration _base_floats keeps
-_S_WORDS = const(13)
+# Where _plan_move's arrays are, as byte offsets from these words plus _AT_BIAS (each
+# non-negative, as a 64-bit port's ptr32 reads a word zero-extended): ptr32() of an
+# array costs the chip about 1.4 us, of an address nothing. MicroPython never moves
+# an object, and the planner holds them all. See _offsets.
+_AT_MEM = const(13)
+_AT_LK = const(14)
+_AT_COUNTS = const(15)
+_AT_GEO = const(16)
+_AT_DIR_SET = const(17)
+_AT_DIR_CLR = const(18)
+_AT_WEIGHTS = const(19)
+_AT_DRIVE_STEPS = const(20)
+_AT_GIVEN = const(21)
+_AT_BIAS = const(0x20000000)
+_S_WORDS = const(22)
+
+
+def _offsets(words, at, arrays):
+    """The arrays' places, from words' own, into words from `at` on (_AT_*)."""
+    from uctypes import addressof
+    base = addressof(words)
+    for i, a in enumerate(arrays):
+        words[at + i] = addressof(a) - base + _AT_BIAS
 
 
 @micropython.viper
@@ -274,8 +296,9 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     counts_buf = io[12]
     weights_buf = io[8]
     words = ptr32(io[3])
-    counts = ptr32(counts_buf)
-    geo = ptr32(geo_buf)
+    at = int(words) - _AT_BIAS  # the arrays' offsets are from here (_AT_*)
+    counts = ptr32(at + words[_AT_COUNTS])
+    geo = ptr32(at + words[_AT_GEO])
     drives = words[_S_DRIVES]
     e_steps = 0
     for i in range(drives):
@@ -297,7 +320,7 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
         n = e_abs
     if n == 0:
         return 0  # less than a step: the filament counts toward the next move
-    mem = ptr32(mem_buf)
+    mem = ptr32(at + words[_AT_MEM])
     if not (how & _HOW_SLOT):
         slot = int(_ring_room(mem_buf))
         if slot < 0 or slot & _RING_IDLE:
@@ -343,16 +366,16 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
             words[_S_OVER] = over
             return _FLOATS
     mix_id = -1
-    given = counts_buf
+    given = counts
     if e_steps:
         # Exact per-drive counts as the block's mix; a fresh id, so the step loop
         # starts its schedule anew and gives each drive exactly its count.
-        given = io[13]
+        given = ptr32(at + words[_AT_GIVEN])
         if not (how & _HOW_SCALED):
-            if int(block_weights(counts_buf, weights_buf, given, drives)) == 0:
+            if int(block_weights(counts_buf, weights_buf, io[13], drives)) == 0:
                 return _SCALE
         if e_steps < 0:
-            g = ptr32(given)
+            g = given
             for i in range(drives):
                 g[i] = 0 - g[i]
         mix_id = (words[_S_MIX_ID] + 1) & 0x3FFFFFF
@@ -372,12 +395,12 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     for i in range(4):
         blk[_B_STEPS + i] = words[i]
     blk[_B_FLAGS] = flags | neg * _F_NEG
-    blk[_B_DIR_SET] = ptr32(io[6])[neg]
-    blk[_B_DIR_CLR] = ptr32(io[7])[neg]
+    blk[_B_DIR_SET] = ptr32(at + words[_AT_DIR_SET])[neg]
+    blk[_B_DIR_CLR] = ptr32(at + words[_AT_DIR_CLR])[neg]
     blk[_B_DWELL] = 0
     if mix_id >= 0:
         blk[_B_MIX] = mix_id
-        weights = ptr32(weights_buf)
+        weights = ptr32(at + words[_AT_WEIGHTS])
         for i in range(_MAX_DRIVES):
             blk[_B_MIX + 1 + i] = weights[i] if i < drives else 0
     lk = io[1]
@@ -386,7 +409,7 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     prev = slot - 1
     if prev < 0:
         prev = mem[_S_QUEUE] - 1
-    prev_v2 = ptr32(lk)[prev * _L_WORDS + _L_NOMINAL]
+    prev_v2 = ptr32(at + words[_AT_LK])[prev * _L_WORDS + _L_NOMINAL]
     if prev_v2 < entry_v2:
         entry_v2 = prev_v2
     _plan_words(lk, slot * _L_WORDS, f_buf, n, io[5], entry_v2, words[_S_RATE_CAP])
@@ -401,10 +424,9 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     pos[3] = int(pos[3]) + e_steps
     # given, an array 'i': a 64-bit port's ptr32 reads a negative count zero-extended,
     # and the sum's low 32 bits, all the word keeps, are the same.
-    drive_steps = ptr32(io[9])
-    given_steps = ptr32(given)
+    drive_steps = ptr32(at + words[_AT_DRIVE_STEPS])
     for i in range(drives):
-        drive_steps[i] += given_steps[i]
+        drive_steps[i] += given[i]
     if e_steps > 0:
         return _EXTRUDED
     return 1
@@ -595,6 +617,9 @@ class Planner:
                           _RAMP_IO, self._dir_set, self._dir_clr, self._weights,
                           self.drive_steps, self._geo, self._geo_f, self._counts,
                           self._given)
+        _offsets(self._abs_steps, _AT_MEM, (mem, self.lk, self._counts, self._geo,
+                                            self._dir_set, self._dir_clr, self._weights,
+                                            self.drive_steps, self._given))
 
     # --- queue state, shared with the step loop ---
     def busy(self):
