@@ -181,6 +181,7 @@ _M30 = const(0x3FFFFFFF)
 
 
 assert mixer.M_ID == 0  # the step loop reads the loaded mix id at MIX_BASE
+assert mixer.MAX_DRIVES == 6  # its forward pick is written out for six drives
 assert (_MIX_W, _MIX_N, _MIX_SUM, _MIX_Q, _MIX_C) == tuple(
     MIX_BASE + m for m in (mixer.M_W, mixer.M_N, mixer.M_SUM, mixer.M_Q, mixer.M_C))
 
@@ -655,14 +656,45 @@ def tick(io) -> int:
                             i += 1
                         q = 0
                         i = 0
-                    while i < drives:
-                        w = mem[_MIX_W + i]
-                        num = 2 * mem[_MIX_C + i] + 1
-                        if num * best_w < best_num * w:
-                            best = i
-                            best_num = num
-                            best_w = w
-                        i += 1
+                    # Every drive's words, written out (a drive not fitted has no
+                    # weight): the loop's counter and indexes cost viper as much
+                    # again on the emulated Pico, and forward is how a print runs.
+                    w = mem[_MIX_W]
+                    num = 2 * mem[_MIX_C] + 1
+                    if num * best_w < best_num * w:
+                        best = 0
+                        best_num = num
+                        best_w = w
+                    w = mem[_MIX_W + 1]
+                    num = 2 * mem[_MIX_C + 1] + 1
+                    if num * best_w < best_num * w:
+                        best = 1
+                        best_num = num
+                        best_w = w
+                    w = mem[_MIX_W + 2]
+                    num = 2 * mem[_MIX_C + 2] + 1
+                    if num * best_w < best_num * w:
+                        best = 2
+                        best_num = num
+                        best_w = w
+                    w = mem[_MIX_W + 3]
+                    num = 2 * mem[_MIX_C + 3] + 1
+                    if num * best_w < best_num * w:
+                        best = 3
+                        best_num = num
+                        best_w = w
+                    w = mem[_MIX_W + 4]
+                    num = 2 * mem[_MIX_C + 4] + 1
+                    if num * best_w < best_num * w:
+                        best = 4
+                        best_num = num
+                        best_w = w
+                    w = mem[_MIX_W + 5]
+                    num = 2 * mem[_MIX_C + 5] + 1
+                    if num * best_w < best_num * w:
+                        best = 5
+                        best_num = num
+                        best_w = w
                     if best >= 0:
                         mem[_MIX_C + best] += 1
                         mem[_MIX_Q] = q + 1
