@@ -22,8 +22,7 @@ import plan_only
 TIMED = (
     ("parse", "parser", "parse", "buf, n"),
     ("g1", "commands", "G1", "line"),
-    ("motion.xyz_targets", "cmd_motion", "xyz_targets",
-     "a, b, c, d, e, f, g, h, i, j, k"),
+    ("motion.xyz_targets", "cmd_motion", "xyz_targets", "a, b, c, d, e, f, g"),
     ("motion._queue", "motion_class", "_queue", "self, steps, xyz, e_nm, feed_mm_s"),
     ("before_extrude", "before_extrude", 0, "z, e_nm"),
     ("planner.add_move", "planner", "add_move",
@@ -31,7 +30,7 @@ TIMED = (
      "homing_axes=0"),
     ("planner._plan_e", "planner_class", "_plan_e", "self, e_nm, weights=None"),
     ("block_weights", "planner_mod", "block_weights", "a, b, c, d"),
-    ("planner._xyz_steps", "planner_mod", "_xyz_steps", "a, b, c, d"),
+    ("planner._xyz_steps", "planner_mod", "_xyz_steps", "a, b, c"),
     ("planner._new_slot", "planner_class", "_new_slot", "self, slot"),
     ("planner._plan_move", "planner_mod", "_plan_move", "a, b, c, d, e, f, g, h"),
     ("planner._remember_extrusion", "planner", "_remember_extrusion", "weights, counts"),

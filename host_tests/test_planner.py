@@ -370,7 +370,7 @@ STEPS_OF_NM = """
 import sys, json
 from array import array
 from mixfw.cmd_motion import xyz_targets, SPM_WORDS
-from mixfw.planner import spm_digits, scaled_round, steps_per_nm
+from mixfw.planner import array_offsets, spm_digits, scaled_round, steps_per_nm
 nm = array("i", bytes(12))
 zeros = array("i", bytes(12))
 steps = array("i", bytes(4 * 5))
@@ -378,11 +378,14 @@ out = []
 for s, xs in json.loads(sys.stdin.read()):
     spm = array("i", bytes(4 * SPM_WORDS))  # and no step kept
     spm_digits(s, spm, 0)
+    # Its last five words: where the line's words, the offsets, the steps and the
+    # travel are (no word named here: only the offsets and the steps are read).
+    array_offsets(spm, SPM_WORDS - 3, (zeros, steps))
     p, q = steps_per_nm(s)
     got = []
     for x in xs:
         nm[0] = x
-        xyz_targets(spm, spm, 0, nm, array("i", bytes(12)), 0, zeros, None, spm, steps, None)
+        xyz_targets(spm, 0, nm, array("i", bytes(12)), 0, 0, None)
         got.append(steps[0])
     out.append([got, [scaled_round(x, p, q) for x in xs]])
 print(json.dumps(out))
@@ -425,7 +428,7 @@ XYZ_CASES = """
 import sys, json
 from mixfw.gcode import Parser
 from mixfw.cmd_motion import xyz_targets, MOVE_BITS, SPM_WORDS
-from mixfw.planner import spm_digits
+from mixfw.planner import array_offsets, spm_digits
 from array import array
 p = Parser()
 spm = array("i", bytes(4 * SPM_WORDS))
@@ -437,9 +440,13 @@ for text, pos, relative, travel, at in json.loads(sys.stdin.read()):
     b = text.encode()
     line = p.parse(b, len(b))
     target = array("i", bytes(12))
-    got = xyz_targets(line.mant, line.decimals, line.present & MOVE_BITS, array("i", pos),
-                      target, relative, array("i", bytes(12)), travel and array("i", travel),
-                      spm, steps, at)
+    off = array("i", bytes(12))
+    travel_nm = array("i", travel) if travel else off
+    # spm's last five words: where the line's words, the offsets, the steps and the
+    # travel are.
+    array_offsets(spm, SPM_WORDS - 5, (line.mant, line.decimals, off, steps, travel_nm))
+    got = xyz_targets(spm, line.present & MOVE_BITS, array("i", pos), target, relative,
+                      1 if travel else 0, at)
     out.append([got, list(target), list(steps)])
 print(json.dumps(out))
 """

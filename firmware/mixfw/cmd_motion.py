@@ -2,8 +2,8 @@
 # Handlers parse and check; the planner does the work.
 from array import array
 from mixfw.gcode import GcodeError, letter_index
-from mixfw.planner import (nm_from_mm, scaled_round, spm_digits, steps_per_nm,
-                           NM_PER_MM, SPM_SCALE)
+from mixfw.planner import (array_offsets, nm_from_mm, scaled_round, spm_digits,
+                           steps_per_nm, NM_PER_MM, SPM_SCALE)
 from mixfw import stepper as st
 from mixfw.compat import const, micropython, ptr8, ptr32
 
@@ -30,7 +30,17 @@ _AXIS_MOVED = const(16)
 # and its step (2 words an axis), and a bit per axis whose pair holds.
 _SPM_LAST = const(9)
 _SPM_HELD = const(15)
-SPM_WORDS = const(16)
+# Then where the arrays it reads are (planner.array_offsets): the parsed line's
+# mantissas and decimals, G92's offsets, the steps it works out, the soft limits'
+# travel. ptr32() of an array costs the chip about 1.4 us, of an address nothing.
+_SPM_MANT = const(16)
+_SPM_DEC = const(17)
+_SPM_OFF = const(18)
+_SPM_STEPS = const(19)
+_SPM_TRAVEL = const(20)
+_AT_BIAS = const(0x20000000)  # as array_offsets adds
+SPM_WORDS = const(21)
+assert _SPM_TRAVEL + 1 == SPM_WORDS  # the places are the last five words
 # 10**12 (NM_PER_MM * SPM_SCALE) in 30-bit limbs, and 2 * 10**12 = 2**13 * (5**6)**2.
 _E12_HI = const(931)
 _E12_LO = const(346361856)
@@ -46,16 +56,18 @@ _RETRACT_REPLAY = const(2)
 
 
 @micropython.viper
-def xyz_targets(mant_buf, dec_buf, named: int, pos_buf, target_buf, relative: int, off_buf,
-                travel_buf, spm_buf, steps_buf, at) -> int:
+def xyz_targets(spm_buf, named: int, pos_buf, target_buf, relative: int, soft: int,
+                at) -> int:
     """The X Y Z a G0/G1 line names with a number (bits of letter indexes in named),
     from its parsed words (gcode.Line's mant and decimals), as exact nanometres into
     target: pos's where not named, added to pos's if relative. Further decimals round
     half away from zero, as Line.fixed_at. Then each axis's absolute step at its
-    machine position (target + off) into steps_buf (array 'i'), with the steps/mm
+    machine position (target + G92's offset) into the steps array, with the steps/mm
     planner.spm_digits put in spm_buf (SPM_WORDS: the step an axis had at the same
     position is taken again, as a line mostly leaves Z). An E word named goes, as
-    nanometres, into steps_buf[4] where it is within +-_NM_MAX.
+    nanometres, into the steps array's word 4 where it is within +-_NM_MAX. The line's
+    words, the offsets, the steps and the soft limits' travel are the arrays whose
+    places spm_buf holds (_SPM_MANT on: planner.array_offsets).
 
     A step is div_round(nm * spm_fixed, NM_PER_MM * SPM_SCALE), the integer
     planner.scaled_round gives, in small ints where scaled_round's products pass them
@@ -63,27 +75,26 @@ def xyz_targets(mant_buf, dec_buf, named: int, pos_buf, target_buf, relative: in
     bits, then over 5**6 twice, each in three machine divisions. Written out here, as
     a call of its own cost the chip about 5 us an axis.
 
-    Returns bits: the axes named (X=1, Y=2, Z=4), _E_READ if steps_buf[4] holds E's
-    word, and (_AXIS_MOVED << a) for each axis a whose step differs from at[a] (at:
-    the queue's position, or None). Or, refused, -_BEYOND - a if axis a's word, target
-    or machine position is beyond +-_NM_MAX nanometres (1,073 mm, the chips' small
-    ints), or with soft limits (travel: each axis's in nm; None: off) -_OUTSIDE - a if
-    its machine position is outside 0..travel. pos, target, off and travel are arrays
-    'i' of X Y Z nanometres, read and written as words. In one viper call, where
-    Line.fixed_at, the sums, the checks and scaled_round, per axis, cost the chip about
-    0.15 ms a line."""
-    mant = ptr32(mant_buf)
-    dec = ptr8(dec_buf)
-    steps = ptr32(steps_buf)
+    Returns bits: the axes named (X=1, Y=2, Z=4), _E_READ if the steps' word 4 holds
+    E's word, and (_AXIS_MOVED << a) for each axis a whose step differs from at[a]
+    (at: the queue's position, or None). Or, refused, -_BEYOND - a if axis a's word,
+    target or machine position is beyond +-_NM_MAX nanometres (1,073 mm, the chips'
+    small ints), or with soft limits (soft: 1; the travel: each axis's in nm)
+    -_OUTSIDE - a if its machine position is outside 0..travel. pos, target, the
+    offsets and the travel are arrays 'i' of X Y Z nanometres, read and written as
+    words. In one viper call, where Line.fixed_at, the sums, the checks and
+    scaled_round, per axis, cost the chip about 0.15 ms a line."""
     spm = ptr32(spm_buf)
+    base = int(spm) - _AT_BIAS  # the arrays' offsets are from here (_SPM_MANT on)
+    mant = ptr32(base + spm[_SPM_MANT])
+    dec = ptr8(base + spm[_SPM_DEC])
+    steps = ptr32(base + spm[_SPM_STEPS])
     pos = ptr32(pos_buf)
     target = ptr32(target_buf)
-    off = ptr32(off_buf)
-    travel = ptr32(spm_buf)  # read only with soft limits on
-    soft = 0
-    if travel_buf:
-        travel = ptr32(travel_buf)
-        soft = 1
+    off = ptr32(base + spm[_SPM_OFF])
+    travel = spm  # read only with soft limits on
+    if soft:
+        travel = ptr32(base + spm[_SPM_TRAVEL])
     moved = 0
     compare = 1 if at else 0
     for a in range(4):
@@ -215,6 +226,8 @@ class Motion:
         # works out, then E's, then an E word in nanometres (see xyz_targets).
         self._xyz_spm = array("i", bytes(4 * SPM_WORDS))
         self._steps_out = array("i", bytes(4 * 5))
+        array_offsets(self._xyz_spm, _SPM_OFF, (self.offset_nm, self._steps_out))
+        self.line = None  # the parsed line whose words xyz_targets reads: see g1
         self._set_steps_per_mm(planner.steps_per_mm)
         self.e_nm = 0  # logical E
         self.e_offset_nm = 0  # filament = logical E + offset (G92 E, G10/G11)
@@ -275,6 +288,7 @@ class Motion:
         self.travel_mm = travel_mm
         # Positions stay within +-_NM_MAX: a longer travel is as good as that.
         self._travel_nm = array("i", [min(nm_from_mm(t), _NM_MAX) for t in travel_mm])
+        array_offsets(self._xyz_spm, _SPM_TRAVEL, (self._travel_nm,))
 
     # A method, not a property: a class with a property makes every attribute stored on
     # its instances look for a setter first, about 11 us a store on the chip.
@@ -306,10 +320,8 @@ class Motion:
         """X Y Z as absolute steps from the logical position; E as planned (drive steps).
         In an array made once: valid until the next call or G1 (the planner and
         Transitions copy what they keep)."""
-        # No word named: the word arrays are not read (any array will do).
-        spm = self._xyz_spm
-        verdict = xyz_targets(spm, spm, 0, self.pos_nm, self._spare_nm, 0, self.offset_nm,
-                              None, spm, self._steps_out, None)
+        # No word named: the line's words are not read.
+        verdict = xyz_targets(self._xyz_spm, 0, self.pos_nm, self._spare_nm, 0, 0, None)
         if verdict < 0:
             self._refuse_target(self.pos_nm, verdict)
         self._steps_out[3] = self.planner.position_steps[3]
@@ -357,11 +369,13 @@ class Motion:
         if present & ~valued & _XYZ_BITS:
             for k in _AXIS_INDEX:
                 line.fixed_at(k, _NM_DECIMALS)  # raises for the word with no number
+        spm = self._xyz_spm
+        if line is not self.line:  # mostly the same parser's line as the line before
+            self.line = line
+            array_offsets(spm, _SPM_MANT, (line.mant, line.decimals))
+        moved = xyz_targets(spm, valued & MOVE_BITS, pos, target, not self.absolute,
+                            self.soft_limits, self.queue.position_steps)
         steps = self._steps_out
-        moved = xyz_targets(line.mant, line.decimals, valued & MOVE_BITS, pos, target,
-                            not self.absolute, self.offset_nm,
-                            self._travel_nm if self.soft_limits else None,
-                            self._xyz_spm, steps, self.queue.position_steps)
         if moved < 0:
             self._refuse_target(target, moved)
         target_e_nm = self.e_nm

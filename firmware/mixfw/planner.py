@@ -216,13 +216,34 @@ def waiting_blocks(mem_buf) -> int:
     return count
 
 
+# Where the arrays _plan_move, _steps_to and _xyz_steps work on are, as byte offsets
+# from the planner's words (Planner._abs_steps) plus _AT_BIAS (each non-negative, as a
+# 64-bit port's ptr32 reads a word zero-extended): ptr32() of an array costs the chip
+# about 1.4 us, of an address nothing. MicroPython never moves an object, and the
+# planner holds them all. See array_offsets.
+_AT_MEM = const(13)
+_AT_LK = const(14)
+_AT_COUNTS = const(15)
+_AT_GEO = const(16)
+_AT_DIR_SET = const(17)
+_AT_DIR_CLR = const(18)
+_AT_WEIGHTS = const(19)
+_AT_DRIVE_STEPS = const(20)
+_AT_GIVEN = const(21)
+_AT_TARGETS = const(22)
+_AT_BIAS = const(0x20000000)
+
+
 @micropython.viper
-def _steps_to(targets_buf, steps_buf, counts_buf, n: int):
-    """Each of n drives' steps from where it is to its target step (arrays 'i')."""
-    t = ptr32(targets_buf)
-    s = ptr32(steps_buf)
-    c = ptr32(counts_buf)
-    for i in range(n):
+def _steps_to(words_buf):
+    """Each drive's steps from where it is to its target step, into the counts: the
+    planner's arrays, from the places its words (Planner._abs_steps) keep."""
+    words = ptr32(words_buf)
+    at = int(words) - _AT_BIAS
+    t = ptr32(at + words[_AT_TARGETS])
+    s = ptr32(at + words[_AT_DRIVE_STEPS])
+    c = ptr32(at + words[_AT_COUNTS])
+    for i in range(words[_S_DRIVES]):
         c[i] = t[i] - s[i]
 
 
@@ -249,25 +270,14 @@ _S_F_BASE = const(12)  # which floats hold _base_floats' own: _F_BASE_ACCEL the
 _F_BASE_ACCEL = const(2)  # acceleration's, _F_BASE_BOTH its speed's too
 _F_BASE_BOTH = const(3)
 _MEMO = const(4)  # pairs of speed and acceleration _base_floats keeps
-# Where _plan_move's arrays are, as byte offsets from these words plus _AT_BIAS (each
-# non-negative, as a 64-bit port's ptr32 reads a word zero-extended): ptr32() of an
-# array costs the chip about 1.4 us, of an address nothing. MicroPython never moves
-# an object, and the planner holds them all. See _offsets.
-_AT_MEM = const(13)
-_AT_LK = const(14)
-_AT_COUNTS = const(15)
-_AT_GEO = const(16)
-_AT_DIR_SET = const(17)
-_AT_DIR_CLR = const(18)
-_AT_WEIGHTS = const(19)
-_AT_DRIVE_STEPS = const(20)
-_AT_GIVEN = const(21)
-_AT_BIAS = const(0x20000000)
-_S_WORDS = const(22)
+_S_WORDS = const(23)
 
 
-def _offsets(words, at, arrays):
-    """The arrays' places, from words' own, into words from `at` on (_AT_*)."""
+def array_offsets(words, at, arrays):
+    """The arrays' places, as byte offsets from words' own plus 0x20000000 (_AT_BIAS),
+    into words from `at` on: viper finds an array there as ptr32(int(words) -
+    0x20000000 + words[k]), where ptr32() of the array itself costs the chip about
+    1.4 us (_plan_move's _AT_*, cmd_motion.xyz_targets's)."""
     from uctypes import addressof
     base = addressof(words)
     for i, a in enumerate(arrays):
@@ -433,14 +443,15 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
 
 
 @micropython.viper
-def _xyz_steps(pos, target, steps_buf, geo_buf) -> int:
+def _xyz_steps(pos, target, steps_buf) -> int:
     """X Y Z's steps from pos to target (absolute steps): their sizes into steps_buf
-    (X Y Z) and geometry's D words, the largest into steps_buf[_S_N_XYZ]. Returns the
+    (the planner's words: X Y Z) and geometry's D words (found from the words'
+    _AT_GEO), the largest into steps_buf[_S_N_XYZ]. Returns the
     bits of the axes that run backwards, and those of the axes that move shifted left
     4; or -1 for a move of 2**30 steps or more, beyond the chips' small ints. One viper
     call where the same arithmetic in native code cost the chip about 0.1 ms a line."""
     steps = ptr32(steps_buf)
-    geo = ptr32(geo_buf)
+    geo = ptr32(int(steps) - _AT_BIAS + steps[_AT_GEO])
     neg = 0
     n = 0
     for i in range(3):
@@ -617,9 +628,10 @@ class Planner:
                           _RAMP_IO, self._dir_set, self._dir_clr, self._weights,
                           self.drive_steps, self._geo, self._geo_f, self._counts,
                           self._given)
-        _offsets(self._abs_steps, _AT_MEM, (mem, self.lk, self._counts, self._geo,
+        array_offsets(self._abs_steps, _AT_MEM, (mem, self.lk, self._counts, self._geo,
                                             self._dir_set, self._dir_clr, self._weights,
-                                            self.drive_steps, self._given))
+                                            self.drive_steps, self._given,
+                                            self.drive_targets))
 
     # --- queue state, shared with the step loop ---
     def busy(self):
@@ -757,7 +769,7 @@ class Planner:
         # step, where it is known: every drive's steps to its target first, in one viper
         # call, then the drives with a share (a loop over every drive in native code
         # was a tenth of a line's time on the chips).
-        _steps_to(targets, now_steps, counts, self.drives)
+        _steps_to(self._abs_steps)
         now_total = self.rem_total
         rescale = now_total != total
         every = not self.targets_known
@@ -936,7 +948,7 @@ class Planner:
         if (-_CAP <= target_steps[0] <= _CAP and -_CAP <= target_steps[1] <= _CAP
                 and -_CAP <= target_steps[2] <= _CAP):
             # Bit i: axis i runs backwards; bit 4 + i: it moves.
-            neg = _xyz_steps(pos, target_steps, self._abs_steps, self._geo)
+            neg = _xyz_steps(pos, target_steps, self._abs_steps)
         # Before the filament is planned: a move refused changes nothing. (E has at
         # most MAX_PERIOD steps a block: see add_move.)
         if neg < 0:
