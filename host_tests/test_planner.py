@@ -523,6 +523,39 @@ def test_xyz_words_become_the_exact_nanometres_or_a_clear_refusal(mp):
 
 # For each line that queued a block: the blocks waiting before it, its nominal V2 and
 # its nominal rate.
+G1_OTHER_PARSER = """
+import sys, json
+import simmachine
+sys.modules["machine"] = simmachine
+import board
+from mixfw import assemble
+from mixfw.gcode import Parser
+simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(6)])
+printer = assemble.build(files_root=None)
+out = []
+for text in (b"G1 X10 Y5 F3000", b"G1 X12"):
+    printer.run_line(printer.parser.parse(text, len(text)))
+    out.append(list(printer.motion.pos_nm))
+other = Parser()
+for text in (b"G1 X20 Y7", b"G1 Y9"):
+    printer.motion.g1(other.parse(text, len(text)))
+    out.append(list(printer.motion.pos_nm))
+text = b"G1 X3"
+printer.run_line(printer.parser.parse(text, len(text)))
+out.append(list(printer.motion.pos_nm))
+print(json.dumps(out))
+"""
+
+
+def test_g1_reads_the_words_of_the_line_it_is_given(mp):
+    """xyz_targets finds the parsed line's words by their places (Motion.line): a line
+    of another parser is read as its own, and the printer's own parser's after it."""
+    mm = 1000000
+    assert mp.json(G1_OTHER_PARSER) == [
+        [10 * mm, 5 * mm, 0], [12 * mm, 5 * mm, 0], [20 * mm, 7 * mm, 0],
+        [20 * mm, 9 * mm, 0], [3 * mm, 9 * mm, 0]]
+
+
 PLANS = """
 import sys, json
 import simmachine

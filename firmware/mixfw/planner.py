@@ -277,7 +277,8 @@ def array_offsets(words, at, arrays):
     """The arrays' places, as byte offsets from words' own plus 0x20000000 (_AT_BIAS),
     into words from `at` on: viper finds an array there as ptr32(int(words) -
     0x20000000 + words[k]), where ptr32() of the array itself costs the chip about
-    1.4 us (_plan_move's _AT_*, cmd_motion.xyz_targets's)."""
+    1.4 us (the _AT_* of _plan_move, _steps_to and _xyz_steps; cmd_motion's _SPM_MANT
+    on, for xyz_targets)."""
     from uctypes import addressof
     base = addressof(words)
     for i, a in enumerate(arrays):
