@@ -913,6 +913,171 @@ def test_a_move_refused_changes_neither_the_position_nor_the_drives_filament(mp)
     assert plain["drive_steps"][:3] != [0, 0, 0]
 
 
+# --- each drive's plan in one viper call (planner._drive_targets) ------------------
+
+DRIVE_TARGETS = """
+import sys, json
+import simmachine
+sys.modules["machine"] = simmachine
+import board
+from mixfw import assemble, planner
+from plan_only import retire_all
+simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(6)])
+fast = [0]
+if sys.stdin.read() == "python":
+    # Counts only, as for a move with no filament: every plan is _plan_e's own.
+    plain = planner._drive_targets
+    planner._drive_targets = lambda words, e_nm, nm, rem: plain(words, 0, nm, rem)
+else:
+    whole = planner._drive_targets
+
+    def counted(words, e_nm, nm, rem):
+        done = whole(words, e_nm, nm, rem)
+        fast[0] += done
+        return done
+    planner._drive_targets = counted
+printer = assemble.build(files_root=None)
+pl = printer.planner
+pl.idle = retire_all(printer.mem, pl.queue)
+# Steps per mm whose p / q fit the words in machine words, in limbs, or not at all
+# (a calibrated drive's 93.71234: _plan_e plans every mix it has a share in).
+pl.set_drive_steps([415.0, 80.0, 400.5, 93.71234, 415.0, 2000.0][:pl.drives])
+seed = [12345]
+
+
+def rand(n):
+    seed[0] = (seed[0] * 1103515245 + 12345) & 0x7FFFFFFF
+    return seed[0] % n
+
+
+mixes = [(1, 0, 0, 0, 0, 0), (0, 0, 0, 0, 1, 0), (3, 7, 0, 0, 0, 0),
+         (10, 15, 20, 25, 12, 18), (373, 0, 627, 0, 0, 0), (1, 0, 0, 0, 0, 9999),
+         (0, 1, 0, 1, 0, 0), (2, 0, 0, 0, 5, 0)]
+out = []
+x = 0
+for n in range(800):
+    if n % 25 == 0:
+        pl.set_mix(n, mixes[rand(len(mixes))][:pl.drives])
+    # Back past zero filament first, then metres forward: each drive's base moves.
+    e_nm = rand(900000) - 200000 if rand(4) else rand(60000000) - 8000000
+    if n < 150:
+        e_nm = -e_nm
+    x = 800 - x
+    pl.add_move([x, 0, 0, 0], 30.0, e_nm=e_nm)
+    out.append(list(pl.drive_steps))
+print(json.dumps({"steps": out, "targets": list(pl.drive_targets), "nm": pl.drive_nm,
+                  "rem": pl.drive_rem, "bases": [pq[5] for pq in pl._per_nm],
+                  "fast": fast[0]}))
+"""
+
+
+def test_each_drives_plan_in_one_viper_call_is_the_plan_in_python_exactly(mp):
+    """Most lines' filament is planned in _drive_targets (viper, machine words and
+    limbs), else in _plan_e (Python's integers of any size): over mixes whose totals
+    and drives' steps per mm fit the words in machine words, in limbs or not at all,
+    extrusion and retraction past zero filament, and moves long enough to move a
+    drive's base, every drive's steps after every move, its target and its exact
+    filament are those planned in Python alone."""
+    both = mp.json(DRIVE_TARGETS, stdin=b"")
+    python = mp.json(DRIVE_TARGETS, stdin=b"python")
+    assert python.pop("fast") == 0
+    assert both.pop("fast") > 400
+    assert max(both["bases"]) > 0
+    assert both == python
+
+
+DRIVE_TARGET_EDGES = """
+import sys, json
+import simmachine
+sys.modules["machine"] = simmachine
+import board
+from mixfw import assemble, planner
+simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(6)])
+printer = assemble.build(files_root=None)
+pl = printer.planner
+whole = planner._drive_targets
+python = lambda words, e_nm, nm, rem: whole(words, 0, nm, rem)
+fast = [0]
+
+
+def viper(words, e_nm, nm, rem):
+    done = whole(words, e_nm, nm, rem)
+    fast[0] += done
+    return done
+
+
+out = []
+for spm, w, nm_f, rem_f, e_nm in json.loads(sys.stdin.read()):
+    pl.set_drive_steps([spm] * pl.drives)
+    w = tuple(w + [0] * (pl.drives - len(w)))
+    total = sum(w)
+    got = []
+    for plan in (viper, python):
+        planner._drive_targets = plan
+        pl._shares = (None, 1)  # the weights anew: _plan_e resyncs the words
+        for i in range(pl.drives):
+            # The filament before the move that leaves drive 0 at nm_f + rem_f / total.
+            rem = (rem_f - e_nm * w[i]) % total if i == 0 else 0
+            k = (e_nm * w[i] + rem - (rem_f if i == 0 else 0)) // total
+            pl.drive_nm[i] = (nm_f if i == 0 else 12345) - k
+            pl.drive_rem[i] = rem
+        pl.targets_known = True
+        pl.rem_total = total
+        pl._plan_e(e_nm, w)
+        got.append([pl.drive_nm[0], pl.drive_rem[0], list(pl.drive_targets)])
+    out.append(got)
+planner._drive_targets = whole
+print(json.dumps([fast[0], out]))
+"""
+
+
+def _edge_cases():
+    """Filament that leaves drive 0 where _drive_targets' arithmetic turns: exactly
+    half a step (rounded away from zero), and a negative filament whose remainder
+    borrows a whole q; with mixes whose steps fit machine words, limbs or neither."""
+    import random
+    from fractions import Fraction
+    rnd = random.Random(36)
+    cases = []
+    for spm in (415.0, 80.0, 400.5, 2000.0, 93.71234):
+        pq = Fraction(round(spm * 10 ** 6), 10 ** 12)
+        p, q = pq.numerator, pq.denominator
+        for w in ([1], [1, 1], [3, 7], [10, 15, 20, 25, 12, 18], [373, 0, 627], [1, 9999]):
+            total = sum(w)
+            qt = q * total
+            for _ in range(12):
+                e_nm = rnd.choice([rnd.randint(-900000, 900000), rnd.randint(-30000000, 30000000)])
+                rem = rnd.randrange(total)
+                cases.append([spm, w, rnd.randint(-(1 << 29), 1 << 29), rem, e_nm])
+                # a borrow: negative filament, a whole number of q below zero, remainder
+                cases.append([spm, w, -q * rnd.randint(1, (1 << 28) // q + 1),
+                              rnd.randrange(1, total) if total > 1 else 0, e_nm])
+            # exactly half a step: 2 low p = qt (2 j + 1), low below qt
+            for j in range(3000):
+                if (qt * (2 * j + 1)) % (2 * p) == 0 and qt * (2 * j + 1) // (2 * p) < qt:
+                    low = qt * (2 * j + 1) // (2 * p)
+                    h = rnd.randint(0, (1 << 28) // q)
+                    cases.append([spm, w, h * q + low // total, low % total, 0])
+                    cases[-1][4] = rnd.randint(-900000, 900000)
+                    if low % total == 0 or total == 1:  # as the negative of the same
+                        cases.append([spm, w, -(h * q + low // total), 0, cases[-1][4]])
+                    break
+    return cases
+
+
+def test_each_drives_plan_in_one_viper_call_is_exact_where_its_arithmetic_turns(mp):
+    """_drive_targets' step for filament at exactly half a step, and for negative
+    filament whose remainder borrows a whole q, in machine words and in limbs, is
+    _plan_e's in Python; and so are its filament and remainder."""
+    cases = _edge_cases()
+    fast, got = mp.json(DRIVE_TARGET_EDGES, stdin=json.dumps(cases).encode())
+    assert len(got) == len(cases) > 300
+    assert fast > len(cases) // 2
+    for case, (viper, python) in zip(cases, got):
+        assert viper == python, case
+        assert viper[:2] == case[2:4], case
+
+
 # --- a move's lengths and junction in integers (mixfw/geometry.py) -------------------
 
 GEOMETRY = """

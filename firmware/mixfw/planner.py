@@ -131,7 +131,6 @@ def steps_per_nm(steps_per_mm):
     return p // g, q // g
 
 
-@micropython.native
 def scaled_round(x, p, q):
     """div_round(x * p, q) (q > 0, p >= 0) without the product x * p, which is a big
     int on the chips (31-bit small ints) for a position in nanometres: split as
@@ -216,7 +215,7 @@ def waiting_blocks(mem_buf) -> int:
     return count
 
 
-# Where the arrays _plan_move, _steps_to and _xyz_steps work on are, as byte offsets
+# Where the arrays _plan_move, _drive_targets and _xyz_steps work on are, as byte offsets
 # from the planner's words (Planner._abs_steps) plus _AT_BIAS (each non-negative, as a
 # 64-bit port's ptr32 reads a word zero-extended): ptr32() of an array costs the chip
 # about 1.4 us, of an address nothing. MicroPython never moves an object, and the
@@ -231,20 +230,133 @@ _AT_WEIGHTS = const(19)
 _AT_DRIVE_STEPS = const(20)
 _AT_GIVEN = const(21)
 _AT_TARGETS = const(22)
+_AT_IO = const(23)
+_S_E = const(24)  # _drive_targets' words (_E_*) from here
+_S_WORDS = const(93)
 _AT_BIAS = const(0x20000000)
 
 
+# _drive_targets' words, the planner's from _S_E on (Planner.resync writes them): per
+# drive, at _E_STRIDE * i, its weight, the largest e_nm its share keeps in a machine
+# word, its steps per nm p / q (and q times the weights' total), the base's steps, the
+# filament's bounds (see _rebase), its filament and remainder as Planner.drive_nm and
+# drive_rem hold them, and how its step is worked out (_E_HOW: 0 in Python, 1 in
+# machine words, 2 in limbs); then the weights' total, whether the words are the
+# planner's state (_E_SYNCED), and whether every drive with a share fits them
+# (_E_FITS).
+_E_W = const(0)
+_E_LIM = const(1)
+_E_P = const(2)
+_E_Q = const(3)
+_E_QT = const(4)
+_E_BASE = const(5)
+_E_LOW = const(6)
+_E_HIGH = const(7)
+_E_NM = const(8)
+_E_REM = const(9)
+_E_HOW = const(10)
+_E_STRIDE = const(11)
+_E_TOTAL = const(66)
+_E_SYNCED = const(67)
+_E_FITS = const(68)
+assert _E_TOTAL == _E_STRIDE * _MAX_DRIVES and _S_E + _E_FITS + 1 == _S_WORDS
+# ramp.product's words in the limbs' scratch (_RAMP_IO), and its mode P_LIMBS.
+_IO_LO = const(9)
+_IO_REM = const(10)
+_IO_A = const(11)
+_P_LIMBS = const(0)
+assert (_IO_LO, _IO_REM, _IO_A, _P_LIMBS) == (ramp.IO_LO, ramp.IO_LO + 1,
+                                              ramp.IO_WORDS - 5, ramp.P_LIMBS)
+
+
 @micropython.viper
-def _steps_to(words_buf):
-    """Each drive's steps from where it is to its target step, into the counts: the
-    planner's arrays, from the places its words (Planner._abs_steps) keep."""
+def _drive_targets(words_buf, e_nm: int, drive_nm, drive_rem) -> int:
+    """Each drive's steps from where it is to its target step, into the counts; then,
+    where the words hold the planner's state (_E_SYNCED) and every drive with a share
+    fits them, the move's e_nm of filament planned as Planner._plan_e does, exactly:
+    each such drive's filament and remainder (in its words, and in the planner's lists
+    drive_nm and drive_rem), its target and its count. Returns 1 if it did
+    that, 0 if _plan_e must (nothing planned then). The planner's arrays from the
+    places its words keep (Planner._abs_steps).
+
+    One viper call for a line that _plan_e took about 90 us for in native code on the
+    emulated Pico, at an attribute, a subscript or an operation on objects each."""
     words = ptr32(words_buf)
     at = int(words) - _AT_BIAS
     t = ptr32(at + words[_AT_TARGETS])
     s = ptr32(at + words[_AT_DRIVE_STEPS])
     c = ptr32(at + words[_AT_COUNTS])
-    for i in range(words[_S_DRIVES]):
+    drives = words[_S_DRIVES]
+    for i in range(drives):
         c[i] = t[i] - s[i]
+    e = ptr32(int(words) + 4 * _S_E)
+    if e_nm == 0 or e[_E_SYNCED] == 0:
+        return 0
+    total = e[_E_TOTAL]
+    io = ptr32(at + words[_AT_IO])
+    # Twice over the drives with a share: every one checked first (one that does not
+    # fit leaves all to _plan_e), then each planned. The filament and its low bound
+    # are kept 2**30 up in their words, as a 64-bit port's ptr32 would read a negative
+    # word zero-extended.
+    planning = 0
+    while planning < 2:
+        for i in range(drives):
+            d = ptr32(int(e) + 4 * _E_STRIDE * i)
+            w = d[_E_W]
+            if w == 0:
+                continue
+            num = e_nm * w + d[_E_REM]
+            if num >= 0:
+                k = num // total
+            else:
+                k = 0 - ((total - 1 - num) // total)
+            nm = d[_E_NM] - _CAP - 1 + k
+            if planning == 0:
+                lim = d[_E_LIM]
+                if (d[_E_HOW] == 0 or e_nm >= lim or e_nm <= 0 - lim
+                        or nm < d[_E_LOW] - _CAP - 1 or nm >= d[_E_HIGH]):
+                    return 0  # beyond the words, or the base moves (_rebase)
+                continue
+            rem = num - k * total
+            # scaled_round(nm * total + rem, p, q * total): nm = h q + l, so the
+            # filament in 1/total nm is h qt + low, low below qt, and its step
+            # h p + low p / qt rounded half away from zero (as the sign).
+            p = d[_E_P]
+            q = d[_E_Q]
+            qt = d[_E_QT]
+            m = nm if nm >= 0 else 0 - nm
+            h = m // q
+            low = (m - h * q) * total
+            if nm >= 0:
+                low += rem
+            else:
+                low -= rem
+                if low < 0:
+                    h -= 1
+                    low += qt
+            if d[_E_HOW] == 1:  # 2 qt p below 2**30
+                r = (2 * low * p + qt) // (2 * qt)
+            else:  # low p // qt and its remainder in limbs: qt below 2**28, p 2**29
+                io[_IO_A] = low
+                io[_IO_A + 1] = p
+                io[_IO_A + 2] = qt
+                io[_IO_A + 4] = _P_LIMBS
+                product(io)
+                r = io[_IO_LO]
+                if 2 * io[_IO_REM] >= qt:
+                    r += 1
+            r += h * p
+            if nm < 0:
+                r = 0 - r
+            target = d[_E_BASE] + r
+            d[_E_NM] = nm + _CAP + 1
+            d[_E_REM] = rem
+            drive_nm[i] = nm
+            drive_rem[i] = rem
+            t[i] = target
+            c[i] = target - s[i]
+        planning += 1
+    return 1
 
 
 # _plan_move's answers besides 1 (queued) and 0 (shorter than a step: nothing to do),
@@ -270,14 +382,13 @@ _S_F_BASE = const(12)  # which floats hold _base_floats' own: _F_BASE_ACCEL the
 _F_BASE_ACCEL = const(2)  # acceleration's, _F_BASE_BOTH its speed's too
 _F_BASE_BOTH = const(3)
 _MEMO = const(4)  # pairs of speed and acceleration _base_floats keeps
-_S_WORDS = const(23)
 
 
 def array_offsets(words, at, arrays):
     """The arrays' places, as byte offsets from words' own plus 0x20000000 (_AT_BIAS),
     into words from `at` on: viper finds an array there as ptr32(int(words) -
     0x20000000 + words[k]), where ptr32() of the array itself costs the chip about
-    1.4 us (the _AT_* of _plan_move, _steps_to and _xyz_steps; cmd_motion's _SPM_MANT
+    1.4 us (the _AT_* of _plan_move, _drive_targets and _xyz_steps; cmd_motion's _SPM_MANT
     on, for xyz_targets)."""
     from uctypes import addressof
     base = addressof(words)
@@ -527,6 +638,7 @@ _recalculate = lookahead.recalculate
 _plan_words = lookahead.plan_words
 _lengths = geometry.lengths
 _junction = geometry.junction
+product = ramp.product
 
 
 class PlanError(ValueError):
@@ -607,8 +719,8 @@ class Planner:
         self._weights = array("i", bytes(4 * self.drives))
         self._given = array("i", bytes(4 * self.drives))
         self.drive_steps = array("i", bytes(4 * self.drives))
-        # The latest weights _plan_e took, their total and the drives with a share.
-        self._shares = (None, 1, ())
+        # The latest weights _plan_e took, and their total.
+        self._shares = (None, 1)
         self.before_sync = []  # fn() each: moves held before the planner are handed over
         self.dir_invert_mask = 0  # DIR pins of motors wired the other way round
         self._dir_set = array("i", bytes(4 * 16))  # see _dir_words
@@ -632,7 +744,8 @@ class Planner:
         array_offsets(self._abs_steps, _AT_MEM, (mem, self.lk, self._counts, self._geo,
                                             self._dir_set, self._dir_clr, self._weights,
                                             self.drive_steps, self._given,
-                                            self.drive_targets))
+                                            self.drive_targets, _RAMP_IO))
+        self.resync()
 
     # --- queue state, shared with the step loop ---
     def busy(self):
@@ -704,6 +817,7 @@ class Planner:
         self.drive_steps_per_mm = list(drive_steps_per_mm)
         self._set_spm_fixed()
         self._drive_pos_from_steps()
+        self.resync()
 
     def _set_spm_fixed(self):
         self._spm_fixed = [spm_fixed(v) for v in self.drive_steps_per_mm]
@@ -728,6 +842,7 @@ class Planner:
             self.drive_rem[i] = 0
         self.rem_total = 1
         self.targets_known = False
+        self._abs_steps[_S_E + _E_SYNCED] = 0
 
     def _rebase(self, i, x):
         """Drive i's filament is its base plus x nm (drive_nm) plus the remainder; its
@@ -753,37 +868,33 @@ class Planner:
         pq[4] = _NM_HIGH if movable else _CAP
         return x - k * q
 
-    @micropython.native
     def _plan_e(self, e_nm, weights=None):
         """The drives' exact filament and target steps after an E move of e_nm
         nanometres shared by the weights, in place; the move's steps per drive in
-        self._counts."""
+        self._counts. Mostly in one viper call (_drive_targets: add_move makes it
+        first); else here, in integers of any size."""
         w = weights or self.tool_mix
         shares = self._shares
         if w is not shares[0]:  # mostly the same weights (a tuple) as the move before
-            shares = self._shares = (w, sum(w), self._sharing(w))
+            shares = self._shares = (w, sum(w))
+            Planner.resync(self)
+        # Every drive's steps to its target first: a drive with no share in the move
+        # stays where it is, and so does its target step, where it is known.
+        if _drive_targets(self._abs_steps, e_nm, self.drive_nm, self.drive_rem):
+            return
         total = shares[1]
         targets = self.drive_targets
         now_steps = self.drive_steps
         counts = self._counts
-        # A drive with no share in the move stays where it is, and so does its target
-        # step, where it is known: every drive's steps to its target first, in one viper
-        # call, then the drives with a share (a loop over every drive in native code
-        # was a tenth of a line's time on the chips).
-        _steps_to(self._abs_steps)
         now_total = self.rem_total
         rescale = now_total != total
         every = not self.targets_known
-        if every or rescale:
-            drives = range(self.drives)
-        elif e_nm:
-            drives = shares[2]
-        else:
+        if not (every or rescale or e_nm):
             return
         per_nm = self._per_nm
         drive_nm = self.drive_nm
         drive_rem = self.drive_rem
-        for i in drives:
+        for i in range(self.drives):
             rem = drive_rem[i]
             if rescale and rem:
                 rem = div_round(rem * total, now_total)  # below a nanometre either way
@@ -805,24 +916,59 @@ class Planner:
                 drive_rem[i] = rem
                 targets[i] = target
                 counts[i] = target - now_steps[i]
-        # Stored only when they change: a store on an object of sixty attributes costs
-        # the chip a few us.
         if rescale:
             self.rem_total = total
         if every:
             self.targets_known = True
+        if self._abs_steps[_S_E + _E_FITS]:
+            Planner.resync(self)
 
-    def _sharing(self, weights):
-        """The drives with a share in weights. Apart from _plan_e: a comprehension's
-        variables are heap cells, made at every call of the native function that holds
-        it."""
-        return tuple(i for i in range(self.drives) if weights[i])
+    def resync(self):
+        """_drive_targets' words from the plan's state: each drive's weight, p / q and
+        how its step is worked out, and whether every drive with a share fits the words
+        (_E_FITS); its filament, remainder, base and bounds; and whether the words are
+        the planner's state (_E_SYNCED): while the targets are known, the remainders
+        count in the weights' total, and every drive with a share fits. After any
+        change _plan_e does not make in them (the weights, the steps per mm, a rebase)."""
+        e = self._abs_steps
+        w, total = self._shares[0], self._shares[1]
+        fits = bool(w)
+        for i in range(self.drives):
+            d = _S_E + _E_STRIDE * i
+            wi = w[i] if w else 0
+            pq = self._per_nm[i]
+            p, qt = pq[0], pq[1] * total
+            how = 0
+            if wi and p < 0x20000000 and qt < 0x10000000:
+                how = 1 if 2 * qt * p < 0x40000000 else 2
+                e[d + _E_LIM] = (_CAP - total) // wi
+                e[d + _E_P] = p
+                e[d + _E_Q] = pq[1]
+                e[d + _E_QT] = qt
+                nm = self.drive_nm[i]
+                if -_CAP < nm < _CAP and pq[2] < _CAP:
+                    e[d + _E_NM] = nm + _CAP + 1  # see _drive_targets
+                    e[d + _E_REM] = self.drive_rem[i]
+                    e[d + _E_BASE] = pq[2]
+                    e[d + _E_LOW] = max(pq[3], -_CAP) + _CAP + 1
+                    e[d + _E_HIGH] = min(pq[4], _CAP)
+                else:
+                    how = 0
+            if wi and not how:
+                fits = False
+            e[d + _E_W] = wi
+            e[d + _E_HOW] = how
+        e[_S_E + _E_TOTAL] = total
+        e[_S_E + _E_FITS] = 1 if fits else 0
+        e[_S_E + _E_SYNCED] = 1 if (fits and self.targets_known and
+                                    self.rem_total == total) else 0
 
     def _replay_counts(self, e_nm):
         """Per-drive steps of a retraction (e_nm < 0) that takes back exactly the drive
         steps of the latest e_nm of extrusion, newest first, or of an unretraction that
         pushes back exactly what retractions took, oldest first. What the record does
         not cover follows the active mix. Plans as _plan_e does."""
+        self._abs_steps[_S_E + _E_SYNCED] = 0  # drive_nm changes here
         back = e_nm < 0
         take = self.extruded if back else self.retracted
         give = self.retracted if back else self.extruded
@@ -958,7 +1104,13 @@ class Planner:
         if replay and e_nm:
             self._replay_counts(e_nm)
         else:
-            Planner._plan_e(self, e_nm, mix[1] if mix else None)
+            # Mostly the weights of the move before, whose plan fits _drive_targets'
+            # words: the whole plan in one viper call, and _plan_e, bytecode for the
+            # heap native code would take, only where it does not.
+            w = mix[1] if mix else self.tool_mix
+            if w is not self._shares[0] or not _drive_targets(
+                    self._abs_steps, e_nm, self.drive_nm, self.drive_rem):
+                Planner._plan_e(self, e_nm, w)
         # The speed and acceleration in floats, worked out again only when one of them
         # or a limit changes (a new F; M201, M203, M204, M205: set_limits): most lines
         # keep them.
