@@ -925,9 +925,9 @@ from plan_only import retire_all
 simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(6)])
 fast = [0]
 if sys.stdin.read() == "python":
-    # Counts only, as for a move with no filament: every plan is _plan_e's own.
+    # Counts only (a travel's), then 0: every plan is _plan_e's own.
     plain = planner._drive_targets
-    planner._drive_targets = lambda words, e_nm, nm, rem: plain(words, 0, nm, rem)
+    planner._drive_targets = lambda words, e_nm, nm, rem: plain(words, 0, nm, rem) and 0
 else:
     whole = planner._drive_targets
 
@@ -996,7 +996,7 @@ simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(
 printer = assemble.build(files_root=None)
 pl = printer.planner
 whole = planner._drive_targets
-python = lambda words, e_nm, nm, rem: whole(words, 0, nm, rem)
+python = lambda words, e_nm, nm, rem: whole(words, 0, nm, rem) and 0  # counts only
 fast = [0]
 
 

@@ -275,8 +275,8 @@ def _drive_targets(words_buf, e_nm: int, drive_nm, drive_rem) -> int:
     where the words hold the planner's state (_E_SYNCED) and every drive with a share
     fits them, the move's e_nm of filament planned as Planner._plan_e does, exactly:
     each such drive's filament and remainder (in its words, and in the planner's lists
-    drive_nm and drive_rem), its target and its count. Returns 1 if it did
-    that, 0 if _plan_e must (nothing planned then). The planner's arrays from the
+    drive_nm and drive_rem), its target and its count (a travel, e_nm 0, changes none).
+    Returns 1 if it did that, 0 if _plan_e must (nothing planned then). The planner's arrays from the
     places its words keep (Planner._abs_steps).
 
     One viper call for a line that _plan_e took about 90 us for in native code on the
@@ -290,8 +290,10 @@ def _drive_targets(words_buf, e_nm: int, drive_nm, drive_rem) -> int:
     for i in range(drives):
         c[i] = t[i] - s[i]
     e = ptr32(int(words) + 4 * _S_E)
-    if e_nm == 0 or e[_E_SYNCED] == 0:
+    if e[_E_SYNCED] == 0:
         return 0
+    if e_nm == 0:
+        return 1  # a travel: the plan stands
     total = e[_E_TOTAL]
     io = ptr32(at + words[_AT_IO])
     # Twice over the drives with a share: every one checked first (one that does not
