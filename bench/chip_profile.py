@@ -28,6 +28,7 @@ TIMED = (
     ("planner.add_move", "planner", "add_move",
      "target_steps, feed_mm_s, dir_masks=None, e_nm=0, mix=None, replay=False, "
      "homing_axes=0"),
+    ("planner._drive_targets", "planner_mod", "_drive_targets", "a, b, c, d"),
     ("planner._plan_e", "planner_class", "_plan_e", "self, e_nm, weights=None"),
     ("block_weights", "planner_mod", "block_weights", "a, b, c, d"),
     ("planner._xyz_steps", "planner_mod", "_xyz_steps", "a, b, c"),
