@@ -915,30 +915,32 @@ def test_a_move_refused_changes_neither_the_position_nor_the_drives_filament(mp)
 
 # --- each drive's plan in one viper call (planner._drive_targets) ------------------
 
-DRIVE_TARGETS = """
+# A printer on the simulated board; whole, its _drive_targets, and as viper and python
+# two that count the lines it planned (fast), or plan none (every plan _plan_e's own).
+SIM_PLANNER = """
 import sys, json
 import simmachine
 sys.modules["machine"] = simmachine
 import board
 from mixfw import assemble, planner
-from plan_only import retire_all
 simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(6)])
-fast = [0]
-if sys.stdin.read() == "python":
-    # Counts only (a travel's), then 0: every plan is _plan_e's own.
-    plain = planner._drive_targets
-    planner._drive_targets = lambda words, e_nm, nm, rem: plain(words, 0, nm, rem) and 0
-else:
-    whole = planner._drive_targets
-
-    def counted(words, e_nm, nm, rem):
-        done = whole(words, e_nm, nm, rem)
-        fast[0] += done
-        return done
-    planner._drive_targets = counted
 printer = assemble.build(files_root=None)
 pl = printer.planner
+whole = planner._drive_targets
+python = lambda words, e_nm, nm, rem: whole(words, 0, nm, rem) and 0  # counts only
+fast = [0]
+
+
+def viper(words, e_nm, nm, rem):
+    done = whole(words, e_nm, nm, rem)
+    fast[0] += done
+    return done
+"""
+
+DRIVE_TARGETS = SIM_PLANNER + """
+from plan_only import retire_all
 pl.idle = retire_all(printer.mem, pl.queue)
+planner._drive_targets = python if sys.stdin.read() == "python" else viper
 # Steps per mm whose p / q fit the words in machine words, in limbs, or not at all
 # (a calibrated drive's 93.71234: _plan_e plans every mix it has a share in).
 pl.set_drive_steps([415.0, 80.0, 400.5, 93.71234, 415.0, 2000.0][:pl.drives])
@@ -986,26 +988,7 @@ def test_each_drives_plan_in_one_viper_call_is_the_plan_in_python_exactly(mp):
     assert both == python
 
 
-DRIVE_TARGET_EDGES = """
-import sys, json
-import simmachine
-sys.modules["machine"] = simmachine
-import board
-from mixfw import assemble, planner
-simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(6)])
-printer = assemble.build(files_root=None)
-pl = printer.planner
-whole = planner._drive_targets
-python = lambda words, e_nm, nm, rem: whole(words, 0, nm, rem) and 0  # counts only
-fast = [0]
-
-
-def viper(words, e_nm, nm, rem):
-    done = whole(words, e_nm, nm, rem)
-    fast[0] += done
-    return done
-
-
+DRIVE_TARGET_EDGES = SIM_PLANNER + """
 out = []
 for spm, w, nm_f, rem_f, e_nm in json.loads(sys.stdin.read()):
     pl.set_drive_steps([spm] * pl.drives)
