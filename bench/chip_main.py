@@ -11,6 +11,8 @@
 #                          stepping_printer). Answers `bench:{json}`.
 #   profile FILE           plan FILE without stepping, then again with the planner's
 #                          functions timed (bench/chip_profile.py): `bench:{json}`.
+#   functions              where each loaded function's code starts, for
+#                          bench/chip_pcprofile.py (before a plan: it makes garbage).
 # Written against the firmware's API: heap.reserve/release/step_loop_bytes (one more
 # reserve, for the second printer), assemble.build(config, files_root=None), Config,
 # assemble.start_timer(printer, tick_us) (returns what has deinit()), printer.parser.parse,
@@ -21,10 +23,14 @@ import gc
 import json
 import os
 import time
+import machine
 import micropython
 from array import array
 
 SKIPPED = (b"M109", b"M190", b"M116")
+# WATCHDOG SCRATCH0, free for programs: 1 while the lines are planned, for the
+# emulator's program counter profile (bench/chip_pcprofile.py, emu/harness.mjs).
+PROFILED = 0x4005800C
 PLAN_FILE = "plan.gcode"
 LINE_MAX = 256
 
@@ -185,6 +191,7 @@ def plan(path, stepping, profile=0):
     errors = []
     mem = printer.mem
     full = planner.queue - 1
+    machine.mem32[PROFILED] = 1  # the program counter's profile, if one is taken
     t0 = time.ticks_us()
     buf = data.buf
     line = data.line
@@ -199,6 +206,7 @@ def plan(path, stepping, profile=0):
         make_room(mem, full)
     planner.synchronize()
     us = time.ticks_diff(time.ticks_us(), t0)
+    machine.mem32[PROFILED] = 0
     if profile == 1:
         # What a line allocates (the collector held off for a few lines), and what one
         # collection costs with the printer built.
@@ -224,12 +232,28 @@ def plan(path, stepping, profile=0):
     return out
 
 
+def functions():
+    """A line `FUN address name` for each function of the loaded modules and their
+    classes. The address is the function object's code pointer (its fourth word): for
+    native and viper code, its first instruction."""
+    for mname, mod in list(sys.modules.items()):
+        for name, v in mod.__dict__.items():
+            if type(v) is type:
+                for attr, f in v.__dict__.items():
+                    if "function" in str(type(f)):
+                        print("FUN", machine.mem32[id(f) + 12], "%s.%s.%s" % (mname, name, attr))
+            elif "function" in str(type(v)):
+                print("FUN", machine.mem32[id(v) + 12], "%s.%s" % (mname, name))
+
+
 def serve():
     while True:
         words = sys.stdin.readline().split()
         if not words:
             continue
-        if words[0] in ("plan", "profile"):
+        if words[0] == "functions":
+            functions()
+        elif words[0] in ("plan", "profile"):
             try:
                 if words[0] == "plan":
                     res = plan(words[1], words[2] == "1")

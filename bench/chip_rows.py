@@ -222,9 +222,12 @@ def _compiled(out, modules):
     return files
 
 
-def _planner_chip(work, requests, gcode=None):
+def _planner_chip(work, requests, gcode=None, profile=None):
     """bench/chip_main.py's answers (JSON) to each request, on a chip of its own, with
-    PLAN_LINES of gcode (the example) as plan.gcode."""
+    PLAN_LINES of gcode (the example) as plan.gcode. profile: a path for the program
+    counter's profile of the last request (emu.Chip.profile), with where the chip's
+    functions start (chip_main.py's `functions`, asked first) in the last answer's
+    "functions"."""
     excerpt = work / "chip_plan.gcode"
     gcode = gcode or paths.EXAMPLE_GCODE
     lines = gcode.read_text().splitlines()[PLAN_LINES[0] - 1:PLAN_LINES[1]]
@@ -237,8 +240,16 @@ def _planner_chip(work, requests, gcode=None):
     settings = dict({"tick_us": PLANNER_TICK_US}, **OVERRIDES)
     with emu.Chip(BOARD, settings=settings, files=files, max_emu_s=120,
                   max_wall_s=900) as chip:
-        for request in requests:
+        functions = []
+        if profile:
+            functions = [t for t in chip.command("functions") if t.startswith("FUN ")]
+        for i, request in enumerate(requests):
+            profiled = profile and i == len(requests) - 1
+            if profiled:
+                chip.profile(gated=True)  # chip_main.py opens it for its lines alone
             answer = chip.command(request, max_s=60)
+            if profiled:
+                chip.profile(profile)
             found = [t for t in answer if t.startswith("bench:")]
             if not found:
                 raise RuntimeError("chip_main.py answered %s" % answer)
@@ -246,6 +257,8 @@ def _planner_chip(work, requests, gcode=None):
             if r.get("failed") or r["errors"] or r.get("timed", {}).get("errors"):
                 raise RuntimeError("planning on the chip: %s" % r)
             got.append(r)
+    if profile:
+        got[-1]["functions"] = functions
     return got
 
 

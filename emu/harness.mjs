@@ -116,6 +116,47 @@ let excNow = 0, excMark = 0, sleptNanos = 0;
   };
 }
 
+// ---------------------------------------------------------------- the program counter's profile
+// Off unless asked ('profile' below): the cycles spent at each instruction address,
+// thread mode and interrupts apart. MicroPython's own code runs from flash, and the
+// firmware's native and viper code from the heap in RAM (above NATIVE_FROM: below it
+// lie the C runtime's few RAM functions, such as the divider's); flash cycles are also
+// summed by the native function they serve, the last one run in that context until it
+// returns into flash (0: none, as when bytecode runs).
+// With `gated`, only while the chip's last write to WATCHDOG SCRATCH0 (0x4005800C, free
+// for programs) was 1: the code profiled marks its own window.
+const NATIVE_FROM = 0x20004000, SRAM_END = 0x20042000;
+const WATCHDOG_BASE = 0x40058000, SCRATCH0 = 0x0c;
+const prof = { on: false, armed: false, gated: false, self: [new Map(), new Map()],
+  by: [new Map(), new Map()], last: [0, 0] };
+{
+  const wd = mcu.findPeripheral(WATCHDOG_BASE);
+  const write = wd.writeUint32.bind(wd);
+  wd.writeUint32 = (offset, value) => {
+    if (offset === SCRATCH0 && prof.armed && prof.gated) prof.on = value === 1;
+    write(offset, value);
+  };
+}
+function profAdd(pc, ins, cyc) {
+  const k = excNow ? 1 : 0;
+  const self = prof.self[k];
+  self.set(pc, (self.get(pc) || 0) + cyc);
+  if (pc >= NATIVE_FROM && pc < SRAM_END) {
+    // pop {..., pc} or bx lr into flash: the native function returned to its caller
+    prof.last[k] = ((ins & 0xff00) === 0xbd00 || ins === 0x4770) && (core.PC >>> 0) < 0x20000000 ? 0 : pc;
+  } else {
+    const by = prof.by[k], fn = prof.last[k];
+    by.set(fn, (by.get(fn) || 0) + cyc);
+  }
+}
+function profileDump(path) {
+  const o = { clk_sys_hz: 1e9 / cycleNs };
+  ['thread', 'irq'].forEach((name, k) => {
+    o[name] = { self: Object.fromEntries(prof.self[k]), by: Object.fromEntries(prof.by[k]) };
+  });
+  fs.writeFileSync(path, JSON.stringify(o));
+}
+
 // ---------------------------------------------------------------- PIO on the emulated clock
 // rp2040js 1.4.1 runs the PIO state machines from Node's event loop, 1000 instructions
 // at a time whatever the emulated time, skips instructions' delay cycles, ignores the
@@ -298,6 +339,12 @@ function runToward(g) {
             const step = Math.min(dt, left);
             clock.tick(step);
             sleptNanos += step;
+          } else if (prof.on) {
+            const pc = core.PC >>> 0;
+            const ins = pc >= NATIVE_FROM && pc < SRAM_END ? mcu.readUint16(pc) : 0;
+            const cyc = core.executeInstruction();
+            clock.tick(cyc * cycleNs);
+            profAdd(pc, ins, cyc);
           } else {
             clock.tick(core.executeInstruction() * cycleNs);
           }
@@ -359,6 +406,8 @@ cdc.onDeviceConnected = () => { connectedNs = clock.nanos; if (goal && goal.conn
 //   {op: "run", oks, match, for_s, max_s}  run the chip; answers met: true/false
 //   {op: "cpu"}                         emulated time per exception so far (cpu)
 //   {op: "edges", path}                 the pin edges so far into path
+//   {op: "profile", on, gated, path}    on: profile the program counter from now (gated:
+//                                       while the chip says so); off: stop, write to path
 //   {op: "end", edges}                  the edges into edges, the heaters, the wall
 //                                       time; then the harness exits
 const ANSWER = '@emu ';
@@ -389,6 +438,13 @@ async function serve(op) {
       return answer({ cpu: cpuSnapshot() });
     case 'edges':
       return answer({ edges: writeEdges(op.path) });
+    case 'profile': // {on: true, gated}: start afresh; {on: false, path}: stop, write it there
+      if (op.on) Object.assign(prof, { self: [new Map(), new Map()], by: [new Map(), new Map()], last: [0, 0] });
+      else if (op.path) profileDump(op.path);
+      prof.armed = !!op.on;
+      prof.gated = !!op.gated;
+      prof.on = prof.armed && !prof.gated;
+      return answer({});
     case 'end': {
       const heaters = bodies.map((b) => { b.advance(clock.nanos); return { name: b.name, temp_c: b.temp_c }; });
       answer({ edges: writeEdges(op.edges), heaters, wall_seconds: (performance.now() - wall0) / 1e3,

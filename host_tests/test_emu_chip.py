@@ -326,3 +326,25 @@ def test_the_six_drive_board_boots_with_room_in_its_heap(settings):
         diag = [t for t in c.command("M122") if t.startswith("echo:underruns")]
     free = int(diag[0].split("mem_free_collected:")[1].split()[0])
     assert free >= 40000, diag
+
+
+def test_the_program_counters_profile_adds_up_to_the_planners_time(tmp_path):
+    """bench/chip_pcprofile.py on the planner rows' excerpt, with the step path running:
+    the time of a line, function by function in the main loop and in the interrupts,
+    adds up to the time a line took (at the run's lines/s); the planner's functions are
+    in the main loop's, and the step loop is the interrupts' most."""
+    _emulator_or_skip()
+    import importlib.util
+    spec = importlib.util.spec_from_file_location(
+        "chip_pcprofile", paths.ROOT / "bench" / "chip_pcprofile.py")
+    pcprofile = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(pcprofile)
+    got = pcprofile.profile(stepping=True, work=tmp_path)
+    thread, irq = got["us_per_line"]["thread"], got["us_per_line"]["irq"]
+    line_us = 1e6 / got["move_lines_per_s"]
+    assert abs(sum(thread.values()) + sum(irq.values()) - line_us) < 0.01 * line_us
+    for name in ("mixfw.cmd_motion.Motion.g1", "mixfw.planner._plan_move",
+                 "mixfw.planner._drive_targets", "mixfw.gcode._scan"):
+        assert thread[name] > 1, name
+    assert "stepper.tick" in max(irq, key=irq.get)
+    assert 0.05 * line_us < sum(irq.values()) < 0.3 * line_us

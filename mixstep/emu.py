@@ -251,6 +251,14 @@ class Chip:
         mode): {nanos, slept, exc, entries}."""
         return self._request(op="cpu")["cpu"]
 
+    def profile(self, path=None, gated=False):
+        """Profile the program counter from now on (emu/harness.mjs; gated: only while
+        the chip's last write to WATCHDOG SCRATCH0 was 1); with path, stop and write
+        the profile there as JSON: {clk_sys_hz, thread, irq}, each {self: {address:
+        cycles}, by: {native function's address, or 0: flash cycles}}."""
+        self._request(op="profile", on=path is None, gated=gated,
+                      path=str(path) if path else None)
+
     def edges(self):
         """(times_ns, gpios, levels) of every recorded pin edge so far."""
         self._edge_files += 1
