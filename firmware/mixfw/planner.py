@@ -738,11 +738,13 @@ class Planner:
         # (M122): the host or the planner did not keep up, and the axes stopped.
         self.underruns = 0
         # The arrays _plan_move works with, in one tuple: a viper call's arguments
-        # cost the chip each.
+        # cost the chip each. Then the objects add_move reads for every line (each
+        # never replaced): a subscript costs the chip about half what an attribute does.
         self._queue_io = (mem, self.lk, self._plan_f, self._abs_steps, self._hooks,
                           _RAMP_IO, self._dir_set, self._dir_clr, self._weights,
                           self.drive_steps, self._geo, self._geo_f, self._counts,
-                          self._given)
+                          self._given, self.position_steps, self.drive_nm,
+                          self.drive_rem, self._base_of)
         array_offsets(self._abs_steps, _AT_MEM, (mem, self.lk, self._counts, self._geo,
                                             self._dir_set, self._dir_clr, self._weights,
                                             self.drive_steps, self._given,
@@ -1090,14 +1092,16 @@ class Planner:
         # The methods it calls are taken from the class: self.method looks in the
         # instance's attributes first, and a miss in a map of sixty costs the emulated
         # Pico about 9 us.
-        pos = self.position_steps
+        io = self._queue_io
+        pos = io[14]  # position_steps
+        words = io[3]  # _abs_steps
         # X Y Z's steps go into the planner's words here, in viper, which would take a
         # big int's low bits for its value: the targets are checked first.
         neg = -1
         if (-_CAP <= target_steps[0] <= _CAP and -_CAP <= target_steps[1] <= _CAP
                 and -_CAP <= target_steps[2] <= _CAP):
             # Bit i: axis i runs backwards; bit 4 + i: it moves.
-            neg = _xyz_steps(pos, target_steps, self._abs_steps)
+            neg = _xyz_steps(pos, target_steps, words)
         # Before the filament is planned: a move refused changes nothing. (E has at
         # most MAX_PERIOD steps a block: see add_move.)
         if neg < 0:
@@ -1110,14 +1114,13 @@ class Planner:
             # words: the whole plan in one viper call, and _plan_e, bytecode for the
             # heap native code would take, only where it does not.
             w = mix[1] if mix else self.tool_mix
-            if w is not self._shares[0] or not _drive_targets(
-                    self._abs_steps, e_nm, self.drive_nm, self.drive_rem):
+            if w is not self._shares[0] or not _drive_targets(words, e_nm, io[15], io[16]):
                 Planner._plan_e(self, e_nm, w)
         # The speed and acceleration in floats, worked out again only when one of them
         # or a limit changes (a new F; M201, M203, M204, M205: set_limits): most lines
         # keep them.
         accel = self.acceleration_mm_s2 if neg & 0x70 else self.retract_acceleration_mm_s2
-        base = self._base_of
+        base = io[17]  # _base_of
         if feed_mm_s is not base[0] or accel is not base[1]:
             Planner._base_floats(self, feed_mm_s, accel)
         # The DIR pins to set and clear for each pattern of the axes' signs, worked out
@@ -1129,7 +1132,6 @@ class Planner:
         if homing_axes:
             flags = st.F_HOMING | (homing_axes << st.F_HOME_SHIFT)
         how = _HOW_JOIN if self.joins and not homing_axes else 0
-        io = self._queue_io
         slot = 0
         got = _plan_move(io, e_nm, neg, flags, how, slot, pos, target_steps)
         while got < 0:
