@@ -81,7 +81,7 @@ def test_excerpt_prints_on_the_emulated_pico(tmp_path):
     assert report["lines"] == sum(1 for _ in open(EXCERPT))
     assert report["underruns"] == 0
     assert 0 < report["cpu_step_fraction"] < 1
-    # 49,776 bytes at stop 36, whose exact filament plan in viper (planner's
+    # 49,680 bytes at stop 36, whose exact filament plan in viper (planner's
     # _drive_targets) took 0.9 kB of the print's heap for 5 % more lines a second.
     assert report["mem_free_min_bytes"] > 49000
     assert report["mem_free_samples"] >= 2
