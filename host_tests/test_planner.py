@@ -997,7 +997,7 @@ for spm, w, nm_f, rem_f, e_nm in json.loads(sys.stdin.read()):
     got = []
     for plan in (viper, python):
         planner._drive_targets = plan
-        pl._shares = (None, 1)  # the weights anew: _plan_e resyncs the words
+        pl._shares = (w, total)  # the planner's weights, as after a move with them
         for i in range(pl.drives):
             # The filament before the move that leaves drive 0 at nm_f + rem_f / total.
             rem = (rem_f - e_nm * w[i]) % total if i == 0 else 0
@@ -1006,6 +1006,7 @@ for spm, w, nm_f, rem_f, e_nm in json.loads(sys.stdin.read()):
             pl.drive_rem[i] = rem
         pl.targets_known = True
         pl.rem_total = total
+        pl.resync()  # the words from that state
         pl._plan_e(e_nm, w)
         got.append([pl.drive_nm[0], pl.drive_rem[0], list(pl.drive_targets)])
     out.append(got)

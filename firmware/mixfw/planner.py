@@ -879,12 +879,15 @@ class Planner:
         first); else here, in integers of any size."""
         w = weights or self.tool_mix
         shares = self._shares
+        words = self._abs_steps
         if w is not shares[0]:  # mostly the same weights (a tuple) as the move before
             shares = self._shares = (w, sum(w))
-            Planner.resync(self)
+            # The words are the old weights': worked out again below (resync), once.
+            words[_S_E + _E_SYNCED] = 0
+            words[_S_E + _E_FITS] = 1
         # Every drive's steps to its target first: a drive with no share in the move
         # stays where it is, and so does its target step, where it is known.
-        if _drive_targets(self._abs_steps, e_nm, self.drive_nm, self.drive_rem):
+        if _drive_targets(words, e_nm, self.drive_nm, self.drive_rem):
             return
         total = shares[1]
         targets = self.drive_targets
@@ -894,6 +897,8 @@ class Planner:
         rescale = now_total != total
         every = not self.targets_known
         if not (every or rescale or e_nm):
+            if not words[_S_E + _E_SYNCED] and words[_S_E + _E_FITS]:
+                Planner.resync(self)
             return
         per_nm = self._per_nm
         drive_nm = self.drive_nm
@@ -924,7 +929,7 @@ class Planner:
             self.rem_total = total
         if every:
             self.targets_known = True
-        if self._abs_steps[_S_E + _E_FITS]:
+        if words[_S_E + _E_FITS]:
             Planner.resync(self)
 
     def resync(self):
@@ -940,10 +945,14 @@ class Planner:
         for i in range(self.drives):
             d = _S_E + _E_STRIDE * i
             wi = w[i] if w else 0
+            e[d + _E_W] = wi
+            e[d + _E_HOW] = 0
+            if not wi:
+                continue
             pq = self._per_nm[i]
             p, qt = pq[0], pq[1] * total
             how = 0
-            if wi and p < 0x20000000 and qt < 0x10000000:
+            if p < 0x20000000 and qt < 0x10000000:
                 how = 1 if 2 * qt * p < 0x40000000 else 2
                 e[d + _E_LIM] = (_CAP - total) // wi
                 e[d + _E_P] = p
@@ -958,9 +967,8 @@ class Planner:
                     e[d + _E_HIGH] = min(pq[4], _CAP)
                 else:
                     how = 0
-            if wi and not how:
+            if not how:
                 fits = False
-            e[d + _E_W] = wi
             e[d + _E_HOW] = how
         e[_S_E + _E_TOTAL] = total
         e[_S_E + _E_FITS] = 1 if fits else 0
