@@ -12,7 +12,7 @@
 #   profile FILE           plan FILE without stepping, then again with the planner's
 #                          functions timed (bench/chip_profile.py): `bench:{json}`.
 #   functions              where each loaded function's code starts, for
-#                          bench/chip_pcprofile.py (before a plan: it makes garbage).
+#                          bench/chip_pcprofile.py.
 # Written against the firmware's API: heap.reserve/release/step_loop_bytes (one more
 # reserve, for the second printer), assemble.build(config, files_root=None), Config,
 # assemble.start_timer(printer, tick_us) (returns what has deinit()), printer.parser.parse,

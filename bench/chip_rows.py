@@ -226,7 +226,7 @@ def _planner_chip(work, requests, gcode=None, profile=None):
     """bench/chip_main.py's answers (JSON) to each request, on a chip of its own, with
     PLAN_LINES of gcode (the example) as plan.gcode. profile: a path for the program
     counter's profile of the last request (emu.Chip.profile), with where the chip's
-    functions start (chip_main.py's `functions`, asked first) in the last answer's
+    functions start (chip_main.py's `functions`, asked last) in the last answer's
     "functions"."""
     excerpt = work / "chip_plan.gcode"
     gcode = gcode or paths.EXAMPLE_GCODE
@@ -240,9 +240,6 @@ def _planner_chip(work, requests, gcode=None, profile=None):
     settings = dict({"tick_us": PLANNER_TICK_US}, **OVERRIDES)
     with emu.Chip(BOARD, settings=settings, files=files, max_emu_s=120,
                   max_wall_s=900) as chip:
-        functions = []
-        if profile:
-            functions = [t for t in chip.command("functions") if t.startswith("FUN ")]
         for i, request in enumerate(requests):
             profiled = profile and i == len(requests) - 1
             if profiled:
@@ -257,8 +254,9 @@ def _planner_chip(work, requests, gcode=None, profile=None):
             if r.get("failed") or r["errors"] or r.get("timed", {}).get("errors"):
                 raise RuntimeError("planning on the chip: %s" % r)
             got.append(r)
-    if profile:
-        got[-1]["functions"] = functions
+        if profile:  # after the plans: it makes garbage the printers' heap has no room for
+            got[-1]["functions"] = [t for t in chip.command("functions")
+                                    if t.startswith("FUN ")]
     return got
 
 
