@@ -44,10 +44,11 @@ def take_one():
 pl.idle = take_one
 recalculate = planner_module._recalculate
 
-def checked_recalculate(lk_buf, mem_buf, newest, hooks):
+def checked_recalculate(w_buf, hooks):
     # The incremental look-ahead must plan what a full pass over the queue plans: in
     # V2 (speed squared), v**2 = v0**2 + 2 a s exactly, within each junction's limit.
-    recalculate(lk_buf, mem_buf, newest, hooks)
+    recalculate(w_buf, hooks)
+    newest = w_buf[lookahead.W_WORDS - 4]  # the slot planned (see lookahead's _W_SLOT)
     first = mem[st.S_TAIL]
     slots = []
     k = first
@@ -199,12 +200,21 @@ PLAN_WORDS = """
 import sys, json
 from array import array
 from mixfw import lookahead as la
+from mixfw.ramp import array_offsets
 lk = array("i", bytes(4 * la.L_WORDS))
-w = array("i", bytes(4 * la.W_WORDS))
+W = la.W_WORDS
+w = array("i", bytes(4 * W))
 out = []
 for bits, n, entry_v2 in json.loads(sys.stdin.read()):
     f = array("f", bytes(array("I", bits)))
-    la.plan_words(lk, 0, f, n, w, entry_v2, 0)
+    # The io array's last seven words: where lk and the floats are (and the step
+    # loop's words, which only recalculate reads), the slot, n, entry_v2, no rate cap.
+    array_offsets(w, W - 7, (lk, f))
+    w[W - 4] = 0
+    w[W - 3] = n
+    w[W - 2] = entry_v2
+    w[W - 1] = 0
+    la.plan_words(w)
     out.append(list(lk))
 print(json.dumps(out))
 """
@@ -258,21 +268,15 @@ def _exact_plan_words(bits, n, entry_v2):
 
 
 def test_a_blocks_words_are_the_same_integers_on_every_build_and_the_exact_ones(mp):
-    """plan_words reads the planner's floats as float32 bits and works in integers: the
-    same words on CPython, the unix port and (CI's second pass) the 32-bit build. Against
-    the exact values: the V2 words within one, the rates within a part in 2**22 (the
-    float32 inputs have 24 bits), and K2 * 4**K_SHIFT, the rate's scale, likewise."""
-    from array import array
+    """plan_words reads the planner's floats as float32 bits and works in integers, on
+    the unix port and (CI's second pass) the 32-bit build. Against the exact values:
+    the V2 words within one, the rates within a part in 2**22 (the float32 inputs have
+    24 bits), and K2 * 4**K_SHIFT, the rate's scale, likewise."""
     from mixfw import lookahead as la
     cases = _plan_word_cases()
-    lk = array("i", bytes(4 * la.L_WORDS))
-    w = array("i", bytes(4 * la.W_WORDS))
-    on_host = []
-    for bits, n, entry_v2 in cases:
-        la.plan_words(lk, 0, array("f", bytes(array("I", bits))), n, w, entry_v2, 0)
-        on_host.append(list(lk))
-    assert mp.json(PLAN_WORDS, stdin=json.dumps(cases).encode()) == on_host
-    for (bits, n, entry_v2), got in zip(cases, on_host):
+    words = mp.json(PLAN_WORDS, stdin=json.dumps(cases).encode())
+    assert len(words) == len(cases)
+    for (bits, n, entry_v2), got in zip(cases, words):
         want = _exact_plan_words(bits, n, entry_v2)
         assert abs(got[la.L_GAIN] - want["gain"]) <= 1, (bits, n)
         assert abs(got[la.L_MAX_ENTRY] - want["max_entry"]) <= 1, (bits, n)
@@ -318,17 +322,37 @@ def test_positions_become_the_same_steps_as_by_the_full_product(mp):
         assert a == b and c == d, case
 
 
-BLOCK_WEIGHTS = """
+SIM_PLANNER = """
 import sys, json
-from array import array
-from mixfw.planner import block_weights
+import simmachine
+sys.modules["machine"] = simmachine
+import board
+from mixfw import assemble, planner
+simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(6)])
+printer = assemble.build(files_root=None)
+pl = printer.planner
+whole = planner._drive_targets
+python = lambda words, e_nm, nm, rem: whole(words, 0, nm, rem) and 0  # counts only
+fast = [0]
+
+
+def viper(words, e_nm, nm, rem):
+    done = whole(words, e_nm, nm, rem)
+    fast[0] += done
+    return done
+"""
+
+BLOCK_WEIGHTS = SIM_PLANNER + """
 out = []
 for counts in json.loads(sys.stdin.read()):
+    # The planner's six drives: counts of fewer drives with 0 for the rest.
     n = len(counts)
-    weights = array("i", [7] * n)
-    steps = array("i", [7] * n)
-    fits = block_weights(array("i", counts), weights, steps, n)
-    out.append([fits, list(steps), list(weights)])
+    for i in range(pl.drives):
+        pl._counts[i] = counts[i] if i < n else 0
+        pl._weights[i] = 7
+        pl._given[i] = 7
+    fits = planner.block_weights(pl._abs_steps)
+    out.append([fits, list(pl._given)[:n], list(pl._weights)[:n]])
 print(json.dumps(out))
 """
 
@@ -917,25 +941,6 @@ def test_a_move_refused_changes_neither_the_position_nor_the_drives_filament(mp)
 
 # A printer on the simulated board; whole, its _drive_targets, and as viper and python
 # two that count the lines it planned (fast), or plan none (every plan _plan_e's own).
-SIM_PLANNER = """
-import sys, json
-import simmachine
-sys.modules["machine"] = simmachine
-import board
-from mixfw import assemble, planner
-simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(6)])
-printer = assemble.build(files_root=None)
-pl = printer.planner
-whole = planner._drive_targets
-python = lambda words, e_nm, nm, rem: whole(words, 0, nm, rem) and 0  # counts only
-fast = [0]
-
-
-def viper(words, e_nm, nm, rem):
-    done = whole(words, e_nm, nm, rem)
-    fast[0] += done
-    return done
-"""
 
 DRIVE_TARGETS = SIM_PLANNER + """
 from plan_only import retire_all
@@ -1067,6 +1072,7 @@ def test_each_drives_plan_in_one_viper_call_is_exact_where_its_arithmetic_turns(
 GEOMETRY = """
 from array import array
 from mixfw import geometry as ge
+from mixfw.ramp import array_offsets
 
 
 def run_geometry(runs):
@@ -1076,11 +1082,14 @@ def run_geometry(runs):
     out = []
     for gf_bits, moves in runs:
         gf = array("f", bytes(array("I", gf_bits)))
+        # g's last three words: where gf and f are, then the move's flags.
+        array_offsets(g, ge.G_WORDS - 3, (gf, f))
         for d, flags in moves:
             for i in range(4):
                 g[ge.G_D + i] = d[i]
-            ge.lengths(g, gf, f, flags)
-            v2 = ge.junction(g, gf, flags)
+            g[ge.G_WORDS - 1] = flags
+            ge.lengths(g)
+            v2 = ge.junction(g)
             out.append([list(array("I", bytes(f))), g[ge.G_LEN], g[ge.G_DIST], v2])
     return out
 """
@@ -1114,8 +1123,8 @@ def _geometry_cases():
 
 
 def test_a_moves_lengths_and_junction_are_the_same_integers_everywhere_and_near_exact(mp):
-    """geometry.py works in integers: the same words on CPython, the unix port and (CI's
-    second pass) the 32-bit build. Against the lengths and the junction worked out from
+    """geometry.py works in integers, on the unix port and (CI's second pass) the 32-bit
+    build. Against the lengths and the junction worked out from
     the float32 mm per unit in double precision: the length to 2**-23 and three of the
     move's units (2**-25 of its largest component), and the junction's V2 where it
     matters (below 300 mm/s) as far as the cosine's 28 bits allow."""
@@ -1132,13 +1141,9 @@ def test_a_moves_lengths_and_junction_are_the_same_integers_everywhere_and_near_
         gf[ge.GF_E_NM] = 1e-6
         gf[ge.GF_ACCEL_JD] = accel_jd
         given.append((list(array("I", bytes(gf))), moves))
-    host = {}
-    exec(GEOMETRY, host)  # the same code as the MicroPython run, on CPython
-    on_host = host["run_geometry"](given)
     script = "import sys, json\n" + GEOMETRY + (
         "print(json.dumps(run_geometry(json.loads(sys.stdin.read()))))\n")
-    assert mp.json(script, stdin=json.dumps(given).encode()) == on_host
-    got = iter(on_host)
+    got = iter(mp.json(script, stdin=json.dumps(given).encode()))
     checked = 0
     for spm, accel_jd, moves in runs:
         scale = [_f32(1.0 / s) for s in spm] + [_f32(1e-6)]

@@ -24,7 +24,16 @@ _G_SIGNS = const(26)  # bit i: component i is negative
 _G_PREV_C = const(27)  # the move before's components, signs and length (4 + 2 words)
 _G_PREV_SIGNS = const(31)
 _G_PREV_LEN = const(32)
-G_WORDS = const(33)
+# Then lengths' and junction's inputs: where the geometry floats (below) and the
+# planner's floats (lookahead.F_*) are, as byte offsets from g's own plus _AT_BIAS (see
+# ramp.array_offsets: set once, as g is made), and the flags (FL_*), which the planner
+# stores for each move. A viper call's argument costs the chip about 1.1 us, and
+# ptr32() of an array 1.4 us; a store a few cycles.
+_G_AT_GF = const(33)
+_G_AT_F = const(34)
+_G_FLAGS = const(35)
+G_WORDS = const(36)
+assert _G_FLAGS == G_WORDS - 1
 # Words of the geometry floats (array 'f', GF_WORDS): mm per unit.
 GF_SCALE = const(0)  # X Y Z E: mm per step
 GF_E_NM = const(4)  # E: mm per nanometre
@@ -34,6 +43,7 @@ GF_WORDS = const(6)
 FL_E_NM = const(16)  # E is in nanometres
 FL_JOIN = const(32)  # the move follows one it may join at speed: work out the junction
 
+_AT_BIAS = const(0x20000000)  # as ramp.array_offsets adds
 _IO_HI = const(8)
 _IO_LO = const(9)
 _IO_A = const(11)
@@ -57,14 +67,16 @@ assert G_D >= ramp.IO_WORDS
 
 
 @micropython.viper
-def lengths(g_buf, gf_buf, f_buf, flags: int) -> int:
+def lengths(g_buf) -> int:
     """The move in g's G_D words -> its components (G_C), its length (G_LEN) and the
-    length its speed is along (G_DIST), which also goes into f_buf's first word (a
-    float array: lookahead.F_MM) as float32 bits. flags: FL_* and the signs. Returns
-    those bits halved (a small int), which order as the lengths do: a comparison
-    without reading the float, which allocates on the chips."""
+    length its speed is along (G_DIST), which also goes into the planner's floats'
+    first word (lookahead.F_MM) as float32 bits. g's flags: FL_* and the signs.
+    Returns those bits halved (a small int), which order as the lengths do: a
+    comparison without reading the float, which allocates on the chips."""
     g = ptr32(g_buf)
-    gf = ptr32(gf_buf)
+    base = int(g) - _AT_BIAS  # the arrays' offsets are from here
+    gf = ptr32(base + g[_G_AT_GF])
+    flags = g[_G_FLAGS]
     # The unit: 2**(top - 27) mm, top the highest bit any component can reach (a
     # product of a and a mantissa of 24 bits has bits(a) + 23 or + 24 bits).
     top = -1000
@@ -156,14 +168,14 @@ def lengths(g_buf, gf_buf, f_buf, flags: int) -> int:
         mant = dist >> (nb - 24)
     else:
         mant = dist << (24 - nb)
-    f = ptr32(f_buf)
+    f = ptr32(base + g[_G_AT_F])
     bits = ((top - 27 + nb - 24 + _BIAS) << 23) | (mant & 0x7FFFFF)
     f[0] = bits
     return (bits >> 1) & 0x3FFFFFFF
 
 
 @micropython.viper
-def junction(g_buf, gf_buf, flags: int) -> int:
+def junction(g_buf) -> int:
     """The fastest the move (its lengths() just worked out) may enter from the move
     before, as the look-ahead's V2 ((mm/s)**2 * 64, at most its range), by the
     junction deviation model; 0 without FL_JOIN. Then the move becomes the move before.
@@ -174,7 +186,7 @@ def junction(g_buf, gf_buf, flags: int) -> int:
     accel * deviation * sin / (1 - sin)."""
     g = ptr32(g_buf)
     v2 = 0
-    if flags & FL_JOIN:
+    if g[_G_FLAGS] & FL_JOIN:
         # The dot product of the directions, in two limbs: the products of the same sign
         # summed, and the other sum taken off.
         sign = 0
@@ -264,7 +276,7 @@ def junction(g_buf, gf_buf, flags: int) -> int:
             g[_IO_HI] = h >> 2
             g[_IO_LO] = (h & 3) << 28
             s = int(isqrt_limbs(g_buf))
-            bits = ptr32(gf_buf)[GF_ACCEL_JD]
+            bits = ptr32(int(g) - _AT_BIAS + g[_G_AT_GF])[GF_ACCEL_JD]
             ex = (bits >> 23) & 0xFF
             if ex:
                 g[_IO_A] = (bits & 0x7FFFFF) | 0x800000

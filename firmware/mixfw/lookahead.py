@@ -78,7 +78,21 @@ _BIAS = const(150)  # float32's exponent bias and its 23 fraction bits
 # lines keep the feed rate of the line before.
 _W_N2_BITS = const(28)
 _W_N2_V2 = const(29)
-W_WORDS = const(30)
+# Then plan_words' and recalculate's inputs, which the planner stores (a viper call's
+# argument costs the chip about 1.1 us, and ptr32() of an array 1.4 us; a store a few
+# cycles): where lk, the floats and the step loop's words are, as byte offsets from
+# io's own plus AT_BIAS (see ramp.array_offsets), then the block's slot, its n, the
+# junction's entry_v2 and the rate_cap (see plan_words).
+_W_AT_LK = const(30)
+_W_AT_F = const(31)
+_W_AT_MEM = const(32)
+_W_SLOT = const(33)
+_W_N = const(34)
+_W_ENTRY_V2 = const(35)
+_W_RATE_CAP = const(36)
+W_WORDS = const(37)
+_AT_BIAS = const(0x20000000)  # as array_offsets adds
+assert _W_RATE_CAP == W_WORDS - 1
 _CAP = const(0x3FFFFFFF)
 _HI = const(8)
 _LO = const(9)
@@ -99,10 +113,10 @@ assert (_A, _B, _C, _S, _HOW) == tuple(range(ramp.IO_WORDS - 5, ramp.IO_WORDS))
 
 
 @micropython.viper
-def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: int):
-    """A new block's words in lk (slot at word `at`) from its floats (F_*), n, its
-    lead-axis steps (0 for a dwell), and entry_v2, the junction's limit (V2, see
-    geometry.junction). Speeds become V2 within the range kept; what the
+def plan_words(w_buf):
+    """A new block's words in lk (its slot's) from its floats (F_*), n, its lead-axis
+    steps (0 for a dwell), and entry_v2, the junction's limit (V2, see
+    geometry.junction), each in the io array w's words (_W_*). Speeds become V2 within the range kept; what the
     block adds to v**2 over its length is 2 a s; mm/s becomes the step loop's rate with
     k = TICK_ONE n / mm, and mm/s**2 its rate change per tick, k a TICK_S.
 
@@ -111,9 +125,14 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
     V2 whose rate it is. In integers here, as the rate is: the same limit in mm/s was
     a speed worked out in floats for every fast line (each float operation allocates
     on the chips)."""
-    lk = ptr32(lk_buf)
     w = ptr32(w_buf)
-    f = ptr32(f_buf)
+    base = int(w) - _AT_BIAS  # the arrays' offsets are from here
+    lk = ptr32(base + w[_W_AT_LK])
+    f = ptr32(base + w[_W_AT_F])
+    at = w[_W_SLOT] * L_WORDS
+    n = w[_W_N]
+    entry_v2 = w[_W_ENTRY_V2]
+    rate_cap = w[_W_RATE_CAP]
     # A local: a call of a module's function looks it up by name first, about 1 us
     # on the chip, and a line makes five or six products.
     prod = product
@@ -259,8 +278,9 @@ def plan_words(lk_buf, at: int, f_buf, n: int, w_buf, entry_v2: int, rate_cap: i
 
 
 @micropython.viper
-def recalculate(lk_buf, mem_buf, newest: int, hooks):
-    """Bring the look-ahead up to date after `newest` was queued (it stops at its end)
+def recalculate(w_buf, hooks):
+    """Bring the look-ahead up to date after the slot plan_words planned (`newest`, in
+    the io array w) was queued (it stops at its end)
     and rewrite the records of the blocks not yet started whose entry or exit changed.
     hooks: (irq_off, irq_on, NVIC mask words: see planner.Planner).
 
@@ -270,8 +290,11 @@ def recalculate(lk_buf, mem_buf, newest: int, hooks):
     and the forward pass starts there. A record is written here, not in a function of
     its own: on curves a line rewrites a dozen, and the call with its arrays' lookups
     cost the chip about 14 us a record."""
-    lk = ptr32(lk_buf)
-    mem = ptr32(mem_buf)
+    w = ptr32(w_buf)
+    base = int(w) - _AT_BIAS
+    lk = ptr32(base + w[_W_AT_LK])
+    mem = ptr32(base + w[_W_AT_MEM])
+    newest = w[_W_SLOT]
     q = mem[_S_QUEUE]
     tail = mem[_S_TAIL]
     first = tail

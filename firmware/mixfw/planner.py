@@ -10,6 +10,7 @@ from mixfw.compat import const, micropython, ptr32
 from mixfw import geometry, heap, lookahead, ramp
 from mixfw import stepper as st
 from mixfw.mixer import MAX_DRIVES, normalize
+from mixfw.ramp import array_offsets
 from mixfw.stepper import schedule_counts
 
 # The step loop's words written for every block, as this module's constants: the
@@ -78,6 +79,11 @@ _FL_JOIN = const(32)
 assert (_G_D, _G_C, _G_DIST, _GF_ACCEL_JD, _FL_E_NM, _FL_JOIN) == (
     geometry.G_D, geometry.G_C, geometry.G_DIST, geometry.GF_ACCEL_JD, geometry.FL_E_NM,
     geometry.FL_JOIN)
+# geometry's words for lengths and junction: where its floats and the planner's are,
+# then the move's flags (_plan_move stores them).
+_G_AT_GF = const(33)
+_G_FLAGS = const(35)
+assert _G_FLAGS == geometry.G_WORDS - 1 == _G_AT_GF + 2
 
 # Largest schedule period the step loop's mixer takes: its products stay below 2**30.
 MAX_PERIOD = 20000
@@ -150,39 +156,6 @@ def spm_digits(steps_per_mm, out, at):
 
 
 @micropython.viper
-def block_weights(counts_buf, weights_buf, steps_buf, n: int) -> int:
-    """Mixer weights that make the step loop give each drive exactly abs(counts[i])
-    steps in a block (one whole period of the schedule); a block runs every drive the
-    same way: abs(counts) into steps, and the weights as the steps over their gcd
-    (arrays 'i' of n words, the drives, made once: len() from viper is a call of
-    about 10 us on the chips). Returns 0 if that period is longer
-    than the mixer takes (nothing written to weights then: add_move scales them). In
-    one viper call, where native code paid a runtime call for every item read or
-    written, and a bytecode call for every gcd."""
-    c = ptr32(counts_buf)
-    s = ptr32(steps_buf)
-    w = ptr32(weights_buf)
-    g = 0
-    total = 0
-    for i in range(n):
-        x = c[i]
-        if x < 0 or x > _CAP:  # negative: a 64-bit port's ptr32 reads it zero-extended
-            x = (0 - x) & _CAP
-        s[i] = x
-        total += x
-        a = x
-        while a:  # g = gcd(x, g)
-            t = g % a
-            g = a
-            a = t
-    if g and total // g > _MAX_PERIOD:
-        return 0
-    for i in range(n):
-        w[i] = s[i] // g if g else 0
-    return 1
-
-
-@micropython.viper
 def _ring_room(mem_buf) -> int:
     """The slot for the next block (S_HEAD), plus _RING_IDLE if the step path has run
     out of work (no block queued or running, no steps still in the DMA ring); -1 while
@@ -232,7 +205,8 @@ _AT_GIVEN = const(21)
 _AT_TARGETS = const(22)
 _AT_IO = const(23)
 _S_E = const(24)  # _drive_targets' words (_E_*) from here
-_S_WORDS = const(93)
+_AT_F = const(93)  # after them: the floats (lookahead's F_*)
+_S_WORDS = const(94)
 _AT_BIAS = const(0x20000000)
 
 
@@ -259,7 +233,7 @@ _E_STRIDE = const(11)
 _E_TOTAL = const(66)
 _E_SYNCED = const(67)
 _E_FITS = const(68)
-assert _E_TOTAL == _E_STRIDE * _MAX_DRIVES and _S_E + _E_FITS + 1 == _S_WORDS
+assert _E_TOTAL == _E_STRIDE * _MAX_DRIVES and _S_E + _E_FITS + 1 == _AT_F
 # ramp.product's words in the limbs' scratch (_RAMP_IO), and its mode P_LIMBS.
 _IO_LO = const(9)
 _IO_REM = const(10)
@@ -267,6 +241,16 @@ _IO_A = const(11)
 _P_LIMBS = const(0)
 assert (_IO_LO, _IO_REM, _IO_A, _P_LIMBS) == (ramp.IO_LO, ramp.IO_LO + 1,
                                               ramp.IO_WORDS - 5, ramp.P_LIMBS)
+# lookahead's words for plan_words and recalculate in the same array, which
+# _plan_move stores.
+_W_AT_LK = const(30)
+_W_AT_F = const(31)
+_W_AT_MEM = const(32)
+_W_SLOT = const(33)
+_W_N = const(34)
+_W_ENTRY_V2 = const(35)
+_W_RATE_CAP = const(36)
+assert _W_RATE_CAP == lookahead.W_WORDS - 1
 
 
 @micropython.viper
@@ -386,16 +370,41 @@ _F_BASE_BOTH = const(3)
 _MEMO = const(4)  # pairs of speed and acceleration _base_floats keeps
 
 
-def array_offsets(words, at, arrays):
-    """The arrays' places, as byte offsets from words' own plus 0x20000000 (_AT_BIAS),
-    into words from `at` on: viper finds an array there as ptr32(int(words) -
-    0x20000000 + words[k]), where ptr32() of the array itself costs the chip about
-    1.4 us (the _AT_* of _plan_move, _drive_targets and _xyz_steps; cmd_motion's _SPM_MANT
-    on, for xyz_targets)."""
-    from uctypes import addressof
-    base = addressof(words)
-    for i, a in enumerate(arrays):
-        words[at + i] = addressof(a) - base + _AT_BIAS
+@micropython.viper
+def block_weights(words_buf) -> int:
+    """Mixer weights that make the step loop give each drive exactly abs(counts[i])
+    steps in a block (one whole period of the schedule); a block runs every drive the
+    same way: abs(counts) into steps, and the weights as the steps over their gcd.
+    The arrays are the planner's, found from its words (words_buf: Planner._abs_steps):
+    its counts (_counts), weights (_weights) and steps (_given), arrays 'i' of a word
+    a drive. Returns 0 if that period is longer than the mixer takes (nothing written
+    to weights then: add_move scales them). In one viper call, where native code paid
+    a runtime call for every item read or written, and a bytecode call for every
+    gcd."""
+    words = ptr32(words_buf)
+    at = int(words) - _AT_BIAS
+    c = ptr32(at + words[_AT_COUNTS])
+    s = ptr32(at + words[_AT_GIVEN])
+    w = ptr32(at + words[_AT_WEIGHTS])
+    n = words[_S_DRIVES]
+    g = 0
+    total = 0
+    for i in range(n):
+        x = c[i]
+        if x < 0 or x > _CAP:  # negative: a 64-bit port's ptr32 reads it zero-extended
+            x = (0 - x) & _CAP
+        s[i] = x
+        total += x
+        a = x
+        while a:  # g = gcd(x, g)
+            t = g % a
+            g = a
+            a = t
+    if g and total // g > _MAX_PERIOD:
+        return 0
+    for i in range(n):
+        w[i] = s[i] // g if g else 0
+    return 1
 
 
 @micropython.viper
@@ -415,11 +424,8 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     costs the chip about 1.5 us from viper, as much as a dozen operations on words."""
     mem_buf = io[0]
     geo_buf = io[10]
-    geo_f = io[11]
-    f_buf = io[2]
-    counts_buf = io[12]
-    weights_buf = io[8]
-    words = ptr32(io[3])
+    words_buf = io[3]
+    words = ptr32(words_buf)
     at = int(words) - _AT_BIAS  # the arrays' offsets are from here (_AT_*)
     counts = ptr32(at + words[_AT_COUNTS])
     geo = ptr32(at + words[_AT_GEO])
@@ -460,7 +466,8 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     if how & _HOW_LENGTHS:
         dist_bits = words[_S_DIST_BITS]  # worked out by the call before, for this move
     else:
-        dist_bits = int(_lengths(geo_buf, geo_f, f_buf, geo_flags))
+        geo[_G_FLAGS] = geo_flags
+        dist_bits = int(_lengths(geo_buf))
         words[_S_DIST_BITS] = dist_bits
     if not (how & _HOW_FLOATS):
         # An axis's share of the path is at most 1 (always on X Y Z), so its limits
@@ -496,7 +503,7 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
         # starts its schedule anew and gives each drive exactly its count.
         given = ptr32(at + words[_AT_GIVEN])
         if not (how & _HOW_SCALED):
-            if int(block_weights(counts_buf, weights_buf, io[13], drives)) == 0:
+            if int(block_weights(words_buf)) == 0:
                 return _SCALE
         if e_steps < 0:
             g = given
@@ -508,7 +515,8 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     # as the look-ahead's V2.
     if how & _HOW_JOIN:
         geo_flags |= _FL_JOIN
-    entry_v2 = int(_junction(geo_buf, geo_f, geo_flags))
+    geo[_G_FLAGS] = geo_flags
+    entry_v2 = int(_junction(geo_buf))
     # The block's words, then its look-ahead words and the records it changes
     # (lookahead.plan_words, recalculate), S_HEAD past it, and the planner's position:
     # X Y Z from target, E plus e_steps, and the drives' plus given, each drive's steps.
@@ -527,7 +535,6 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
         weights = ptr32(at + words[_AT_WEIGHTS])
         for i in range(_MAX_DRIVES):
             blk[_B_MIX + 1 + i] = weights[i] if i < drives else 0
-    lk = io[1]
     # No faster than the move before, the ring's slot before this one: its nominal V2.
     # (entry_v2 is 0 after a stop.)
     prev = slot - 1
@@ -536,8 +543,20 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     prev_v2 = ptr32(at + words[_AT_LK])[prev * _L_WORDS + _L_NOMINAL]
     if prev_v2 < entry_v2:
         entry_v2 = prev_v2
-    _plan_words(lk, slot * _L_WORDS, f_buf, n, io[5], entry_v2, words[_S_RATE_CAP])
-    _recalculate(lk, mem_buf, slot, io[4])
+    # lookahead's words for its two calls (the places from the io array's own
+    # address: it is shared by every planner).
+    w_buf = io[5]
+    w = ptr32(w_buf)
+    w_at = int(w) - _AT_BIAS
+    w[_W_AT_LK] = at + words[_AT_LK] - w_at
+    w[_W_AT_F] = at + words[_AT_F] - w_at
+    w[_W_AT_MEM] = at + words[_AT_MEM] - w_at
+    w[_W_SLOT] = slot
+    w[_W_N] = n
+    w[_W_ENTRY_V2] = entry_v2
+    w[_W_RATE_CAP] = words[_S_RATE_CAP]
+    _plan_words(w_buf)
+    _recalculate(w_buf, io[4])
     slot += 1  # committed: the step loop may start it
     if slot >= mem[_S_QUEUE]:
         slot = 0
@@ -749,6 +768,8 @@ class Planner:
                                             self._dir_set, self._dir_clr, self._weights,
                                             self.drive_steps, self._given,
                                             self.drive_targets, _RAMP_IO))
+        array_offsets(self._abs_steps, _AT_F, (self._plan_f,))
+        array_offsets(self._geo, _G_AT_GF, (self._geo_f, self._plan_f))
         self.resync()
 
     # --- queue state, shared with the step loop ---
@@ -1075,7 +1096,11 @@ class Planner:
             m[b + i] = 0
         m[b + st.B_FLAGS] = st.F_DWELL
         m[b + st.B_DWELL] = ticks
-        _plan_words(self.lk, slot * _L_WORDS, self._plan_f, 0, _RAMP_IO, 0, 0)
+        w = _RAMP_IO
+        array_offsets(w, _W_AT_LK, (self.lk, self._plan_f))
+        w[_W_SLOT] = slot
+        w[_W_N] = 0  # a dwell
+        _plan_words(w)
         slot += 1
         m[_S_HEAD] = 0 if slot >= self.queue else slot
         self.joins = False

@@ -42,6 +42,20 @@ _S = const(14)
 _HOW = const(15)
 IO_WORDS = const(16)
 assert _HOW == IO_WORDS - 1 and _A == IO_WORDS - 5
+_AT_BIAS = const(0x20000000)
+
+
+def array_offsets(words, at, arrays):
+    """The arrays' places, as byte offsets from words' own plus 0x20000000 (_AT_BIAS),
+    into words from `at` on: viper finds an array there as ptr32(int(words) -
+    0x20000000 + words[k]), where ptr32() of the array itself costs the chip about
+    1.4 us. MicroPython never moves an object: the places hold while whoever keeps
+    words keeps the arrays too (the planner's _AT_* words; lookahead's and geometry's;
+    cmd_motion's _SPM_MANT on, for xyz_targets)."""
+    from uctypes import addressof
+    base = addressof(words)
+    for i, a in enumerate(arrays):
+        words[at + i] = addressof(a) - base + _AT_BIAS
 
 
 @micropython.viper
