@@ -720,13 +720,15 @@ def test_short_moves_slow_down_while_the_queue_is_under_half_full(mp):
 ISQRT = """
 import sys, json
 from array import array
+from uctypes import addressof
 from mixfw import ramp
 w = array("i", bytes(4 * ramp.IO_WORDS))
+w4 = addressof(w) >> 2  # the helpers take the array as its address over 4
 out = []
 for v in json.loads(sys.stdin.read()):
     w[ramp.IO_HI] = v >> 30
     w[ramp.IO_LO] = v & 0x3FFFFFFF
-    out.append(ramp.isqrt_limbs(w))
+    out.append(ramp.isqrt_limbs(w4))
 print(json.dumps(out))
 """
 
@@ -754,13 +756,15 @@ def test_the_root_of_two_limbs_is_the_integer_square_root(mp):
 DIV = """
 import sys, json
 from array import array
+from uctypes import addressof
 from mixfw import ramp
 w = array("i", bytes(4 * ramp.IO_WORDS))
+w4 = addressof(w) >> 2  # the helpers take the array as its address over 4
 out = []
 for v, c in json.loads(sys.stdin.read()):
     w[ramp.IO_HI] = v >> 30
     w[ramp.IO_LO] = v & 0x3FFFFFFF
-    ramp.div_limbs(w, c)
+    ramp.div_limbs(w4, c)
     out.append([w[ramp.IO_HI], w[ramp.IO_LO], w[ramp.IO_HI + 2]])
 print(json.dumps(out))
 """
@@ -790,13 +794,15 @@ def test_two_limbs_over_a_word_give_the_exact_quotient_and_remainder(mp):
 PRODUCT = """
 import sys, json
 from array import array
+from uctypes import addressof
 from mixfw import ramp
 w = array("i", bytes(4 * ramp.IO_WORDS))
+w4 = addressof(w) >> 2  # the helpers take the array as its address over 4
 out = []
 for a, b, c, s, how in json.loads(sys.stdin.read()):
     for k, v in enumerate((a, b, c, s, how)):  # product()'s operands: w's last five
         w[ramp.IO_WORDS - 5 + k] = v
-    x = ramp.product(w)
+    x = ramp.product(w4)
     out.append([x, w[ramp.IO_HI], w[ramp.IO_LO]])
 print(json.dumps(out))
 """

@@ -74,6 +74,7 @@ def lengths(g_buf) -> int:
     Returns those bits halved (a small int), which order as the lengths do: a
     comparison without reading the float, which allocates on the chips."""
     g = ptr32(g_buf)
+    g4 = int(g) >> 2  # for ramp's helpers
     base = int(g) - _AT_BIAS  # the arrays' offsets are from here
     gf = ptr32(base + g[_G_AT_GF])
     flags = g[_G_FLAGS]
@@ -139,7 +140,7 @@ def lengths(g_buf) -> int:
             if hi or lo:
                 g[_IO_HI] = hi
                 g[_IO_LO] = lo
-                dist = int(isqrt_limbs(g_buf))
+                dist = int(isqrt_limbs(g4))
             if dist < 1:
                 dist = 1  # X Y Z below the unit: still a length to divide by
             g[G_DIST] = dist
@@ -154,7 +155,7 @@ def lengths(g_buf) -> int:
             lo = lo & 0x3FFFFFFF
     g[_IO_HI] = hi
     g[_IO_LO] = lo
-    g[G_LEN] = int(isqrt_limbs(g_buf))
+    g[G_LEN] = int(isqrt_limbs(g4))
     # G_DIST as a float32: 24 bits of it, and the unit's exponent.
     nb = 1  # bits(dist), dist >= 1
     a = dist
@@ -185,6 +186,7 @@ def junction(g_buf) -> int:
     angle between the moves' directions, and the junction's speed**2 is
     accel * deviation * sin / (1 - sin)."""
     g = ptr32(g_buf)
+    g4 = int(g) >> 2  # for ramp's helpers
     v2 = 0
     if g[_G_FLAGS] & FL_JOIN:
         # The dot product of the directions, in two limbs: the products of the same sign
@@ -261,7 +263,7 @@ def junction(g_buf) -> int:
             # num * ONE // den, below ONE: num shifted into two limbs, one division.
             g[_IO_HI] = num >> 2
             g[_IO_LO] = (num & 3) << 28
-            div_limbs(g_buf, den)
+            div_limbs(g4, den)
             cos = g[_IO_LO]
         if cos > _ONE - _STRAIGHT:
             if not sign:
@@ -275,7 +277,7 @@ def junction(g_buf) -> int:
                 h = (_ONE + cos) >> 1
             g[_IO_HI] = h >> 2
             g[_IO_LO] = (h & 3) << 28
-            s = int(isqrt_limbs(g_buf))
+            s = int(isqrt_limbs(g4))
             bits = ptr32(int(g) - _AT_BIAS + g[_G_AT_GF])[GF_ACCEL_JD]
             ex = (bits >> 23) & 0xFF
             if ex:
@@ -284,7 +286,7 @@ def junction(g_buf) -> int:
                 g[_IO_C] = _ONE - s
                 g[_IO_S] = ex - _BIAS + 6
                 g[_IO_HOW] = _P_ROUND
-                v2 = int(product(g_buf))
+                v2 = int(product(g4))
             if v2 > _V2_MAX:
                 v2 = _V2_MAX
     for i in range(4):

@@ -126,6 +126,7 @@ def plan_words(w_buf):
     a speed worked out in floats for every fast line (each float operation allocates
     on the chips)."""
     w = ptr32(w_buf)
+    w4 = int(w) >> 2  # for ramp's helpers
     base = int(w) - _AT_BIAS  # the arrays' offsets are from here
     lk = ptr32(base + w[_W_AT_LK])
     f = ptr32(base + w[_W_AT_F])
@@ -171,14 +172,14 @@ def plan_words(w_buf):
     w[_C] = 1
     w[_S] = e_a + e_mm + 7
     w[_HOW] = _P_ROUND
-    x = int(prod(w_buf))
+    x = int(prod(w4))
     lk[at + L_GAIN] = x if x < _V2_MAX else _V2_MAX
     bits = f[F_NOMINAL2]
     if bits != w[_W_N2_BITS]:
         w[_A] = w[_W_M + F_NOMINAL2]
         w[_B] = 1
         w[_S] = w[_W_E + F_NOMINAL2] - _BIAS + 6
-        x = int(prod(w_buf))  # C and HOW as for GAIN
+        x = int(prod(w4))  # C and HOW as for GAIN
         w[_W_N2_V2] = x if x < _V2_MAX else _V2_MAX
         w[_W_N2_BITS] = bits
     x = w[_W_N2_V2]
@@ -201,7 +202,7 @@ def plan_words(w_buf):
     w[_C] = m_mm
     w[_S] = 26
     w[_HOW] = _P_TOP
-    ke = int(prod(w_buf))
+    ke = int(prod(w4))
     ke += w[_W_E + F_TICK_ONE] - _BIAS - 6 - ns - e_mm
     km = w[_LO]
     # RATE_NOM = nominal k, truncated.
@@ -210,7 +211,7 @@ def plan_words(w_buf):
     w[_C] = 1
     w[_S] = w[_W_E + F_NOMINAL] - _BIAS + ke
     w[_HOW] = _P_TRUNC
-    r_nom = int(prod(w_buf))
+    r_nom = int(prod(w4))
     # acc = k a TICK_S, the rate change per tick, as km * m_at 2**s (a TICK_S comes
     # in as one float, worked out where the acceleration changes: a product less a
     # line): ACC rounded, at least 1.
@@ -220,21 +221,21 @@ def plan_words(w_buf):
     w[_B] = m_at
     w[_S] = s
     w[_HOW] = _P_ROUND
-    acc = int(prod(w_buf))  # C as for RATE_NOM
+    acc = int(prod(w4))  # C as for RATE_NOM
     lk[at + L_ACC] = acc if acc > 1 else 1
     # FLOOR, the slowest rate a block may fall to: reached from rest within half a
     # step, so a block that ends at a stop still finishes. sqrt(acc ONE), ONE = 2**28:
     # the root of acc taken to 54 bits, or 55 for an even exponent, truncated.
     w[_S] = 54
     w[_HOW] = _P_TOP
-    t = int(prod(w_buf)) + s + 28  # A B C as for ACC
+    t = int(prod(w4)) + s + 28  # A B C as for ACC
     if t & 1:
         hi = w[_HI]
         lo = w[_LO]
         w[_HI] = (hi << 1) | (lo >> 29)
         w[_LO] = (lo << 1) & _CAP
         t -= 1
-    floor = int(isqrt_limbs(w_buf))
+    floor = int(isqrt_limbs(w4))
     t = t >> 1
     if t >= 0:
         floor = _CAP if t > 30 or floor > (_CAP >> t) else floor << t
@@ -269,7 +270,7 @@ def plan_words(w_buf):
             w[_C] = k2
             w[_S] = 0
             w[_HOW] = _P_TRUNC
-            x = int(prod(w_buf))
+            x = int(prod(w4))
             if x < lk[at + L_NOMINAL]:
                 lk[at + L_NOMINAL] = x
                 if x < lk[at + L_MAX_ENTRY]:

@@ -107,11 +107,6 @@ def round_steps(v):
     return int(v + 0.5) if v >= 0 else -int(0.5 - v)
 
 
-def steps_from_mm(mm, steps_per_mm):
-    """Absolute millimetres -> absolute steps."""
-    return round_steps(mm * steps_per_mm)
-
-
 def div_round(a, b):
     """a / b for integers (b > 0), rounded as round_steps does: half away from zero."""
     q = (2 * (a if a >= 0 else -a) + b) // (2 * b)
@@ -327,7 +322,7 @@ def _drive_targets(words_buf, e_nm: int, drive_nm, drive_rem) -> int:
                 io[_IO_A + 1] = p
                 io[_IO_A + 2] = qt
                 io[_IO_A + 4] = _P_LIMBS
-                product(io)
+                product(int(io) >> 2)  # its address over 4
                 r = io[_IO_LO]
                 if 2 * io[_IO_REM] >= qt:
                     r += 1

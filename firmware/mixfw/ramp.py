@@ -7,6 +7,8 @@
 # kept as two 30-bit limbs (hi, lo) in words of the io array. Every intermediate stays
 # below 2**31, so the 32-bit chips and the 64-bit unix port give the same results.
 from mixfw.compat import const, micropython, ptr32
+# Viper's cast (a pointer's address) here, and CPython's stand-in for it (see compat).
+from mixfw.compat import int  # noqa: A004
 
 _MAX_TICK = const(0x3FFFFFFF)
 _M30 = const(0x3FFFFFFF)
@@ -58,8 +60,14 @@ def array_offsets(words, at, arrays):
         words[at + i] = addressof(a) - base + _AT_BIAS
 
 
+# The helpers below take their array as its address over 4 (w4: int(ptr32(w)) >> 2, a
+# small int on every port, 32-bit ones included): ptr32() of an array costs the chip
+# about 1.4 us a call, of an int nothing. Their callers keep the array, so its place
+# holds (MicroPython never moves an object).
+
+
 @micropython.viper
-def div_limbs(w_buf, c: int):
+def div_limbs(w4: int, c: int):
     """(hi, lo) //= c and REM = the remainder, for 0 < c < 2**29: hi by one machine
     division (the RP2040's divider), then lo in two digits of 15 bits. Each digit's
     quotient is estimated from c's top 15 bits, which is at most one below and two
@@ -67,7 +75,7 @@ def div_limbs(w_buf, c: int):
     way, so a 32-bit chip's products may wrap on the way: it comes out exact. Digits
     as wide as kept the partial remainder below 2**30 took up to 30 loop turns for a
     large c, about 60 us on the chip."""
-    w = ptr32(w_buf)
+    w = ptr32(w4 << 2)
     hi = w[_HI]
     lo = w[_LO]
     qh = hi // c
@@ -114,12 +122,12 @@ def div_limbs(w_buf, c: int):
 
 
 @micropython.viper
-def isqrt_limbs(w_buf) -> int:
+def isqrt_limbs(w4: int) -> int:
     """floor(sqrt((hi, lo))), for (hi, lo) below 2**56, by Zimmermann's Karatsuba
     square root on four 14-bit digits: the root of the top two digits by Newton's
     method (28 bits, in machine words), the rest with one division. Bit by bit took
     28 loop turns, about 25 us on the chip."""
-    w = ptr32(w_buf)
+    w = ptr32(w4 << 2)
     hi = w[_HI]
     lo = w[_LO]
     if not (hi or lo):
@@ -186,12 +194,12 @@ CAP = const(0x3FFFFFFF)
 
 
 @micropython.viper
-def product(w_buf) -> int:
+def product(w4: int) -> int:
     """x = a * b // c, for 0 <= a, b < 2**30 and 0 < c < 2**29, in two limbs, then as
     `how` says (P_*), with a, b, c, s and how in w's last five words. One call
     where a call each for the product, its scaling and its bit length cost the chip
     about 6 us apiece."""
-    w = ptr32(w_buf)
+    w = ptr32(w4 << 2)
     a = w[_A]
     b = w[_B]
     c = w[_C]
@@ -210,7 +218,7 @@ def product(w_buf) -> int:
     if c > 1:
         w[_HI] = hi
         w[_LO] = lo
-        div_limbs(w_buf, c)
+        div_limbs(w4, c)
         hi = w[_HI]
         lo = w[_LO]
     else:
@@ -305,6 +313,7 @@ def ramp_into(io_buf):
     R1, ACC): planner.ramp_ticks says what it means. Distances are in steps << 28 (the
     step loop's ONE), so n up to 2**30 steps fits the two limbs."""
     io = ptr32(io_buf)
+    io4 = int(io) >> 2  # for the helpers above
     n = io[IO_N]
     r0 = io[IO_R0]
     vn = io[IO_RNOM]
@@ -372,7 +381,7 @@ def ramp_into(io_buf):
     if not peak and (s_hi or s_lo):
         io[_HI] = s_hi
         io[_LO] = s_lo
-        div_limbs(io_buf, 2 * acc)
+        div_limbs(io4, 2 * acc)
         s_hi = io[_HI]
         s_lo = io[_LO]
     if peak:
@@ -396,7 +405,7 @@ def ramp_into(io_buf):
             lo = l1
         io[_HI] = hi
         io[_LO] = lo
-        vn = int(isqrt_limbs(io_buf))
+        vn = int(isqrt_limbs(io4))
     else:
         # Cruise: what the ramps leave.
         c_lo = all_lo - s_lo
@@ -419,7 +428,7 @@ def ramp_into(io_buf):
             # (a cruise below 65,536 steps, most of them).
             io[_HI] = (c_hi << _FRAC) | (c_lo >> (30 - _FRAC))
             io[_LO] = (c_lo << _FRAC) & _M30
-            div_limbs(io_buf, vn)
+            div_limbs(io4, vn)
             if io[_HI] >> (30 - _FRAC):  # 2**30 ticks or more: as below, no fraction
                 c_int = _MAX_TICK
             else:
@@ -428,7 +437,7 @@ def ramp_into(io_buf):
         else:
             io[_HI] = c_hi
             io[_LO] = c_lo
-            div_limbs(io_buf, vn)
+            div_limbs(io4, vn)
             if io[_HI]:
                 c_int = _MAX_TICK
             else:
@@ -457,7 +466,7 @@ def ramp_into(io_buf):
             io[_C] = c
             io[_S] = 0
             io[_HOW] = P_LIMBS
-            product(io_buf)
+            product(io4)
             q = io[_LO]
         frac += q
     decel = a_int + c_int
@@ -485,7 +494,7 @@ def ramp_into(io_buf):
             io[_C] = 1
             io[_S] = 0
             io[_HOW] = P_LIMBS
-            product(io_buf)
+            product(io4)
             lo = io[_LO] + _HALF
             fall = (io[_HI] << 14) + (lo >> _FRAC)
         r_decel = vn - fall

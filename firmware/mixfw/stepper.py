@@ -268,7 +268,7 @@ def schedule(mem_buf, b: int, io_buf):
                     lo = ((mid & 0x7FFF) << 15) + a0 * b0
                     io[_IO_HI] = a1 * b1 + (mid >> 15) + (lo >> 30)
                     io[_IO_LO] = lo & _M30
-                    r = int(isqrt_limbs(io_buf))
+                    r = int(isqrt_limbs(int(io) >> 2))  # its address over 4
                     if shift >= 0:
                         r = r << shift
                     else:
