@@ -225,7 +225,8 @@ class Motion:
         # X Y Z's steps/mm for xyz_targets (and the steps it keeps), and the steps it
         # works out, then E's, then an E word in nanometres (see xyz_targets).
         self._xyz_spm = array("i", bytes(4 * SPM_WORDS))
-        self._steps_out = array("i", bytes(4 * 5))
+        # The planner's own: add_move reads the targets there as words.
+        self._steps_out = planner.target_steps
         array_offsets(self._xyz_spm, _SPM_OFF, (self.offset_nm, self._steps_out))
         self.line = None  # the parsed line whose words xyz_targets reads: see g1
         self._set_steps_per_mm(planner.steps_per_mm)

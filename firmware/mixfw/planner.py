@@ -29,6 +29,9 @@ _B_DWELL = const(14)
 _B_MIX = const(15)
 _F_NEG = const(4)
 _F_DWELL = const(1)
+_F_HOMING = const(2)
+_F_HOME_SHIFT = const(8)
+assert (_F_HOMING, _F_HOME_SHIFT) == (st.F_HOMING, st.F_HOME_SHIFT)
 _B_RATE_INIT = const(8)
 _B_RATE_NOM = const(9)
 _B_RATE_FINAL = const(10)
@@ -201,7 +204,8 @@ _AT_TARGETS = const(22)
 _AT_IO = const(23)
 _S_E = const(24)  # _drive_targets' words (_E_*) from here
 _AT_F = const(93)  # after them: the floats (lookahead's F_*)
-_S_WORDS = const(94)
+_AT_XYZ = const(94)  # and Planner.target_steps
+_S_WORDS = const(95)
 _AT_BIAS = const(0x20000000)
 
 
@@ -353,6 +357,9 @@ _HOW_FLOATS = const(2)
 _HOW_SCALED = const(4)
 _HOW_JOIN = const(8)
 _HOW_LENGTHS = const(16)  # the call before worked out the move's lengths
+# and in the same word, the homing axes (X=1, Y=2, Z=4) and the ring's slot of _HOW_SLOT
+_HOW_HOMING_SHIFT = const(5)
+_HOW_SLOT_SHIFT = const(8)
 # Words of Planner._abs_steps past the drives and the rate cap.
 _S_MIX_ID = const(7)  # the latest block's mix id
 _S_WITHIN = const(8)  # the axes whose limits the speed is within (see _base_floats)
@@ -403,14 +410,14 @@ def block_weights(words_buf) -> int:
 
 
 @micropython.viper
-def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
-               target) -> int:
+def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
     """The move _xyz_steps measured (neg: its answer) with e_nm of filament, whose
     drives' steps are planned (io's counts), from its lengths to its slot of the step
     loop's ring, where its speed is the one add_move set in floats (_base_floats) and
     nothing needs Python: else the answer says what add_move must do first (_FLOATS
-    and the rest). flags: the block's homing flags. how: _HOW_*, with slot the ring's
-    slot where _HOW_SLOT. One call for the lengths, the axes' limits, SLOWDOWN's check,
+    and the rest). how: _HOW_*, the homing axes << _HOW_HOMING_SHIFT and, with
+    _HOW_SLOT, the ring's slot << _HOW_SLOT_SHIFT. pos: Planner.position_steps, whose
+    X Y Z become the target's (Planner.target_steps). One call for the lengths, the axes' limits, SLOWDOWN's check,
     the junction, the block's weights and its words, where each was a call and the
     glue between them native code on objects, at 1 to 2 us an attribute or an
     operation on the chips.
@@ -446,6 +453,7 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     if n == 0:
         return 0  # less than a step: the filament counts toward the next move
     mem = ptr32(at + words[_AT_MEM])
+    slot = how >> _HOW_SLOT_SHIFT
     if not (how & _HOW_SLOT):
         slot = int(_ring_room(mem_buf))
         if slot < 0 or slot & _RING_IDLE:
@@ -521,7 +529,11 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     blk[_B_N] = n
     for i in range(4):
         blk[_B_STEPS + i] = words[i]
-    blk[_B_FLAGS] = flags | neg * _F_NEG
+    flags = neg * _F_NEG
+    homing = (how >> _HOW_HOMING_SHIFT) & 7
+    if homing:
+        flags |= _F_HOMING | (homing << _F_HOME_SHIFT)
+    blk[_B_FLAGS] = flags
     blk[_B_DIR_SET] = ptr32(at + words[_AT_DIR_SET])[neg]
     blk[_B_DIR_CLR] = ptr32(at + words[_AT_DIR_CLR])[neg]
     blk[_B_DWELL] = 0
@@ -556,9 +568,12 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
     if slot >= mem[_S_QUEUE]:
         slot = 0
     mem[_S_HEAD] = slot
-    pos[0] = target[0]
-    pos[1] = target[1]
-    pos[2] = target[2]
+    target = ptr32(at + words[_AT_XYZ])  # within +-_CAP (_xyz_steps)
+    for i in range(3):
+        t = target[i]
+        if t > _CAP:  # negative: a 64-bit port's ptr32 reads it zero-extended
+            t = 0 - ((0 - t) & _CAP)
+        pos[i] = t
     pos[3] = int(pos[3]) + e_steps
     # given, an array 'i': a 64-bit port's ptr32 reads a negative count zero-extended,
     # and the sum's low 32 bits, all the word keeps, are the same.
@@ -571,19 +586,31 @@ def _plan_move(io, e_nm: int, neg: int, flags: int, how: int, slot: int, pos,
 
 
 @micropython.viper
-def _xyz_steps(pos, target, steps_buf) -> int:
-    """X Y Z's steps from pos to target (absolute steps): their sizes into steps_buf
-    (the planner's words: X Y Z) and geometry's D words (found from the words'
-    _AT_GEO), the largest into steps_buf[_S_N_XYZ]. Returns the
-    bits of the axes that run backwards, and those of the axes that move shifted left
-    4; or -1 for a move of 2**30 steps or more, beyond the chips' small ints. One viper
-    call where the same arithmetic in native code cost the chip about 0.1 ms a line."""
+def _xyz_steps(pos, steps_buf) -> int:
+    """X Y Z's steps from pos to the target (absolute steps, in Planner.target_steps,
+    found from the words' _AT_XYZ): their sizes into steps_buf (the planner's words:
+    X Y Z) and geometry's D words (from _AT_GEO), the largest into
+    steps_buf[_S_N_XYZ]. Returns the bits of the axes that run backwards, and those of
+    the axes that move shifted left 4; or -1 for a target or a move of 2**30 steps or
+    more, beyond the chips' small ints. One viper call where the same arithmetic in
+    native code cost the chip about 0.1 ms a line."""
     steps = ptr32(steps_buf)
-    geo = ptr32(int(steps) - _AT_BIAS + steps[_AT_GEO])
+    at = int(steps) - _AT_BIAS
+    geo = ptr32(at + steps[_AT_GEO])
+    target = ptr32(at + steps[_AT_XYZ])
     neg = 0
     n = 0
     for i in range(3):
-        t = int(target[i])
+        # The word's top two bits (as a 64-bit port reads it zero-extended, or a 32-bit
+        # one signed): 0 for 0 .. 2**30 - 1, 3 for -2**30 .. -1, else beyond.
+        t = target[i]
+        top = (t >> 30) & 3
+        if top == 3:
+            t = 0 - ((0 - t) & _CAP)
+            if t == 0:  # -2**30
+                return -1
+        elif top:
+            return -1
         p = int(pos[i])
         # In halves first: the difference itself could pass a 32-bit word.
         h = (t >> 1) - (p >> 1)
@@ -693,6 +720,10 @@ class Planner:
         self.set_steps_per_mm(settings["steps_per_mm"])
         self._min_mm_f = array("f", bytes(4))  # SLOWDOWN's length (see _min_bits)
         self.position_steps = [0, 0, 0, 0]
+        # add_move's X Y Z targets as its viper code reads them: callers may write
+        # theirs here and pass it (cmd_motion's g1 does); else add_move copies them in.
+        # Two words more, which add_move never reads, for the callers' E.
+        self.target_steps = array("i", bytes(4 * 5))
         # Per-slot planning data in integers, for the look-ahead (see lookahead.py).
         # A block's floats for lookahead.plan_words, with the tick's two.
         self._plan_f = array("f", bytes(4 * lookahead.F_WORDS))
@@ -758,12 +789,12 @@ class Planner:
                           _RAMP_IO, self._dir_set, self._dir_clr, self._weights,
                           self.drive_steps, self._geo, self._geo_f, self._counts,
                           self._given, self.position_steps, self.drive_nm,
-                          self.drive_rem, self._base_of)
+                          self.drive_rem, self._base_of, self.target_steps)
         array_offsets(self._abs_steps, _AT_MEM, (mem, self.lk, self._counts, self._geo,
                                             self._dir_set, self._dir_clr, self._weights,
                                             self.drive_steps, self._given,
                                             self.drive_targets, _RAMP_IO))
-        array_offsets(self._abs_steps, _AT_F, (self._plan_f,))
+        array_offsets(self._abs_steps, _AT_F, (self._plan_f, self.target_steps))
         array_offsets(self._geo, _G_AT_GF, (self._geo_f, self._plan_f))
         self.resync()
 
@@ -1115,26 +1146,38 @@ class Planner:
         if e_nm >= piece_nm or e_nm <= -piece_nm:
             return self._add_pieces(target_steps, feed_mm_s, dir_masks, e_nm, mix, replay,
                                     homing_axes)
-        if feed_mm_s <= 0:
-            raise PlanError("feed rate must be > 0")
         # The methods it calls are taken from the class: self.method looks in the
         # instance's attributes first, and a miss in a map of sixty costs the emulated
         # Pico about 9 us.
         io = self._queue_io
         pos = io[14]  # position_steps
         words = io[3]  # _abs_steps
-        # X Y Z's steps go into the planner's words here, in viper, which would take a
-        # big int's low bits for its value: the targets are checked first.
-        neg = -1
-        if (-_CAP <= target_steps[0] <= _CAP and -_CAP <= target_steps[1] <= _CAP
-                and -_CAP <= target_steps[2] <= _CAP):
-            # Bit i: axis i runs backwards; bit 4 + i: it moves.
-            neg = _xyz_steps(pos, target_steps, words)
-        # Before the filament is planned: a move refused changes nothing. (E has at
-        # most MAX_PERIOD steps a block: see add_move.)
+        target = io[18]  # target_steps
+        if target_steps is not target:
+            # X Y Z's targets go into the planner's array, which viper reads as words:
+            # checked first, as viper would take a big int's low bits for its value.
+            for i in range(3):
+                t = target_steps[i]
+                if not -_CAP <= t <= _CAP:
+                    raise PlanError("move too long: from %s to %s steps"
+                                    % (pos[:3], list(target_steps[:3])))
+                target[i] = t
+        # Bit i: axis i runs backwards; bit 4 + i: it moves. Before the filament is
+        # planned: a move refused changes nothing. (E has at most MAX_PERIOD steps a
+        # block: see add_move.)
+        neg = _xyz_steps(pos, words)
         if neg < 0:
             raise PlanError("move too long: from %s to %s steps"
                             % (pos[:3], list(target_steps[:3])))
+        # The speed and acceleration in floats, worked out again only when one of them
+        # or a limit changes (a new F; M201, M203, M204, M205: set_limits): most lines
+        # keep them, and a feed rate kept was checked as it came.
+        accel = self.acceleration_mm_s2 if neg & 0x70 else self.retract_acceleration_mm_s2
+        base = io[17]  # _base_of
+        if feed_mm_s is not base[0] or accel is not base[1]:
+            if feed_mm_s <= 0:
+                raise PlanError("feed rate must be > 0")
+            Planner._base_floats(self, feed_mm_s, accel)
         if replay and e_nm:
             self._replay_counts(e_nm)
         else:
@@ -1144,30 +1187,23 @@ class Planner:
             w = mix[1] if mix else self.tool_mix
             if w is not self._shares[0] or not _drive_targets(words, e_nm, io[15], io[16]):
                 Planner._plan_e(self, e_nm, w)
-        # The speed and acceleration in floats, worked out again only when one of them
-        # or a limit changes (a new F; M201, M203, M204, M205: set_limits): most lines
-        # keep them.
-        accel = self.acceleration_mm_s2 if neg & 0x70 else self.retract_acceleration_mm_s2
-        base = io[17]  # _base_of
-        if feed_mm_s is not base[0] or accel is not base[1]:
-            Planner._base_floats(self, feed_mm_s, accel)
         # The DIR pins to set and clear for each pattern of the axes' signs, worked out
         # once for these masks.
         inv = self.dir_invert_mask
         if dir_masks is not self._dir_masks_seen or inv != self._dir_invert_seen:
             self._dir_words(dir_masks, inv)
-        flags = 0
-        if homing_axes:
-            flags = st.F_HOMING | (homing_axes << st.F_HOME_SHIFT)
-        how = _HOW_JOIN if self.joins and not homing_axes else 0
-        slot = 0
-        got = _plan_move(io, e_nm, neg, flags, how, slot, pos, target_steps)
+        # How _plan_move is to plan, the homing axes and the ring's slot in one word.
+        how = homing_axes << _HOW_HOMING_SHIFT
+        if self.joins and not homing_axes:
+            how |= _HOW_JOIN
+        got = _plan_move(io, e_nm, neg, how, pos)
         while got < 0:
             # In Python, as add_move did all of it before: the ring's room, the speed
             # where a limit binds or SLOWDOWN slows the move, a mix too long.
             if got == _RING_WAIT:
                 slot = Planner._new_slot(self, _ring_room(self.mem))
-                how |= _HOW_SLOT
+                how = (how & ((1 << _HOW_SLOT_SHIFT) - 1) | _HOW_SLOT
+                       | slot << _HOW_SLOT_SHIFT)
                 if not self.joins:  # the step path ran dry
                     how &= ~_HOW_JOIN
             elif got == _FLOATS:
@@ -1176,7 +1212,7 @@ class Planner:
             else:
                 self._scaled(self._given)
                 how |= _HOW_SCALED | _HOW_LENGTHS
-            got = _plan_move(io, e_nm, neg, flags, how, slot, pos, target_steps)
+            got = _plan_move(io, e_nm, neg, how, pos)
         if got == 0:
             return False
         if got == _EXTRUDED and self.keep_extrusion and not replay:
