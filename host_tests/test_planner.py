@@ -44,11 +44,12 @@ def take_one():
 pl.idle = take_one
 recalculate = planner_module._recalculate
 
-def checked_recalculate(w_buf, hooks):
+def checked_recalculate(w4, hooks):
     # The incremental look-ahead must plan what a full pass over the queue plans: in
     # V2 (speed squared), v**2 = v0**2 + 2 a s exactly, within each junction's limit.
-    recalculate(w_buf, hooks)
-    newest = w_buf[lookahead.W_WORDS - 4]  # the slot planned (see lookahead's _W_SLOT)
+    recalculate(w4, hooks)
+    # The slot planned, in the planner's io array (see lookahead's _W_SLOT).
+    newest = planner_module._RAMP_IO[lookahead.W_WORDS - 4]
     first = mem[st.S_TAIL]
     slots = []
     k = first
@@ -199,6 +200,7 @@ def test_the_schedule_is_the_same_integers_on_every_build_and_the_exact_trapezoi
 PLAN_WORDS = """
 import sys, json
 from array import array
+from uctypes import addressof
 from mixfw import lookahead as la
 from mixfw.ramp import array_offsets
 lk = array("i", bytes(4 * la.L_WORDS))
@@ -214,7 +216,7 @@ for bits, n, entry_v2 in json.loads(sys.stdin.read()):
     w[W - 3] = n
     w[W - 2] = entry_v2
     w[W - 1] = 0
-    la.plan_words(w)
+    la.plan_words(addressof(w) >> 2)  # the array as its address over 4
     out.append(list(lk))
 print(json.dumps(out))
 """
@@ -343,6 +345,7 @@ def viper(words, e_nm, nm, rem):
 """
 
 BLOCK_WEIGHTS = SIM_PLANNER + """
+from uctypes import addressof
 out = []
 for counts in json.loads(sys.stdin.read()):
     # The planner's six drives: counts of fewer drives with 0 for the rest.
@@ -351,7 +354,7 @@ for counts in json.loads(sys.stdin.read()):
         pl._counts[i] = counts[i] if i < n else 0
         pl._weights[i] = 7
         pl._given[i] = 7
-    fits = planner.block_weights(pl._abs_steps)
+    fits = planner.block_weights(addressof(pl._abs_steps) >> 2)  # its address over 4
     out.append([fits, list(pl._given)[:n], list(pl._weights)[:n]])
 print(json.dumps(out))
 """
@@ -1077,6 +1080,7 @@ def test_each_drives_plan_in_one_viper_call_is_exact_where_its_arithmetic_turns(
 
 GEOMETRY = """
 from array import array
+from uctypes import addressof
 from mixfw import geometry as ge
 from mixfw.ramp import array_offsets
 
@@ -1094,8 +1098,8 @@ def run_geometry(runs):
             for i in range(4):
                 g[ge.G_D + i] = d[i]
             g[ge.G_WORDS - 1] = flags
-            ge.lengths(g)
-            v2 = ge.junction(g)
+            ge.lengths(addressof(g) >> 2)  # the array as its address over 4
+            v2 = ge.junction(addressof(g) >> 2)
             out.append([list(array("I", bytes(f))), g[ge.G_LEN], g[ge.G_DIST], v2])
     return out
 """

@@ -24,7 +24,8 @@ _G_SIGNS = const(26)  # bit i: component i is negative
 _G_PREV_C = const(27)  # the move before's components, signs and length (4 + 2 words)
 _G_PREV_SIGNS = const(31)
 _G_PREV_LEN = const(32)
-# Then lengths' and junction's inputs: where the geometry floats (below) and the
+# lengths and junction take g as its address over 4 (as ramp's helpers take theirs).
+# Then their inputs: where the geometry floats (below) and the
 # planner's floats (lookahead.F_*) are, as byte offsets from g's own plus _AT_BIAS (see
 # ramp.array_offsets: set once, as g is made), and the flags (FL_*), which the planner
 # stores for each move. A viper call's argument costs the chip about 1.1 us, and
@@ -67,14 +68,13 @@ assert G_D >= ramp.IO_WORDS
 
 
 @micropython.viper
-def lengths(g_buf) -> int:
+def lengths(g4: int) -> int:
     """The move in g's G_D words -> its components (G_C), its length (G_LEN) and the
     length its speed is along (G_DIST), which also goes into the planner's floats'
     first word (lookahead.F_MM) as float32 bits. g's flags: FL_* and the signs.
     Returns those bits halved (a small int), which order as the lengths do: a
     comparison without reading the float, which allocates on the chips."""
-    g = ptr32(g_buf)
-    g4 = int(g) >> 2  # for ramp's helpers
+    g = ptr32(g4 << 2)
     base = int(g) - _AT_BIAS  # the arrays' offsets are from here
     gf = ptr32(base + g[_G_AT_GF])
     flags = g[_G_FLAGS]
@@ -176,7 +176,7 @@ def lengths(g_buf) -> int:
 
 
 @micropython.viper
-def junction(g_buf) -> int:
+def junction(g4: int) -> int:
     """The fastest the move (its lengths() just worked out) may enter from the move
     before, as the look-ahead's V2 ((mm/s)**2 * 64, at most its range), by the
     junction deviation model; 0 without FL_JOIN. Then the move becomes the move before.
@@ -185,8 +185,7 @@ def junction(g_buf) -> int:
     its own move's unit, which cancels; sin(angle / 2) = sqrt((1 - cos) / 2) of the
     angle between the moves' directions, and the junction's speed**2 is
     accel * deviation * sin / (1 - sin)."""
-    g = ptr32(g_buf)
-    g4 = int(g) >> 2  # for ramp's helpers
+    g = ptr32(g4 << 2)
     v2 = 0
     if g[_G_FLAGS] & FL_JOIN:
         # The dot product of the directions, in two limbs: the products of the same sign

@@ -78,7 +78,8 @@ _BIAS = const(150)  # float32's exponent bias and its 23 fraction bits
 # lines keep the feed rate of the line before.
 _W_N2_BITS = const(28)
 _W_N2_V2 = const(29)
-# Then plan_words' and recalculate's inputs, which the planner stores (a viper call's
+# plan_words and recalculate take io as its address over 4 (as ramp's helpers take
+# theirs). Then their inputs, which the planner stores (a viper call's
 # argument costs the chip about 1.1 us, and ptr32() of an array 1.4 us; a store a few
 # cycles): where lk, the floats and the step loop's words are, as byte offsets from
 # io's own plus AT_BIAS (see ramp.array_offsets), then the block's slot, its n, the
@@ -113,7 +114,7 @@ assert (_A, _B, _C, _S, _HOW) == tuple(range(ramp.IO_WORDS - 5, ramp.IO_WORDS))
 
 
 @micropython.viper
-def plan_words(w_buf):
+def plan_words(w4: int):
     """A new block's words in lk (its slot's) from its floats (F_*), n, its lead-axis
     steps (0 for a dwell), and entry_v2, the junction's limit (V2, see
     geometry.junction), each in the io array w's words (_W_*). Speeds become V2 within the range kept; what the
@@ -125,8 +126,7 @@ def plan_words(w_buf):
     V2 whose rate it is. In integers here, as the rate is: the same limit in mm/s was
     a speed worked out in floats for every fast line (each float operation allocates
     on the chips)."""
-    w = ptr32(w_buf)
-    w4 = int(w) >> 2  # for ramp's helpers
+    w = ptr32(w4 << 2)
     base = int(w) - _AT_BIAS  # the arrays' offsets are from here
     lk = ptr32(base + w[_W_AT_LK])
     f = ptr32(base + w[_W_AT_F])
@@ -279,7 +279,7 @@ def plan_words(w_buf):
 
 
 @micropython.viper
-def recalculate(w_buf, hooks):
+def recalculate(w4: int, hooks):
     """Bring the look-ahead up to date after the slot plan_words planned (`newest`, in
     the io array w) was queued (it stops at its end)
     and rewrite the records of the blocks not yet started whose entry or exit changed.
@@ -291,7 +291,7 @@ def recalculate(w_buf, hooks):
     and the forward pass starts there. A record is written here, not in a function of
     its own: on curves a line rewrites a dozen, and the call with its arrays' lookups
     cost the chip about 14 us a record."""
-    w = ptr32(w_buf)
+    w = ptr32(w4 << 2)
     base = int(w) - _AT_BIAS
     lk = ptr32(base + w[_W_AT_LK])
     mem = ptr32(base + w[_W_AT_MEM])

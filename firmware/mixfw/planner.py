@@ -373,17 +373,18 @@ _MEMO = const(4)  # pairs of speed and acceleration _base_floats keeps
 
 
 @micropython.viper
-def block_weights(words_buf) -> int:
+def block_weights(words4: int) -> int:
     """Mixer weights that make the step loop give each drive exactly abs(counts[i])
     steps in a block (one whole period of the schedule); a block runs every drive the
     same way: abs(counts) into steps, and the weights as the steps over their gcd.
     The arrays are the planner's, found from its words (words_buf: Planner._abs_steps):
-    its counts (_counts), weights (_weights) and steps (_given), arrays 'i' of a word
+    as its address over 4 (as ramp's helpers take theirs): its counts (_counts),
+    weights (_weights) and steps (_given), arrays 'i' of a word
     a drive. Returns 0 if that period is longer than the mixer takes (nothing written
     to weights then: add_move scales them). In one viper call, where native code paid
     a runtime call for every item read or written, and a bytecode call for every
     gcd."""
-    words = ptr32(words_buf)
+    words = ptr32(words4 << 2)
     at = int(words) - _AT_BIAS
     c = ptr32(at + words[_AT_COUNTS])
     s = ptr32(at + words[_AT_GIVEN])
@@ -422,12 +423,12 @@ def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
     glue between them native code on objects, at 1 to 2 us an attribute or an
     operation on the chips.
 
-    Each of io's arrays is taken out of the tuple once: a subscript of an object
-    costs the chip about 1.5 us from viper, as much as a dozen operations on words."""
+    Its arrays are found from the planner's words (_AT_*), and the functions it calls
+    take theirs as addresses over 4: a subscript of an object costs the chip about
+    1.5 us from viper, as much as a dozen operations on words, and ptr32() of an array
+    1.4 us."""
     mem_buf = io[0]
-    geo_buf = io[10]
-    words_buf = io[3]
-    words = ptr32(words_buf)
+    words = ptr32(io[3])
     at = int(words) - _AT_BIAS  # the arrays' offsets are from here (_AT_*)
     counts = ptr32(at + words[_AT_COUNTS])
     geo = ptr32(at + words[_AT_GEO])
@@ -470,7 +471,7 @@ def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
         dist_bits = words[_S_DIST_BITS]  # worked out by the call before, for this move
     else:
         geo[_G_FLAGS] = geo_flags
-        dist_bits = int(_lengths(geo_buf))
+        dist_bits = int(_lengths(int(geo) >> 2))
         words[_S_DIST_BITS] = dist_bits
     if not (how & _HOW_FLOATS):
         # An axis's share of the path is at most 1 (always on X Y Z), so its limits
@@ -506,7 +507,7 @@ def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
         # starts its schedule anew and gives each drive exactly its count.
         given = ptr32(at + words[_AT_GIVEN])
         if not (how & _HOW_SCALED):
-            if int(block_weights(words_buf)) == 0:
+            if int(block_weights(int(words) >> 2)) == 0:
                 return _SCALE
         if e_steps < 0:
             g = given
@@ -519,7 +520,7 @@ def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
     if how & _HOW_JOIN:
         geo_flags |= _FL_JOIN
     geo[_G_FLAGS] = geo_flags
-    entry_v2 = int(_junction(geo_buf))
+    entry_v2 = int(_junction(int(geo) >> 2))
     # The block's words, then its look-ahead words and the records it changes
     # (lookahead.plan_words, recalculate), S_HEAD past it, and the planner's position:
     # X Y Z from target, E plus e_steps, and the drives' plus given, each drive's steps.
@@ -552,8 +553,7 @@ def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
         entry_v2 = prev_v2
     # lookahead's words for its two calls (the places from the io array's own
     # address: it is shared by every planner).
-    w_buf = io[5]
-    w = ptr32(w_buf)
+    w = ptr32(at + words[_AT_IO])
     w_at = int(w) - _AT_BIAS
     w[_W_AT_LK] = at + words[_AT_LK] - w_at
     w[_W_AT_F] = at + words[_AT_F] - w_at
@@ -562,8 +562,8 @@ def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
     w[_W_N] = n
     w[_W_ENTRY_V2] = entry_v2
     w[_W_RATE_CAP] = words[_S_RATE_CAP]
-    _plan_words(w_buf)
-    _recalculate(w_buf, io[4])
+    _plan_words(int(w) >> 2)
+    _recalculate(int(w) >> 2, io[4])
     slot += 1  # committed: the step loop may start it
     if slot >= mem[_S_QUEUE]:
         slot = 0
@@ -1126,7 +1126,8 @@ class Planner:
         array_offsets(w, _W_AT_LK, (self.lk, self._plan_f))
         w[_W_SLOT] = slot
         w[_W_N] = 0  # a dwell
-        _plan_words(w)
+        from uctypes import addressof
+        _plan_words(addressof(w) >> 2)
         slot += 1
         m[_S_HEAD] = 0 if slot >= self.queue else slot
         self.joins = False
