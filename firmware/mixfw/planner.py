@@ -359,6 +359,16 @@ _HOW_JOIN = const(8)
 _HOW_LENGTHS = const(16)  # the call before worked out the move's lengths
 # and in the same word, the homing axes (X=1, Y=2, Z=4) and the ring's slot of _HOW_SLOT
 _HOW_HOMING_SHIFT = const(5)
+# Planner._queue_io's objects: the step loop's words, the planner's, the look-ahead's
+# hooks, position_steps, drive_nm, drive_rem, _base_of, target_steps.
+_Q_MEM = const(0)
+_Q_WORDS = const(1)
+_Q_HOOKS = const(2)
+_Q_POS = const(3)
+_Q_NM = const(4)
+_Q_REM = const(5)
+_Q_BASE = const(6)
+_Q_TARGET = const(7)
 _HOW_SLOT_SHIFT = const(8)
 # Words of Planner._abs_steps past the drives and the rate cap.
 _S_MIX_ID = const(7)  # the latest block's mix id
@@ -413,7 +423,7 @@ def block_weights(words4: int) -> int:
 @micropython.viper
 def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
     """The move _xyz_steps measured (neg: its answer) with e_nm of filament, whose
-    drives' steps are planned (io's counts), from its lengths to its slot of the step
+    drives' steps are planned (the planner's counts), from its lengths to its slot of the step
     loop's ring, where its speed is the one add_move set in floats (_base_floats) and
     nothing needs Python: else the answer says what add_move must do first (_FLOATS
     and the rest). how: _HOW_*, the homing axes << _HOW_HOMING_SHIFT and, with
@@ -427,8 +437,8 @@ def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
     take theirs as addresses over 4: a subscript of an object costs the chip about
     1.5 us from viper, as much as a dozen operations on words, and ptr32() of an array
     1.4 us."""
-    mem_buf = io[0]
-    words = ptr32(io[3])
+    mem_buf = io[_Q_MEM]
+    words = ptr32(io[_Q_WORDS])
     at = int(words) - _AT_BIAS  # the arrays' offsets are from here (_AT_*)
     counts = ptr32(at + words[_AT_COUNTS])
     geo = ptr32(at + words[_AT_GEO])
@@ -563,7 +573,7 @@ def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
     w[_W_ENTRY_V2] = entry_v2
     w[_W_RATE_CAP] = words[_S_RATE_CAP]
     _plan_words(int(w) >> 2)
-    _recalculate(int(w) >> 2, io[4])
+    _recalculate(int(w) >> 2, io[_Q_HOOKS])
     slot += 1  # committed: the step loop may start it
     if slot >= mem[_S_QUEUE]:
         slot = 0
@@ -782,14 +792,11 @@ class Planner:
         # Times the step loop ran dry between two moves with no wait between them
         # (M122): the host or the planner did not keep up, and the axes stopped.
         self.underruns = 0
-        # The arrays _plan_move works with, in one tuple: a viper call's arguments
-        # cost the chip each. Then the objects add_move reads for every line (each
-        # never replaced): a subscript costs the chip about half what an attribute does.
-        self._queue_io = (mem, self.lk, self._plan_f, self._abs_steps, self._hooks,
-                          _RAMP_IO, self._dir_set, self._dir_clr, self._weights,
-                          self.drive_steps, self._geo, self._geo_f, self._counts,
-                          self._given, self.position_steps, self.drive_nm,
-                          self.drive_rem, self._base_of, self.target_steps)
+        # The objects add_move and _plan_move read for every line (_Q_*; each never
+        # replaced), in one tuple: a subscript costs the chip about half what an
+        # attribute does, and a viper call's arguments cost it each.
+        self._queue_io = (mem, self._abs_steps, self._hooks, self.position_steps,
+                          self.drive_nm, self.drive_rem, self._base_of, self.target_steps)
         array_offsets(self._abs_steps, _AT_MEM, (mem, self.lk, self._counts, self._geo,
                                             self._dir_set, self._dir_clr, self._weights,
                                             self.drive_steps, self._given,
@@ -1151,9 +1158,9 @@ class Planner:
         # instance's attributes first, and a miss in a map of sixty costs the emulated
         # Pico about 9 us.
         io = self._queue_io
-        pos = io[14]  # position_steps
-        words = io[3]  # _abs_steps
-        target = io[18]  # target_steps
+        pos = io[_Q_POS]
+        words = io[_Q_WORDS]
+        target = io[_Q_TARGET]
         if target_steps is not target:
             # X Y Z's targets go into the planner's array, which viper reads as words:
             # checked first, as viper would take a big int's low bits for its value.
@@ -1174,7 +1181,7 @@ class Planner:
         # or a limit changes (a new F; M201, M203, M204, M205: set_limits): most lines
         # keep them, and a feed rate kept was checked as it came.
         accel = self.acceleration_mm_s2 if neg & 0x70 else self.retract_acceleration_mm_s2
-        base = io[17]  # _base_of
+        base = io[_Q_BASE]
         if feed_mm_s is not base[0] or accel is not base[1]:
             if feed_mm_s <= 0:
                 raise PlanError("feed rate must be > 0")
@@ -1186,7 +1193,7 @@ class Planner:
             # words: the whole plan in one viper call, and _plan_e, bytecode for the
             # heap native code would take, only where it does not.
             w = mix[1] if mix else self.tool_mix
-            if w is not self._shares[0] or not _drive_targets(words, e_nm, io[15], io[16]):
+            if w is not self._shares[0] or not _drive_targets(words, e_nm, io[_Q_NM], io[_Q_REM]):
                 Planner._plan_e(self, e_nm, w)
         # The DIR pins to set and clear for each pattern of the axes' signs, worked out
         # once for these masks.
