@@ -22,7 +22,7 @@ import plan_only
 TIMED = (
     ("parse", "parser", "parse", "buf, n"),
     ("g1", "commands", "G1", "line"),
-    ("motion.xyz_targets", "cmd_motion", "xyz_targets", "a, b, c, d, e, f, g"),
+    ("motion.xyz_targets", "cmd_motion", "xyz_targets", "a, b, c, d, e"),
     ("motion._queue", "motion_class", "_queue", "self, steps, xyz, e_nm, feed_mm_s"),
     ("before_extrude", "before_extrude", 0, "z, e_nm"),
     ("planner.add_move", "planner", "add_move",

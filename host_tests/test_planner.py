@@ -412,7 +412,7 @@ for s, xs in json.loads(sys.stdin.read()):
     got = []
     for x in xs:
         nm[0] = x
-        xyz_targets(spm, 0, nm, array("i", bytes(12)), 0, 0, None)
+        xyz_targets(spm, 0, nm, array("i", bytes(12)), None)
         got.append(steps[0])
     out.append([got, [scaled_round(x, p, q) for x in xs]])
 print(json.dumps(out))
@@ -472,8 +472,9 @@ for text, pos, relative, travel, at in json.loads(sys.stdin.read()):
     # spm's last five words: where the line's words, the offsets, the steps and the
     # travel are.
     array_offsets(spm, SPM_WORDS - 5, (line.mant, line.decimals, off, steps, travel_nm))
-    got = xyz_targets(spm, line.present & MOVE_BITS, array("i", pos), target, relative,
-                      1 if travel else 0, at)
+    # The word before them: the modes, relative (1) and soft limits (2).
+    spm[SPM_WORDS - 6] = (1 if relative else 0) | (2 if travel else 0)
+    got = xyz_targets(spm, line.present & MOVE_BITS, array("i", pos), target, at)
     out.append([got, list(target), list(steps)])
 print(json.dumps(out))
 """

@@ -30,16 +30,22 @@ _AXIS_MOVED = const(16)
 # and its step (2 words an axis), and a bit per axis whose pair holds.
 _SPM_LAST = const(9)
 _SPM_HELD = const(15)
-# Then where the arrays it reads are (planner.array_offsets): the parsed line's
+# Then the modes it moves in (_MODE_*: G90/G91, M211 and the soft_limits option), as
+# a word it reads rather than arguments (each costs the chip about 1.1 us a call).
+_SPM_MODES = const(16)
+_MODE_RELATIVE = const(1)
+_MODE_SOFT = const(2)
+_MODE_SOFT_OPTION = const(4)  # the option as last applied: M211 holds until it changes
+# Then where the arrays it reads are (ramp.array_offsets): the parsed line's
 # mantissas and decimals, G92's offsets, the steps it works out, the soft limits'
 # travel. ptr32() of an array costs the chip about 1.4 us, of an address nothing.
-_SPM_MANT = const(16)
-_SPM_DEC = const(17)
-_SPM_OFF = const(18)
-_SPM_STEPS = const(19)
-_SPM_TRAVEL = const(20)
+_SPM_MANT = const(17)
+_SPM_DEC = const(18)
+_SPM_OFF = const(19)
+_SPM_STEPS = const(20)
+_SPM_TRAVEL = const(21)
 _AT_BIAS = const(0x20000000)  # as array_offsets adds
-SPM_WORDS = const(21)
+SPM_WORDS = const(22)
 assert _SPM_TRAVEL + 1 == SPM_WORDS  # the places are the last five words
 # 10**12 (NM_PER_MM * SPM_SCALE) in 30-bit limbs, and 2 * 10**12 = 2**13 * (5**6)**2.
 _E12_HI = const(931)
@@ -56,11 +62,10 @@ _RETRACT_REPLAY = const(2)
 
 
 @micropython.viper
-def xyz_targets(spm_buf, named: int, pos_buf, target_buf, relative: int, soft: int,
-                at) -> int:
+def xyz_targets(spm_buf, named: int, pos_buf, target_buf, at) -> int:
     """The X Y Z a G0/G1 line names with a number (bits of letter indexes in named),
     from its parsed words (gcode.Line's mant and decimals), as exact nanometres into
-    target: pos's where not named, added to pos's if relative. Further decimals round
+    target: pos's where not named, added to pos's if relative (spm_buf's modes word). Further decimals round
     half away from zero, as Line.fixed_at. Then each axis's absolute step at its
     machine position (target + G92's offset) into the steps array, with the steps/mm
     planner.spm_digits put in spm_buf (SPM_WORDS: the step an axis had at the same
@@ -79,7 +84,7 @@ def xyz_targets(spm_buf, named: int, pos_buf, target_buf, relative: int, soft: i
     E's word, and (_AXIS_MOVED << a) for each axis a whose step differs from at[a]
     (at: the queue's position, or None). Or, refused, -_BEYOND - a if axis a's word,
     target or machine position is beyond +-_NM_MAX nanometres (1,073 mm, the chips'
-    small ints), or with soft limits (soft: 1; the travel: each axis's in nm)
+    small ints), or with soft limits (the modes word; the travel: each axis's in nm)
     -_OUTSIDE - a if its machine position is outside 0..travel. pos, target, the
     offsets and the travel are arrays 'i' of X Y Z nanometres, read and written as
     words. In one viper call, where Line.fixed_at, the sums, the checks and
@@ -92,6 +97,8 @@ def xyz_targets(spm_buf, named: int, pos_buf, target_buf, relative: int, soft: i
     pos = ptr32(pos_buf)
     target = ptr32(target_buf)
     off = ptr32(base + spm[_SPM_OFF])
+    relative = spm[_SPM_MODES] & _MODE_RELATIVE
+    soft = spm[_SPM_MODES] & _MODE_SOFT
     travel = spm  # read only with soft limits on
     if soft:
         travel = ptr32(base + spm[_SPM_TRAVEL])
@@ -232,8 +239,7 @@ class Motion:
         self._set_steps_per_mm(planner.steps_per_mm)
         self.e_nm = 0  # logical E
         self.e_offset_nm = 0  # filament = logical E + offset (G92 E, G10/G11)
-        self.absolute = True
-        self.absolute_e = True
+        self.absolute_e = True  # G90/G91 for X Y Z: in _xyz_spm's modes word
         self.feed_mm_s = settings["default_feed_mm_s"]
         self._travel(settings["travel_mm"])
         self.homing_feed_mm_s = settings["homing_feed_mm_s"]
@@ -241,7 +247,8 @@ class Motion:
         self.dir_masks = pins.axis_dir_masks()
         self.enabled = 0  # bit per driver: X Y Z then drives
         self._drive_bits = ((1 << self.drives) - 1) << 3
-        self.soft_limits = self._soft_option = settings.get("soft_limits", True)
+        if settings.get("soft_limits", True):  # in _xyz_spm's modes word (see there)
+            self._xyz_spm[_SPM_MODES] = _MODE_SOFT | _MODE_SOFT_OPTION
         # Longest E move accepted, as Marlin's PREVENT_LENGTHY_EXTRUDE.
         self.max_extrude_mm = settings.get("max_extrude_mm", 200.0)
         self._max_extrude_nm = nm_from_mm(self.max_extrude_mm)
@@ -272,9 +279,11 @@ class Motion:
         self.homing_feed_mm_s = settings["homing_feed_mm_s"]
         # M211 holds until M211 or a restart, as Marlin's does: the option changes it
         # only when the option itself changes (any setting's change applies them all).
-        option = settings.get("soft_limits", True)
-        if option != self._soft_option:
-            self.soft_limits = self._soft_option = option
+        on = settings.get("soft_limits", True)
+        modes = self._xyz_spm[_SPM_MODES]
+        if bool(on) != bool(modes & _MODE_SOFT_OPTION):
+            self._xyz_spm[_SPM_MODES] = modes & _MODE_RELATIVE | (
+                _MODE_SOFT | _MODE_SOFT_OPTION if on else 0)
         self.max_extrude_mm = settings.get("max_extrude_mm", 200.0)
         self._max_extrude_nm = nm_from_mm(self.max_extrude_mm)
         self._retraction_settings(settings)
@@ -319,10 +328,10 @@ class Motion:
 
     def machine_steps(self):
         """X Y Z as absolute steps from the logical position; E as planned (drive steps).
-        In an array made once: valid until the next call or G1 (the planner and
-        Transitions copy what they keep)."""
+        In the planner's target_steps: valid until the next call, G1 or move queued
+        (the planner and Transitions copy what they keep)."""
         # No word named: the line's words are not read.
-        verdict = xyz_targets(self._xyz_spm, 0, self.pos_nm, self._spare_nm, 0, 0, None)
+        verdict = xyz_targets(self._xyz_spm, 0, self.pos_nm, self._spare_nm, None)
         if verdict < 0:
             self._refuse_target(self.pos_nm, verdict)
         self._steps_out[3] = self.planner.position_steps[3]
@@ -374,8 +383,7 @@ class Motion:
         if line is not self.line:  # mostly the same parser's line as the line before
             self.line = line
             array_offsets(spm, _SPM_MANT, (line.mant, line.decimals))
-        moved = xyz_targets(spm, valued & MOVE_BITS, pos, target, not self.absolute,
-                            self.soft_limits, self.queue.position_steps)
+        moved = xyz_targets(spm, valued & MOVE_BITS, pos, target, self.queue.position_steps)
         steps = self._steps_out
         if moved < 0:
             self._refuse_target(target, moved)
@@ -534,10 +542,12 @@ class Motion:
 
     # G90 / G91: absolute / relative coordinates (E follows, as in Marlin).
     def g90(self, line):
-        self.absolute = self.absolute_e = True
+        self._xyz_spm[_SPM_MODES] &= ~_MODE_RELATIVE
+        self.absolute_e = True
 
     def g91(self, line):
-        self.absolute = self.absolute_e = False
+        self._xyz_spm[_SPM_MODES] |= _MODE_RELATIVE
+        self.absolute_e = False
 
     # M82 / M83: absolute / relative E only.
     def m82(self, line):
@@ -601,9 +611,11 @@ class Motion:
 
     # M211 [S0|S1]: soft limits off/on; no S reports.
     def m211(self, line):
+        spm = self._xyz_spm
         if line.has("S"):
-            self.soft_limits = bool(line.int("S", lo=0, hi=1))
-        self.reply("echo:Soft endstops: %s" % ("On" if self.soft_limits else "Off"))
+            on = _MODE_SOFT if line.int("S", lo=0, hi=1) else 0
+            spm[_SPM_MODES] = spm[_SPM_MODES] & ~_MODE_SOFT | on
+        self.reply("echo:Soft endstops: %s" % ("On" if spm[_SPM_MODES] & _MODE_SOFT else "Off"))
 
 
 def register(printer, motion):

@@ -1350,9 +1350,12 @@ class Planner:
         pieces = (abs(e_nm) * max(self._spm_fixed)
                   // (NM_PER_MM * SPM_SCALE * (MAX_PERIOD - 2 * MAX_DRIVES))) + 1
         start = list(self.position_steps)  # which each piece changes in place
+        # A copy: the targets may be in the planner's target_steps, which each piece's
+        # add_move overwrites.
+        end = list(target_steps[:3])
         added = False
         for k in range(1, pieces + 1):
-            point = [start[i] + div_round((target_steps[i] - start[i]) * k, pieces)
+            point = [start[i] + div_round((end[i] - start[i]) * k, pieces)
                      for i in range(3)]
             piece_nm = e_nm * k // pieces - e_nm * (k - 1) // pieces
             added = self.add_move(point, feed_mm_s, dir_masks, piece_nm, mix, replay,
