@@ -125,11 +125,10 @@ def stepping_printer():
         # nor a long queue: the heap they took left too little for the PIO programs
         # its step path assembles when it starts, once a change of the firmware's
         # code had moved the pieces (MemoryError).
-        # Its reserve goes back first: the heap's gaps beside it may be too small for
-        # the config's tables (a 776-byte one found none), which then come first in
-        # the reserve's block and leave the rest of it whole for build()'s arrays.
-        heap.release()
+        # Its config first, and its garbage collected (22 kB of it, in pieces across
+        # the heap): then the reserve goes back, whole for build()'s tables and arrays.
         config = Config(dict(board.SETTINGS, trace_records=0, queue_blocks=4), None)
+        heap.release()
         printer = assemble.build(config, files_root=None)
         for line in STEP_SETUP + (STEP_MOVE,):
             printer.run_line(printer.parser.parse(line, len(line)))

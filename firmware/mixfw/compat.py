@@ -1,5 +1,6 @@
 # Lets the pure modules (gcode, mixer) import on CPython too, so host tools reuse them
-# instead of carrying a second copy. On MicroPython the real decorators are used.
+# instead of carrying a second copy. On MicroPython the real decorators are used; the
+# CPython stand-ins are a module of their own (cpython), whose code the chips never load.
 try:
     import micropython
     const = micropython.const
@@ -8,39 +9,4 @@ try:
     ptr32 = ptr8 = ptr16 = None
     int = int
 except ImportError:
-    import builtins
-    class _Micropython:
-        @staticmethod
-        def viper(f):
-            return f
-
-        native = viper
-
-        @staticmethod
-        def const(v):
-            return v
-
-    micropython = _Micropython()
-    const = micropython.const
-
-    # Viper's pointer casts: on CPython the buffer itself indexes the same way.
-    def ptr32(buf):
-        if isinstance(buf, builtins.int):  # an address int() gave: its buffer
-            return _ADDRESSED[buf]
-        # An array('f') is read as its bits, as viper reads it.
-        if getattr(buf, "typecode", None) == "f":
-            return memoryview(buf).cast("B").cast("I")
-        return buf
-
-    # Viper's int() of a pointer is its address, which ptr32() takes back (ramp.py's
-    # helpers take their array so): on CPython a key of the buffer's, a multiple of 4.
-    _ADDRESSED = {}
-
-    def int(x=0, *base):
-        if base or isinstance(x, (builtins.int, float, str, bytes)):
-            return builtins.int(x, *base)
-        at = 4 * id(x)
-        _ADDRESSED[at] = x
-        return at
-
-    ptr8 = ptr16 = ptr32
+    from mixfw.cpython import micropython, const, ptr32, ptr8, ptr16, int  # noqa: F401
