@@ -101,7 +101,7 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     printer = Printer(settings["line_buffer_bytes"], machine.idle, RAW_COMMANDS)
     planner = Planner(mem, settings, printer.idle, machine.disable_irq, machine.enable_irq,
                       lk, feed.irq if feed else None)
-    planner.dir_invert_mask = pins.dir_invert_mask
+    planner.set_dir_invert(pins.dir_invert_mask)
     motion = cmd_motion.Motion(planner, pins, settings, printer.reply)
     motion.feed = feed
     # A halt stops motion before anything is reported; steps the DMA ring still held

@@ -205,7 +205,10 @@ _AT_IO = const(23)
 _S_E = const(24)  # _drive_targets' words (_E_*) from here
 _AT_F = const(93)  # after them: the floats (lookahead's F_*)
 _AT_XYZ = const(94)  # and Planner.target_steps
-_S_WORDS = const(95)
+# 1 while the latest block is a move the next one may join at speed (geometry.junction
+# has its direction); 0 after a stop, which _plan_move's homing moves are too.
+_S_JOINS = const(95)
+_S_WORDS = const(96)
 _AT_BIAS = const(0x20000000)
 
 
@@ -350,13 +353,11 @@ _RING_WAIT = const(-1)  # the ring is full, or the step path idle (see _new_slot
 _FLOATS = const(-2)  # a limit binds, SLOWDOWN may, or the floats are another move's
 _SCALE = const(-3)  # too many steps for the mixer's weights (see _scaled)
 _EXTRUDED = const(2)  # queued, with filament forward
-# What add_move has done of that (_plan_move's `how`), and whether the move may join
-# the one before at speed.
+# What add_move has done of that (_plan_move's `how`).
 _HOW_SLOT = const(1)
 _HOW_FLOATS = const(2)
 _HOW_SCALED = const(4)
-_HOW_JOIN = const(8)
-_HOW_LENGTHS = const(16)  # the call before worked out the move's lengths
+_HOW_LENGTHS = const(8)  # the call before worked out the move's lengths
 # and in the same word, the homing axes (X=1, Y=2, Z=4) and the ring's slot of _HOW_SLOT
 _HOW_HOMING_SHIFT = const(5)
 # Planner._queue_io's objects: the step loop's words, the planner's, the look-ahead's
@@ -527,7 +528,8 @@ def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
         words[_S_MIX_ID] = mix_id
     # The junction's speed, from the deviation model (a stop if the queue ran empty),
     # as the look-ahead's V2.
-    if how & _HOW_JOIN:
+    homing = (how >> _HOW_HOMING_SHIFT) & 7
+    if words[_S_JOINS] and not homing:
         geo_flags |= _FL_JOIN
     geo[_G_FLAGS] = geo_flags
     entry_v2 = int(_junction(int(geo) >> 2))
@@ -541,7 +543,6 @@ def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
     for i in range(4):
         blk[_B_STEPS + i] = words[i]
     flags = neg * _F_NEG
-    homing = (how >> _HOW_HOMING_SHIFT) & 7
     if homing:
         flags |= _F_HOMING | (homing << _F_HOME_SHIFT)
     blk[_B_FLAGS] = flags
@@ -578,6 +579,7 @@ def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
     if slot >= mem[_S_QUEUE]:
         slot = 0
     mem[_S_HEAD] = slot
+    words[_S_JOINS] = 0 if homing else 1
     target = ptr32(at + words[_AT_XYZ])  # within +-_CAP (_xyz_steps)
     for i in range(3):
         t = target[i]
@@ -741,9 +743,6 @@ class Planner:
         self.lk = lk or heap.zeros(lk_words(q))
         # The last: irq, or a bit of 0 for irq_off and irq_on.
         self._hooks = (irq_off, irq_on, irq or array("i", bytes(12)))
-        # The latest block is a move the next one may join at speed (geometry.junction
-        # has its direction); False after a stop.
-        self.joins = False
         # X Y Z E, n (_xyz_steps), the drives (_plan_move: len() is a call), the
         # fastest rate the step loop may step at (see lookahead.plan_words), and
         # _plan_move's words (_S_MIX_ID on).
@@ -779,10 +778,10 @@ class Planner:
         # The latest weights _plan_e took, and their total.
         self._shares = (None, 1)
         self.before_sync = []  # fn() each: moves held before the planner are handed over
-        self.dir_invert_mask = 0  # DIR pins of motors wired the other way round
-        self._dir_set = array("i", bytes(4 * 16))  # see _dir_words
+        self.dir_invert_mask = 0  # DIR pins of motors wired the other way round: see
+        self._dir_set = array("i", bytes(4 * 16))  # set_dir_invert, _dir_words
         self._dir_clr = array("i", bytes(4 * 16))
-        self._dir_masks_seen = self._dir_invert_seen = None
+        self._dir_masks_seen = None
         # For retract_policy 2: the latest extrusion as stretches [start, end) of block
         # schedules (weights, start, end), newest last, and what retractions took back
         # from it, taken-first first. See _replay_counts.
@@ -817,7 +816,7 @@ class Planner:
             fn()
         while self.busy():
             self.idle()
-        self.joins = False
+        self._abs_steps[_S_JOINS] = 0
 
     def abort(self):
         """Drop every queued block at once (M112, faults). The step loop's counters
@@ -833,7 +832,7 @@ class Planner:
         for i in range(self.drives):
             self.drive_steps[i] = m[st.S_DRIVE_POS + i]
         self._drive_pos_from_steps()
-        self.joins = False
+        self._abs_steps[_S_JOINS] = 0
         self.extruded = []
         self.retracted = []
 
@@ -1114,9 +1113,10 @@ class Planner:
             self.idle()
             slot = _ring_room(m)
         if slot & _RING_IDLE:
-            if self.joins:
+            words = self._abs_steps
+            if words[_S_JOINS]:
                 self.underruns += 1
-            self.joins = False
+            words[_S_JOINS] = 0
             slot ^= _RING_IDLE
         return slot
 
@@ -1137,7 +1137,7 @@ class Planner:
         _plan_words(addressof(w) >> 2)
         slot += 1
         m[_S_HEAD] = 0 if slot >= self.queue else slot
-        self.joins = False
+        self._abs_steps[_S_JOINS] = 0
 
     @micropython.native
     def add_move(self, target_steps, feed_mm_s, dir_masks=None, e_nm=0, mix=None,
@@ -1197,13 +1197,10 @@ class Planner:
                 Planner._plan_e(self, e_nm, w)
         # The DIR pins to set and clear for each pattern of the axes' signs, worked out
         # once for these masks.
-        inv = self.dir_invert_mask
-        if dir_masks is not self._dir_masks_seen or inv != self._dir_invert_seen:
-            self._dir_words(dir_masks, inv)
+        if dir_masks is not self._dir_masks_seen:
+            self._dir_words(dir_masks)
         # How _plan_move is to plan, the homing axes and the ring's slot in one word.
         how = homing_axes << _HOW_HOMING_SHIFT
-        if self.joins and not homing_axes:
-            how |= _HOW_JOIN
         got = _plan_move(io, e_nm, neg, how, pos)
         while got < 0:
             # In Python, as add_move did all of it before: the ring's room, the speed
@@ -1212,8 +1209,6 @@ class Planner:
                 slot = Planner._new_slot(self, _ring_room(self.mem))
                 how = (how & ((1 << _HOW_SLOT_SHIFT) - 1) | _HOW_SLOT
                        | slot << _HOW_SLOT_SHIFT)
-                if not self.joins:  # the step path ran dry
-                    how &= ~_HOW_JOIN
             elif got == _FLOATS:
                 Planner._limited_floats(self, feed_mm_s, accel)
                 how |= _HOW_FLOATS | _HOW_LENGTHS
@@ -1225,7 +1220,6 @@ class Planner:
             return False
         if got == _EXTRUDED and self.keep_extrusion and not replay:
             self._remember_extrusion(tuple(self._weights), list(self._given))
-        self.joins = not homing_axes
         return True
 
     def _base_floats(self, speed, accel):
@@ -1373,10 +1367,16 @@ class Planner:
             self._given[i] = got[i]
         return self._given
 
-    def _dir_words(self, dir_masks, inv):
+    def set_dir_invert(self, mask):
+        """The DIR pins of motors wired the other way round, flipped in every block."""
+        self.dir_invert_mask = mask
+        self._dir_masks_seen = None  # the DIR words are worked out again
+
+    def _dir_words(self, dir_masks):
         """The DIR pins a block sets and clears, for each of the 16 patterns of its X Y Z
         E signs (bit i: axis i runs backwards), with dir_masks per axis (None: no pins)
-        and the motors wired the other way round (inv) flipped."""
+        and the motors wired the other way round (dir_invert_mask) flipped."""
+        inv = self.dir_invert_mask
         for neg in range(16):
             dset = 0
             dclr = 0
@@ -1389,4 +1389,3 @@ class Planner:
             self._dir_set[neg] = (dset & ~inv) | (dclr & inv)
             self._dir_clr[neg] = (dclr & ~inv) | (dset & inv)
         self._dir_masks_seen = dir_masks
-        self._dir_invert_seen = inv
