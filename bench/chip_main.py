@@ -153,6 +153,7 @@ def planned_printer():
 
 
 PRINTERS = {}
+SPACER = []
 
 
 def stepper_steps(printer):
@@ -163,12 +164,18 @@ def stepper_steps(printer):
 def plan(path, stepping, profile=0):
     """profile 1: also what a line allocates and what a collection costs; 2: the
     planner's functions timed (chip_profile)."""
+    # A collection every kB while the printers are built: their garbage, collected
+    # early, leaves holes the next tables fill, and the heap in fewer pieces (built
+    # with none, the second printer's tables once found no room, with 31 kB free in
+    # pieces of under 584 bytes: MemoryError).
+    gc.threshold(1024)
     printer = planned_printer()
     if stepping:
         stepper = stepping_printer()
     else:
         stepper = None
         heap.release()  # the stepping printer's reserve: heap as a board has it
+    gc.threshold(-1)
     planner = printer.planner
     run_line = printer.run_line
     data = LINES.get(path) or Lines(path)
@@ -255,6 +262,10 @@ def serve():
         elif words[0] in ("plan", "profile"):
             try:
                 if words[0] == "plan":
+                    # A spacer of that many bytes first, kept: the printers' objects
+                    # then lie elsewhere in the heap (see chip_rows.LAYOUTS).
+                    if len(words) > 3:
+                        SPACER.append(bytearray(int(words[3])))
                     res = plan(words[1], words[2] == "1")
                 else:
                     res = plan(words[1], False, 1)
