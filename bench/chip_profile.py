@@ -23,7 +23,7 @@ TIMED = (
     ("parse", "parser", "parse", "buf, n"),
     ("g1", "commands", "G1", "line"),
     ("motion.xyz_targets", "cmd_motion", "xyz_targets", "a, b, c, d, e"),
-    ("motion._queue", "motion_class", "_queue", "self, steps, xyz, e_nm, feed_mm_s"),
+    ("motion._queue", "cmd_motion", "_queue", "motion, steps, xyz, e_nm, feed_mm_s"),
     ("before_extrude", "before_extrude", 0, "z, e_nm"),
     ("planner.add_move", "planner", "add_move",
      "target_steps, feed_mm_s, dir_masks=None, e_nm=0, mix=None, replay=False, "
@@ -69,7 +69,7 @@ def _targets(printer):
     motion = printer.motion
     return {"parser": printer.parser, "commands": printer.commands, "motion": motion,
             "before_extrude": motion.before_extrude, "planner": printer.planner,
-            "planner_class": type(printer.planner), "motion_class": type(motion),
+            "planner_class": type(printer.planner),
             "planner_mod": planner_mod, "lookahead": lookahead, "cmd_motion": cmd_motion,
             "plan_only": plan_only}
 

@@ -387,22 +387,21 @@ class Motion:
         steps = self._steps_out
         if moved < 0:
             self._refuse_target(target, moved)
-        target_e_nm = self.e_nm
+        e_was = self.e_nm
+        target_e_nm = e_was
         if (present >> _E_INDEX) & 1:
             if moved & _E_READ:
                 v = steps[4]
             else:  # beyond +-1,073 mm, or no number (which this refuses)
                 v = line.fixed_at(_E_INDEX, _NM_DECIMALS)
             target_e_nm = v if self.absolute_e else target_e_nm + v
-        e_nm = target_e_nm - self.e_nm
+        e_nm = target_e_nm - e_was
         xyz = (moved >> 4) & 7
         if xyz or e_nm:
             if e_nm:
                 for fn in self.before_extrude:
                     fn(pos[2] + target[2], e_nm)
-            # From the class: a method looked up on self is first missed among the
-            # instance's attributes, about 9 us on the emulated Pico.
-            Motion._queue(self, steps, xyz, e_nm, self.feed_mm_s)
+            _queue(self, steps, xyz, e_nm, self.feed_mm_s)
         self.e_nm = target_e_nm
         self.pos_nm = target
         self._spare_nm = pos
@@ -421,41 +420,6 @@ class Motion:
                          "nanometres" % (AXIS_LETTERS[-_BEYOND - verdict],
                                          _NM_MAX // NM_PER_MM))
 
-    @micropython.native
-    def _queue(self, steps, xyz, e_nm, feed_mm_s):
-        """Queue a move of X Y Z (axes in xyz) to steps, with e_nm of filament."""
-        if e_nm:
-            most = self._max_extrude_nm
-            if e_nm > most or e_nm < -most:
-                raise GcodeError("extrusion of %.1f mm in one move is over max_extrude_mm %g"
-                                 % (abs(e_nm) / NM_PER_MM, self.max_extrude_mm))
-            if not self._guards_passed:
-                for guard in self.extrusion_guards:
-                    guard()
-                self._guards_passed = True
-        # Mostly the move's drivers are on already. Not all of them may be: a print
-        # that never moves Z left it off, and enable_for's bytecode call then cost
-        # the chip 35 us a line.
-        if (xyz | (self._drive_bits if e_nm else 0)) & ~self.enabled:
-            self.enable_for(xyz | (8 if e_nm else 0))
-        q = self.queue
-        policy = self.retract_policy
-        if not xyz and policy == _RETRACT_EQUAL and (e_nm < 0 or self.retracted_nm > 0):
-            # A retraction, or the unretraction after it: every drive pulls equally, and
-            # as drives are planned from absolute positions, pushes back exactly.
-            q.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_nm=e_nm,
-                       mix=(q.mix_id, (1,) * self.drives))
-            self.retracted_nm = max(0, self.retracted_nm - e_nm)
-        elif policy == _RETRACT_REPLAY and (e_nm < 0 or (not xyz and self.retracted_nm > 0)):
-            # Wipes (retraction while moving) count as retraction too.
-            q.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_nm=e_nm, replay=True)
-            self.retracted_nm = max(0, self.retracted_nm - e_nm)
-        else:
-            if policy == _RETRACT_REPLAY and e_nm > 0:
-                self.retracted_nm = 0  # as the planner forgets them on extrusion
-            # Positional: a call with keywords costs the chip more.
-            q.add_move(steps, feed_mm_s, self.dir_masks, e_nm)
-
     # G10: firmware retraction by retract_mm at retract_feed_mm_s; the logical E stays.
     def g10(self, line):
         if self.fw_retracted:
@@ -472,7 +436,7 @@ class Motion:
 
     def _fw_retract(self, e_nm, feed_mm_s):
         self.e_offset_nm += e_nm  # the filament moves; the logical E does not
-        self._queue(self.machine_steps(), 0, e_nm, feed_mm_s)
+        _queue(self, self.machine_steps(), 0, e_nm, feed_mm_s)
 
     # G4 P<ms> | S<s>: dwell after the queued moves. Example: G4 P500
     def g4(self, line):
@@ -616,6 +580,45 @@ class Motion:
             on = _MODE_SOFT if line.int("S", lo=0, hi=1) else 0
             spm[_SPM_MODES] = spm[_SPM_MODES] & ~_MODE_SOFT | on
         self.reply("echo:Soft endstops: %s" % ("On" if spm[_SPM_MODES] & _MODE_SOFT else "Off"))
+
+
+@micropython.native
+def _queue(self, steps, xyz, e_nm, feed_mm_s):
+    """Motion self queues a move of X Y Z (axes in xyz) to steps, with e_nm of
+    filament. A function of the module's, not a method: Motion._queue cost a line the
+    class's lookup too, about 2.5 us on the emulated Pico (a method looked up on self
+    is first missed among the instance's attributes: about 9 us)."""
+    if e_nm:
+        most = self._max_extrude_nm
+        if e_nm > most or e_nm < -most:
+            raise GcodeError("extrusion of %.1f mm in one move is over max_extrude_mm %g"
+                             % (abs(e_nm) / NM_PER_MM, self.max_extrude_mm))
+        if not self._guards_passed:
+            for guard in self.extrusion_guards:
+                guard()
+            self._guards_passed = True
+    # Mostly the move's drivers are on already. Not all of them may be: a print
+    # that never moves Z left it off, and enable_for's bytecode call then cost
+    # the chip 35 us a line.
+    if (xyz | (self._drive_bits if e_nm else 0)) & ~self.enabled:
+        self.enable_for(xyz | (8 if e_nm else 0))
+    q = self.queue
+    policy = self.retract_policy
+    if not xyz and policy == _RETRACT_EQUAL and (e_nm < 0 or self.retracted_nm > 0):
+        # A retraction, or the unretraction after it: every drive pulls equally, and
+        # as drives are planned from absolute positions, pushes back exactly.
+        q.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_nm=e_nm,
+                   mix=(q.mix_id, (1,) * self.drives))
+        self.retracted_nm = max(0, self.retracted_nm - e_nm)
+    elif policy == _RETRACT_REPLAY and (e_nm < 0 or (not xyz and self.retracted_nm > 0)):
+        # Wipes (retraction while moving) count as retraction too.
+        q.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_nm=e_nm, replay=True)
+        self.retracted_nm = max(0, self.retracted_nm - e_nm)
+    else:
+        if policy == _RETRACT_REPLAY and e_nm > 0:
+            self.retracted_nm = 0  # as the planner forgets them on extrusion
+        # Positional: a call with keywords costs the chip more.
+        q.add_move(steps, feed_mm_s, self.dir_masks, e_nm)
 
 
 def register(printer, motion):
