@@ -947,6 +947,37 @@ def test_a_move_refused_changes_neither_the_position_nor_the_drives_filament(mp)
     assert plain["drive_steps"][:3] != [0, 0, 0]
 
 
+TARGET_WORDS = SIM_PLANNER + """
+from plan_only import retire_all
+pl.idle = retire_all(printer.mem, pl.queue)
+out = []
+# Each case: where X is, and a target X beyond +-(2**30 - 1) steps but a few steps away,
+# written into the planner's own array (as g1 writes it) or given as a list.
+for start, end in ((2 ** 30 - 10, 2 ** 30 + 5), (-(2 ** 30) + 10, -(2 ** 30)),
+                   (2 ** 30 - 10, 2 ** 30 - 4)):
+    for as_words in (1, 0):
+        pl.set_position_steps([start, 0, 0, 0])
+        target = pl.target_steps if as_words else [0, 0, 0]
+        target[0] = end
+        target[1] = target[2] = 0
+        try:
+            pl.add_move(target, 10.0)
+            got = "planned"
+        except planner.PlanError as e:
+            got = str(e)[:13]
+        out.append([got, pl.position_steps[0] == (end if got == "planned" else start)])
+print(json.dumps(out))
+"""
+
+
+def test_targets_beyond_the_chips_small_ints_are_refused_as_words_as_in_lists(mp):
+    """add_move reads X Y Z's targets from the planner's target_steps as words, in
+    viper: a target past +-(2**30 - 1) steps is refused there as a list's is in Python
+    (move too long), the position kept, even a few steps from where the axis is."""
+    got = mp.json(TARGET_WORDS, stdin=b"")
+    assert got == [["move too long", True]] * 4 + [["planned", True]] * 2
+
+
 # --- each drive's plan in one viper call (planner._drive_targets) ------------------
 
 # A printer on the simulated board; whole, its _drive_targets, and as viper and python
