@@ -82,7 +82,7 @@ _W_N2_V2 = const(29)
 # theirs). Then their inputs, which the planner stores (a viper call's
 # argument costs the chip about 1.1 us, and ptr32() of an array 1.4 us; a store a few
 # cycles): where lk, the floats and the step loop's words are, as byte offsets from
-# io's own plus AT_BIAS (see ramp.array_offsets), then the block's slot, its n, the
+# io's own plus _AT_BIAS (see ramp.array_offsets), then the block's slot, its n, the
 # junction's entry_v2 and the rate_cap (see plan_words).
 _W_AT_LK = const(30)
 _W_AT_F = const(31)
