@@ -212,3 +212,66 @@ def test_the_main_loops_background_takes_nothing_from_the_heap_between_control_p
     between lines at least every 10 ms: between two control periods they take
     nothing from the heap (the control period's own floats are left out)."""
     assert mp.json(BACKGROUND) == [False] * 5
+
+
+# The bytecode functions a G1 line runs on its way to the ring when it brings a new
+# feed rate, when an axis's limits bind or when SLOWDOWN slows it: Planner._base_floats,
+# _limited_floats and what they call. Their floats take a block each from the heap,
+# found at once; a frame takes several, found only after a search through the heap's
+# holes (on the emulated Pico's fragmented heap, hundreds of microseconds a call).
+FEED_PATH = ("_base_floats", "_memo_load", "_work_base_floats", "_within", "_min_bits",
+             "_limited_floats", "_axis_limit", "_slowdown", "_set_floats", "_new_slot")
+
+FRAMES = PROBE + """
+import json, sys, uctypes
+import simmachine
+sys.modules["machine"] = simmachine
+WORD = 8 if sys.maxsize > 2 ** 32 else 4
+def frame_words(fn):
+    # A bytecode function object's fourth word points at its bytecode, which opens with
+    # its frame's size: the locals and stack (n_state) and the exception handlers' depth
+    # (two words each), packed as py/bc.h's MP_BC_PRELUDE_SIG_DECODE unpacks them.
+    code = int.from_bytes(uctypes.bytearray_at(id(fn) + 3 * WORD, WORD), "little")
+    ip = uctypes.bytearray_at(code, 8)
+    z = ip[0]
+    state = (z >> 3) & 0xF
+    handlers = (z >> 2) & 1
+    n = 0
+    while z & 0x80:
+        n += 1
+        z = ip[n]
+        state |= (z & 0x30) << (2 * (n - 1))
+        handlers |= (z & 2) << (n - 1)
+    return state + 1 + 2 * handlers
+def _eleven(a, b):  # 2 arguments, 7 locals, 2 words of stack
+    c = d = e = f = g = h = i = a
+    return c
+def _twelve(a, b):
+    c = d = e = f = g = h = i = j = a
+    return c
+# The reading agrees with the VM: 11 words on the C stack, 12 from the heap.
+assert frame_words(_eleven) == 11 and not allocates(_eleven, 7, 2)
+assert frame_words(_twelve) == 12 and allocates(_twelve, 7, 2)
+import board
+from mixfw import assemble
+from mixfw.planner import Planner
+simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%%d" %% i for i in range(6)])
+printer = assemble.build(files_root=None)
+planner = printer.planner
+accel = planner.acceleration_mm_s2
+def base(speed, accel):
+    Planner._base_floats(planner, speed, accel)
+frames = {name: frame_words(Planner.__dict__[name]) for name in %r}
+new = allocates(base, 50.0, accel)
+print(json.dumps([frames, new, allocates(base, 50.0, accel)]))
+"""
+
+
+def test_a_new_feed_rate_takes_no_frame_from_the_heap(mp):
+    """The planner's functions a line runs when it brings a new feed rate or where a
+    limit binds keep their frames within the 11 words the VM takes from the C stack; a
+    feed rate taken again (the memo's) takes nothing from the heap at all, a new one
+    its floats."""
+    frames, new, again = mp.json(FRAMES % (FEED_PATH,))
+    assert {name: words for name, words in frames.items() if words > 11} == {}
+    assert new and not again

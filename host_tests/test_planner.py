@@ -659,7 +659,7 @@ def test_a_move_keeps_each_axis_within_its_limits_by_its_share(mp):
 
 def test_a_feed_rate_taken_again_plans_as_it_did_the_first_time(mp):
     """A print's retractions, travels and extrusions take turns at a few feed rates, and
-    the planner keeps the latest four's floats (Planner._base_floats' memo): a move at a
+    the planner keeps the floats of the latest eight (Planner._base_floats' memo): a move at a
     feed rate it planned before, kept or long gone from the memo, along X and as a
     retraction of E alone (its own acceleration), plans as the first move at it did."""
     feeds = [600, 1200, 1800, 2400, 3000]  # within E's own limit too

@@ -208,7 +208,8 @@ _AT_XYZ = const(94)  # and Planner.target_steps
 # 1 while the latest block is a move the next one may join at speed (geometry.junction
 # has its direction); 0 after a stop, which _plan_move's homing moves are too.
 _S_JOINS = const(95)
-_S_WORDS = const(96)
+_S_MEMO_NEXT = const(96)  # where the memo's oldest entry starts (see _work_base_floats)
+_S_WORDS = const(97)
 _AT_BIAS = const(0x20000000)
 
 
@@ -380,7 +381,9 @@ _S_DIST_BITS = const(11)  # and the move's length, as lengths' bits
 _S_F_BASE = const(12)  # which floats hold _base_floats' own: _F_BASE_ACCEL the
 _F_BASE_ACCEL = const(2)  # acceleration's, _F_BASE_BOTH its speed's too
 _F_BASE_BOTH = const(3)
-_MEMO = const(4)  # pairs of speed and acceleration _base_floats keeps
+_MEMO = const(8)  # pairs of speed and acceleration _base_floats keeps, each as
+_MEMO_WORDS = const(7)  # speed, accel, its _S_WITHIN, _S_MIN_BITS and the floats
+# _set_floats works out: _F_NOMINAL2, _F_ACCEL_TICK, _GF_ACCEL_JD
 
 
 @micropython.viper
@@ -726,6 +729,8 @@ class Planner:
         # add_move): a list changed in place, as a tuple a new F would be garbage on
         # the chips.
         self._base_of = [None, None]
+        # _base_floats' memo: _MEMO entries of _MEMO_WORDS, one list changed in place.
+        self._memo = [None] * (_MEMO * _MEMO_WORDS)
         self.set_limits(settings)
         tick_us = settings["tick_us"]
         self.tick_s = tick_us * 1e-6
@@ -859,7 +864,9 @@ class Planner:
         self.junction_deviation_mm = settings["junction_deviation_mm"]
         self.min_segment_s = settings["min_segment_time_us"] * 1e-6
         self._base_of[0] = None
-        self._memo = [(None,) * 7] * _MEMO
+        memo = self._memo
+        for i in range(len(memo)):
+            memo[i] = None
 
     def set_mix(self, mix_id, weights, tool=-1):
         """The mix for E moves queued from now on (already normalised weights). The
@@ -1222,6 +1229,11 @@ class Planner:
             self._remember_extrusion(tuple(self._weights), list(self._given))
         return True
 
+    # The bytecode functions below run on lines that change the feed rate or where a
+    # limit binds. Each keeps its locals and stack within 11 words: MicroPython gives a
+    # function with more its frame from the heap at each call, and on a fragmented heap
+    # that search for a hole of several blocks cost the emulated Pico hundreds of
+    # microseconds a call (the line's floats take one block each: found at once).
     def _base_floats(self, speed, accel):
         """For add_move: what the move's speed and acceleration are within (the axes'
         limits, bit i, and bit 4 within eight times E's) and SLOWDOWN's shortest length
@@ -1229,35 +1241,55 @@ class Planner:
         look-ahead and the junction take them, in floats.
 
         Mostly a pair worked out before, taken from the memo: a print's retractions,
-        travels and extrusions take turns at three or four of them, and working them out
-        costs the chip about 0.2 ms (each float operation allocates)."""
+        travels and extrusions take turns at a few of them, and working them out costs
+        the chip about 0.2 ms (each float operation allocates)."""
         base = self._base_of
         base[0] = speed
         base[1] = accel
-        for got in self._memo:
-            if got[1] is accel and got[0] == speed:
-                Planner._memo_load(self, got)
+        memo = self._memo
+        for at in range(0, _MEMO * _MEMO_WORDS, _MEMO_WORDS):
+            if memo[at + 1] is accel and memo[at] == speed:
                 break
         else:
-            Planner._work_base_floats(self, speed, accel)
+            at = Planner._work_base_floats(self, speed, accel)
+        Planner._memo_load(self, at)
         self._abs_steps[_S_F_BASE] = _F_BASE_BOTH
 
-    def _memo_load(self, got):
-        """A memo's pair's words and floats (see _work_base_floats) into the planner's."""
+    def _memo_load(self, at):
+        """The memo's entry at `at`: its words and floats into the planner's."""
+        memo = self._memo
         words = self._abs_steps
-        words[_S_WITHIN] = got[2]
-        words[_S_MIN_BITS] = got[3]
+        words[_S_WITHIN] = memo[at + 2]
+        words[_S_MIN_BITS] = memo[at + 3]
         f = self._plan_f
-        f[_F_ACCEL] = got[1]
-        f[_F_NOMINAL] = got[0]
-        f[_F_NOMINAL2] = got[4]
-        f[_F_ACCEL_TICK] = got[5]
-        self._geo_f[_GF_ACCEL_JD] = got[6]
+        f[_F_ACCEL] = memo[at + 1]
+        f[_F_NOMINAL] = memo[at]
+        f[_F_NOMINAL2] = memo[at + 4]
+        f[_F_ACCEL_TICK] = memo[at + 5]
+        self._geo_f[_GF_ACCEL_JD] = memo[at + 6]
 
     def _work_base_floats(self, speed, accel):
-        """_base_floats' words and floats worked out, and kept in the memo (the oldest
-        pair goes), as (speed, accel, within, SLOWDOWN's bits, then the floats
-        _set_floats works out)."""
+        """_base_floats' words and floats for the pair, worked out into the memo's
+        oldest entry; returns where it starts. Its pair goes in last: an entry left
+        half done matches none."""
+        words = self._abs_steps
+        at = words[_S_MEMO_NEXT]
+        words[_S_MEMO_NEXT] = (at + _MEMO_WORDS) % (_MEMO * _MEMO_WORDS)
+        memo = self._memo
+        memo[at + 1] = None
+        memo[at + 2] = Planner._within(self, speed, accel)
+        memo[at + 3] = Planner._min_bits(self, speed) if self.min_segment_s else 0
+        Planner._set_floats(self, speed, accel)
+        memo[at + 4] = self._plan_f[_F_NOMINAL2]
+        memo[at + 5] = self._plan_f[_F_ACCEL_TICK]
+        memo[at + 6] = self._geo_f[_GF_ACCEL_JD]
+        memo[at] = speed
+        memo[at + 1] = accel
+        return at
+
+    def _within(self, speed, accel):
+        """The axes whose limits speed and accel are within (bit i), and bit 4 if
+        within eight times E's."""
         max_feed = self.max_feed_mm_s
         max_accel = self.max_accel_mm_s2
         within = 0
@@ -1266,16 +1298,7 @@ class Planner:
                 within |= 1 << i
         if speed <= 8 * max_feed[3] and accel <= 8 * max_accel[3]:
             within |= 16
-        words = self._abs_steps
-        words[_S_WITHIN] = within
-        min_s = self.min_segment_s
-        words[_S_MIN_BITS] = Planner._min_bits(self, speed) if min_s else 0
-        Planner._set_floats(self, speed, accel)
-        f = self._plan_f
-        memo = self._memo
-        memo.pop()
-        memo.insert(0, (speed, accel, within, words[_S_MIN_BITS], f[_F_NOMINAL2],
-                        f[_F_ACCEL_TICK], self._geo_f[_GF_ACCEL_JD]))
+        return within
 
     def _min_bits(self, speed):
         """SLOWDOWN's shortest length at speed, as geometry.lengths gives a length."""
@@ -1288,44 +1311,50 @@ class Planner:
         floats of the speed and acceleration asked, where they hold another move's. On
         a print that SLOWDOWN slows every line comes here, and each float operation
         allocates on the chips: the acceleration's floats are kept where they stand."""
-        words = self._abs_steps
-        over = words[_S_OVER]
-        asked = speed
-        asked_accel = accel
-        geo = self._geo
-        if over:
-            inv = 1.0 / geo[_G_DIST]
-            for i in range(4):
-                if (over >> i) & 1:
-                    share = geo[_G_C + i] * inv
-                    v = self.max_feed_mm_s[i] / share
-                    if v < speed:
-                        speed = v
-                    v = self.max_accel_mm_s2[i] / share
-                    if v < accel:
-                        accel = v
-        min_s = self.min_segment_s
-        if min_s:
-            bits = words[_S_MIN_BITS] if speed is asked else Planner._min_bits(self, speed)
-            if bits > words[_S_DIST_BITS]:
-                # Marlin's SLOWDOWN (set_limits), with its bounds: 2 to half the
-                # queue's blocks waiting, and 2 (min_s - t) / waiting added to the time t.
-                waiting = waiting_blocks(self.mem)
-                if 2 <= waiting < self.queue // 2:
-                    dist = self._plan_f[_F_MM]
-                    t = dist / speed
-                    speed = dist / (t + 2 * (min_s - t) / waiting)
-        held = words[_S_F_BASE]
-        if speed is not asked and accel is asked_accel and held & _F_BASE_ACCEL:
+        limited = speed
+        limited_accel = accel
+        if self._abs_steps[_S_OVER]:
+            limited = Planner._axis_limit(self, speed, self.max_feed_mm_s)
+            limited_accel = Planner._axis_limit(self, accel, self.max_accel_mm_s2)
+        if self.min_segment_s:
+            limited = Planner._slowdown(self, limited, limited is speed)
+        if (limited is not speed and limited_accel is accel
+                and self._abs_steps[_S_F_BASE] & _F_BASE_ACCEL):
             # SLOWDOWN alone, mostly: the acceleration's floats stand.
-            f = self._plan_f
-            f[_F_NOMINAL] = speed
-            f[_F_NOMINAL2] = speed * speed
-            words[_S_F_BASE] = _F_BASE_ACCEL
+            self._plan_f[_F_NOMINAL] = limited
+            self._plan_f[_F_NOMINAL2] = limited * limited
+            self._abs_steps[_S_F_BASE] = _F_BASE_ACCEL
             return
-        Planner._set_floats(self, speed, accel)
-        words[_S_F_BASE] = (_F_BASE_BOTH if speed is asked and accel is asked_accel
-                            else 0)
+        Planner._set_floats(self, limited, limited_accel)
+        self._abs_steps[_S_F_BASE] = (_F_BASE_BOTH if limited is speed
+                                      and limited_accel is accel else 0)
+
+    def _axis_limit(self, value, limits):
+        """value (a speed or an acceleration along the path), or lower where an axis
+        _plan_move found over its limits binds: its limit over its share of the path.
+        The same object where none binds."""
+        inv = 1.0 / self._geo[_G_DIST]
+        for i in range(4):
+            if (self._abs_steps[_S_OVER] >> i) & 1:
+                bound = limits[i] / (self._geo[_G_C + i] * inv)
+                if bound < value:
+                    value = bound
+        return value
+
+    def _slowdown(self, speed, asked):
+        """speed, or slower where Marlin's SLOWDOWN (set_limits) slows the move, with
+        its bounds: 2 to half the queue's blocks waiting, and 2 (min_s - t) / waiting
+        added to the time t. asked: speed is the one asked (its length is in the
+        words)."""
+        if ((self._abs_steps[_S_MIN_BITS] if asked else Planner._min_bits(self, speed))
+                <= self._abs_steps[_S_DIST_BITS]):
+            return speed
+        waiting = waiting_blocks(self.mem)
+        if not 2 <= waiting < self.queue // 2:
+            return speed
+        dist = self._plan_f[_F_MM]
+        t = dist / speed
+        return dist / (t + 2 * (self.min_segment_s - t) / waiting)
 
     def _set_floats(self, speed, accel):
         """The look-ahead's floats (lookahead.plan_words) and the junction's."""
