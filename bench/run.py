@@ -45,7 +45,6 @@ SNIPPET_LINES = 600  # of the example, for the step timing and heap-size searche
 TARGETS = {
     "step_loop_ratio": ("<=", 2.5),
     "idle_tick_ratio": ("<=", 1.5),
-    "bytecode_step_loop_ratio": None,
     "step_loop_pin_ratio": None,
     "heap_peak_bytes": ("<=", 65536),
     "heap_at_rest_bytes": None,
@@ -123,11 +122,10 @@ def example_snippet():
 
 def bench_step_loop(res):
     r = micropython("step_cost.py")
-    for key in ("step_loop_ratio", "idle_tick_ratio", "bytecode_step_loop_ratio",
-                "step_loop_pin_ratio"):
+    for key in ("step_loop_ratio", "idle_tick_ratio", "step_loop_pin_ratio"):
         res[key] = r[key]
     res["step_loop_reference_empty_viper_us"] = r["empty_viper_us"]
-    for key in ("step_tick_us", "idle_tick_us", "step_tick_bytecode_us", "step_tick_pin_us"):
+    for key in ("step_tick_us", "idle_tick_us", "step_tick_pin_us"):
         res["step_loop_" + key] = r[key]
     res["step_loop_note"] = ("one step-loop call writing the set/clear registers of a "
                              "simulated RP2040 bank, as on the chip; step_loop_pin_ratio: "

@@ -3,9 +3,10 @@
 # tick (no step due). Each is given as a ratio to an empty viper function with the
 # same arguments, called the same way in the same run. The step loop writes the pins
 # as on a chip (pin_writer "registers" of an RP2040: set/clear registers through
-# ptr32, here the simulated chip's register bank in RAM). Beside it: the same source
-# compiled as plain bytecode, and the Pin.value path, whose cost is mostly the
-# simulated chip recording every edge.
+# ptr32, here the simulated chip's register bank in RAM). Beside it: the Pin.value
+# path, whose cost is mostly the simulated chip recording every edge. (The step loop
+# has no bytecode build since it reads its records through pointers of its own:
+# pointer arithmetic is viper's alone.)
 #   MICROPYPATH=firmware:boards/sim micropython bench/step_cost.py
 import sys
 import json
@@ -25,14 +26,6 @@ REPEATS = 5
 @micropython.viper
 def empty(io) -> int:
     return 0
-
-
-def bytecode_module(path, extra):
-    src = open(path).read().replace("@micropython.viper\n", "")
-    ns = {"__name__": "bytecode"}
-    exec(src, ns)
-    ns.update(extra)
-    return ns
 
 
 def time_calls(fn, io):
@@ -81,20 +74,13 @@ def main_bench():
     simmachine.attach_world(board.PINS, names)
     settings = board.SETTINGS
     simmachine.now_us = 1  # past #0, so only real level changes are recorded
-    mixer_bc = bytecode_module("firmware/mixfw/mixer.py", {})
-    # Bytecode has no ptr32 cast: it indexes the register bank array itself.
-    stepper_bc = bytecode_module("firmware/mixfw/stepper.py", {"ptr32": lambda bank: bank})
-    stepper_bc["mix_load"] = mixer_bc["mix_load"]
     reg = stepping_printer(settings, registers=True)
-    reg_bc = stepping_printer(settings, registers=True)
     idle = idle_printer(settings)
     cases = [
         ("empty_viper_us", empty, reg),
         ("step_tick_us", st.tick, reg),
-        ("step_tick_bytecode_us", stepper_bc["tick"], reg_bc),
         ("step_tick_pin_us", st.tick, stepping_printer(settings)),
         ("idle_tick_us", st.tick, idle),
-        ("idle_tick_bytecode_us", stepper_bc["tick"], idle_printer(settings)),
     ]
     # Rounds over every case, keeping each one's best: a slow spell from other
     # processes then hits a case in one round, not the reference in all of them.
@@ -107,7 +93,6 @@ def main_bench():
     e = res["empty_viper_us"]
     res["step_loop_ratio"] = res["step_tick_us"] / e
     res["idle_tick_ratio"] = res["idle_tick_us"] / e
-    res["bytecode_step_loop_ratio"] = res["step_tick_bytecode_us"] / e
     res["step_loop_pin_ratio"] = res["step_tick_pin_us"] / e
     print(json.dumps(res))
 
