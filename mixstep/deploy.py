@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 
 from mixstep import boards, paths
+from mixfw import inram
 
 # mpy-cross -march per chip: viper and native code are machine code for this core.
 MARCH = {"rp2040": "armv6m", "rp2350": "armv7emsp", "esp32": "xtensawin"}
@@ -35,8 +36,9 @@ SOURCE_FILES = ("main.py", "board.py")
 INFO_CODE = ("import sys, json; i = sys.implementation; print(json.dumps({"
              "'version': list(i.version[:3]), 'mpy': getattr(i, '_mpy', None), "
              "'platform': sys.platform, 'machine': getattr(i, '_machine', '')}))")
-# Run on the board: remove the previous mixfw package, so no stale module survives
-# (a left-over .py would even win over the new .mpy). /mixstep.cfg stays.
+# Run on the board: remove the previous mixfw package and step path copy, so no stale
+# module survives (a left-over .py would even win over the new .mpy, and a mixfw folder
+# would hide a frozen one). /mixstep.cfg stays.
 REMOVE_CODE = ("import os\n"
                "def rm(p):\n"
                "    try:\n"
@@ -49,7 +51,8 @@ REMOVE_CODE = ("import os\n"
                "        os.rmdir(p)\n"
                "    else:\n"
                "        os.remove(p)\n"
-               "rm('mixfw')\n")
+               "rm('mixfw')\n"
+               "rm('%s')\n" % inram.RAM_DIR.lstrip("/"))
 
 
 class DeployError(Exception):
@@ -248,12 +251,26 @@ def deploy_commands(out, port):
             c + ["reset"]]
 
 
-def deploy(board, port, dry_run=False):
+def frozen_commands(out, port):
+    """The mpremote commands for a board whose image has the firmware frozen in:
+    board.py, and the step path's modules into inram.RAM_DIR, from which the frozen
+    firmware loads their code into RAM (mixfw/inram.py)."""
+    c = _connect(port)
+    ram_dir = inram.RAM_DIR.lstrip("/")
+    return [c + ["exec", REMOVE_CODE],
+            c + ["cp", out / "board.py", ":"],
+            c + ["mkdir", ":" + ram_dir],
+            c + ["cp"] + [out / "mixfw" / (name + ".mpy") for name in inram.STEP_PATH]
+            + [":" + ram_dir + "/"],
+            c + ["reset"]]
+
+
+def deploy(board, port, dry_run=False, frozen=False):
     chip = board_chip(board)
     out = build(board)
     headers = [mpy_header(p) for p in sorted((out / "mixfw").glob("*.mpy"))]
     info_cmd = _connect(port) + ["exec", INFO_CODE]
-    commands = deploy_commands(out, port)
+    commands = (frozen_commands if frozen else deploy_commands)(out, port)
     if dry_run:
         print("# built %s (%d modules, -march=%s); on the board this would run:"
               % (out, len(headers), MARCH[chip]))
@@ -299,6 +316,11 @@ def freeze_text(board):
     else:
         lines.append("# flash: esptool.py --chip esp32 --port PORT write_flash -z 0x1000 "
                      "ports/esp32/build-%s/firmware.bin" % mp_board)
+    lines += [
+        "# then the step path's modules, which run from RAM, never from the flash "
+        "cache (%s), and board.py:" % ", ".join(inram.STEP_PATH),
+        "mixstep deploy --board %s --port PORT --frozen" % board,
+    ]
     lines.append("# A board.py on the board's flash overrides the frozen one (the "
                  "filesystem comes first on sys.path), so pins stay editable.")
     return "\n".join(lines)
@@ -360,7 +382,11 @@ def add_parser(sub):
     p.add_argument("--port", required=True, help="the board's serial port, e.g. /dev/ttyACM0")
     p.add_argument("--dry-run", action="store_true",
                    help="build, then print the mpremote commands instead of running them")
-    p.set_defaults(run=lambda a: _guard(deploy, a.board, a.port, a.dry_run))
+    p.add_argument("--frozen", action="store_true",
+                   help="the board runs an image with the firmware frozen in (mixstep "
+                        "freeze): copy only board.py and the step path's modules, "
+                        "which run from RAM")
+    p.set_defaults(run=lambda a: _guard(deploy, a.board, a.port, a.dry_run, a.frozen))
     p = sub.add_parser("freeze", help="print how to build a MicroPython image with the "
                                       "firmware frozen in")
     p.add_argument("--board", required=True, help="board name (boards/<NAME>)")

@@ -6,7 +6,9 @@ import sys
 import machine
 import micropython
 import board
-from mixfw import heap
+from mixfw import heap, inram
+# A frozen image: the step path's code into RAM, before anything imports it (inram.py).
+inram.load(board.SETTINGS)
 if board.SETTINGS.get("step_backend") == "pio_dma":
     import rp2  # noqa: F401 (Feed's: loaded before the reserve, which it would split)
 # The modules from here on load beside a reserve that build() takes its arrays from
