@@ -87,14 +87,16 @@ step-cost: setup
 	MICROPYPATH=firmware:boards/sim $${MIXSTEP_MICROPYTHON:-$(VENV)/bin/micropython} bench/step_cost.py
 
 # Onto a board: make deploy BOARD=pico PORT=/dev/ttyACM0 (DRY_RUN=1 prints the
-# mpremote commands), make freeze BOARD=esp32_devkit, make board-check BOARD=... PORT=...
+# mpremote commands; FROZEN=1 on a board flashed with the image make freeze describes),
+# make freeze BOARD=esp32_devkit, make board-check BOARD=... PORT=...
 .PHONY: deploy freeze board-check boards-check
 NEED_BOARD = @test -n "$(BOARD)" || { echo "give BOARD=<name>, one of: $(notdir $(patsubst %/board.py,%,$(wildcard boards/*/board.py)))"; exit 2; }
 NEED_PORT = @test -n "$(PORT)" || { echo "give PORT=<serial port>, e.g. PORT=/dev/ttyACM0"; exit 2; }
 deploy: setup
 	$(NEED_BOARD)
 	$(NEED_PORT)
-	$(VENV)/bin/mixstep deploy --board $(BOARD) --port $(PORT) $(if $(DRY_RUN),--dry-run)
+	$(VENV)/bin/mixstep deploy --board $(BOARD) --port $(PORT) $(if $(DRY_RUN),--dry-run) \
+		$(if $(FROZEN),--frozen)
 freeze: setup
 	$(NEED_BOARD)
 	$(VENV)/bin/mixstep freeze --board $(BOARD)

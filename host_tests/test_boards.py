@@ -167,11 +167,12 @@ def test_enable_polarity_must_be_stated():
 
 
 def test_tmc_addresses():
-    tmc = {"tx": 22, "rx": 21, "addresses": {}}
+    bus = paths.load_board("fysetc_e4")["TMC_UART"]
+    tmc = dict(bus, addresses={})
     assert_one(broken("fysetc_e4", TMC_UART=tmc), "TMC_UART has no addresses")
-    tmc = {"tx": 22, "rx": 21, "addresses": {"x": 1, "y": 1, "z": 0, "e0": 2}}
+    tmc = dict(bus, addresses={"x": 1, "y": 1, "z": 0, "e0": 2})
     assert_one(broken("fysetc_e4", TMC_UART=tmc), "address 1", "x", "y")
-    tmc = {"tx": 22, "rx": 21, "addresses": {"x": 1, "y": 3, "z": 0, "e0": 4}}
+    tmc = dict(bus, addresses={"x": 1, "y": 3, "z": 0, "e0": 4})
     assert_one(broken("fysetc_e4", TMC_UART=tmc), "e0", "0..3")
 
 

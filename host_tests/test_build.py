@@ -33,7 +33,8 @@ def test_build_every_module(name, tmp_path):
     out = deploy.build(name, tmp_path / name)
     built = sorted(p.stem for p in (out / "mixfw").glob("*.mpy"))
     assert built == MODULES
-    assert (out / "main.py").read_text() == (paths.FIRMWARE / "main.py").read_text()
+    for source in ("boot.py", "main.py"):
+        assert (out / source).read_text() == (paths.FIRMWARE / source).read_text()
     assert (out / "board.py").read_text() == (paths.BOARDS / name / "board.py").read_text()
     headers = [deploy.mpy_header(p) for p in (out / "mixfw").glob("*.mpy")]
     # Modules with viper code carry the chip's architecture; the rest carry none.
@@ -83,8 +84,9 @@ def test_deploy_dry_run(capsys):
     lines = [l for l in capsys.readouterr().out.splitlines() if "mpremote" in l]
     assert all("connect /dev/ttyUSB0" in l for l in lines)
     assert "exec" in lines[0] and "_mpy" in lines[0]  # the version check comes first
-    assert any(l.endswith("build/esp32_devkit/main.py " + str(paths.ROOT)
-                          + "/build/esp32_devkit/board.py :") for l in lines)
+    out = str(paths.ROOT / "build" / "esp32_devkit")
+    assert any(l.endswith(" %s/boot.py %s/main.py %s/board.py :" % (out, out, out))
+               for l in lines)
     assert any("cp -r" in l and l.endswith("build/esp32_devkit/mixfw :") for l in lines)
     assert lines[-1].endswith("reset")
 
@@ -133,9 +135,10 @@ def test_manifest_names_existing_files(name):
 
     exec((here / "manifest.py").read_text(),
          {"module": module, "package": package, "include": include})
-    assert seen[0] is None and len(seen) == 4
+    assert seen[0] is None and len(seen) == 5
     assert all(p.exists() for p in seen[1:]), seen
     assert seen[1].resolve() == (here / "board.py").resolve()
+    assert seen[2].resolve() == (paths.FIRMWARE / "boot.py").resolve()  # drivers off first
 
 
 def test_evaluate_board_check_report():

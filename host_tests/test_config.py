@@ -470,12 +470,6 @@ def damaged_files(good):
         "flipped bit": (bytes(flipped), "checksum mismatch (file corrupt)"),
         "other version": (with_crc(body.replace(b"version 1", b"version 2")),
                           "unsupported header '# mixstep configuration, version 2'"),
-        "unknown option": (with_crc(body + b"warp_drive = 1\n"),
-                           "line %d: unknown option 'warp_drive' (M503 lists them)"
-                           % (body.count(b"\n") + 1)),
-        "out of range": (with_crc(body.replace(b"drives = 3", b"drives = 8")),
-                         "line %d: drives = 8 is above the maximum 6"
-                         % (body[:body.index(b"drives = 3")].count(b"\n") + 1)),
         "no separator": (with_crc(body + b"drives 3\n"),
                          "line %d: expected name = value" % (body.count(b"\n") + 1)),
         "too large": (b"#" * 20000 + b"\n", "20001 bytes is too large for a configuration"),
@@ -500,6 +494,25 @@ def test_damaged_file_gives_defaults_and_a_warning_at_boot(mp, tmp_path):
     cfg.write_bytes(good)
     s = Session(mp, cfg, ["M925 Isteps_per_mm_x"])
     assert s.boot == [] and value_of(s.of(0)[0]) == "100.0"
+
+
+def test_a_value_this_firmware_no_longer_takes_keeps_its_default_alone(mp, tmp_path):
+    # The checksum says the file is as saved: an option this firmware doesn't have, or
+    # a value past a limit that changed, leaves that option at its default and keeps
+    # every other saved value.
+    good = good_file(mp)
+    body = good[:good.rindex(b"\n", 0, -1) + 1]
+    cfg = tmp_path / "mixstep.cfg"
+    drives_line = body[:body.index(b"drives = 3")].count(b"\n") + 1
+    cfg.write_bytes(with_crc(body.replace(b"drives = 3", b"drives = 8")
+                             + b"warp_drive = 1\n"))
+    s = Session(mp, cfg, ["M925 Isteps_per_mm_x", "M925 Idrives", "M501"])
+    note = ("%s: line %d: drives = 8 is above the maximum 6; line %d: unknown option "
+            "'warp_drive' (M503 lists them); kept the defaults"
+            % (cfg, drives_line, body.count(b"\n") + 1))
+    assert s.boot == ["echo:config " + note]
+    assert [value_of(s.of(i)[0]) for i in (0, 1)] == ["100.0", "6"]
+    assert s.of(2) == ["echo:config " + note]
 
 
 BOOT_EACH = """

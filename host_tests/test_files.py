@@ -72,6 +72,27 @@ def test_a_real_slicer_file_prints_from_flash_with_pause_and_resume(tmp_path, bo
     assert steps == expected_steps(gcode, board["SETTINGS"]["steps_per_mm"])
 
 
+def test_an_upload_whose_write_fails_runs_none_of_its_lines(tmp_path):
+    """An upload is written a flash sector (4 KB) at a time: when a write fails, the
+    host hears why at that line, the rest of the upload is still taken as text and
+    never run, and M29 says the file was not saved."""
+    files = tmp_path / "flash"
+    files.mkdir()
+    (files / "up.gcode.part").mkdir()  # where the upload is written: no file can be
+    gcode = paths.ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
+    lines = [c for c in (l.split(";")[0].strip() for l in open(gcode)) if c][:400]
+    p = SimPrinter(files_dir=files)
+    assert p.send("M28 up.gcode") == ["Writing to file: up.gcode", "ok"]
+    said = [p.send(line) for line in lines]
+    failed = [reply for reply in said if reply != ["ok"]]
+    assert len(failed) == 1 and failed[0][0].startswith(
+        "Error:could not write up.gcode: [Errno 21] EISDIR; M29 ends the upload")
+    assert p.send("M29") == ["Error:up.gcode not saved: [Errno 21] EISDIR", "ok"]
+    assert not (files / "up.gcode").exists()
+    assert p.send("M114")[0].startswith("X:0.00 Y:0.00 Z:0.00 E:0.00")  # nothing ran
+    p.finish()
+
+
 def test_bad_file_commands_get_errors(tmp_path):
     files = tmp_path / "flash"
     files.mkdir()

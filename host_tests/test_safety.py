@@ -2,11 +2,15 @@
 timer that stopped halts the printer with the heaters off, a main loop that hangs is
 reset by the watchdog, and every way out of the main loop leaves heaters and drivers
 off. The faults are injected by the simulated board (boards/sim/simfaults.py)."""
+import ast
 import json
 import subprocess
+import zlib
+
+import pytest
 
 from mixstep import paths
-from mixstep.simprinter import SIM_MAIN, SimPrinter
+from mixstep.simprinter import SIM_MAIN, SimPrinter, set_args
 
 STALL = "Error:step timer stopped (no tick for 250 ms); restart the board"
 
@@ -43,11 +47,18 @@ def test_a_running_step_timer_never_trips_the_check():
     assert report["steps"]["x"] == 0
 
 
-def _run(lines):
-    proc = subprocess.run([paths.micropython(), "-X", "heapsize=2M", str(SIM_MAIN)],
+def _run(lines, board="sim", settings=None):
+    """Runs the lines through the simulated board: (exit status, output lines)."""
+    proc = subprocess.run([paths.micropython(), "-X", "heapsize=2M", str(SIM_MAIN)]
+                          + set_args(settings),
                           input=("\n".join(lines) + "\n").encode(), capture_output=True,
-                          env=paths.micropython_env("sim"), timeout=120)
+                          env=paths.micropython_env(board), timeout=120)
     return proc.returncode, proc.stdout.decode().splitlines()
+
+
+def _duty(reply):
+    """The heater duty (0..1) of an M7100 H<n> report line."""
+    return float(reply.split(" duty:")[1].split()[0])
 
 
 def test_the_watchdog_resets_a_main_loop_that_hangs():
@@ -60,6 +71,31 @@ def test_the_watchdog_resets_a_main_loop_that_hangs():
     assert 4000000 <= at_us - fed_us <= 4002000
     # The line after the reset never ran.
     assert [l for l in out if l.startswith("ok")] == ["ok", "ok", "ok T:%s" % out[3][5:]]
+
+
+def test_the_watchdog_cant_be_turned_off(tmp_path):
+    # Every board drives heaters: 1000 ms at least, and the RP2040's 8388 ms at most.
+    cfg = tmp_path / "mixstep.cfg"
+    p = SimPrinter(config_path=cfg)
+    assert p.send("M926 Iwatchdog_ms V0") == [
+        "Error:watchdog_ms = 0 is below the minimum 1000", "ok"]
+    assert p.send("M926 Iwatchdog_ms V8389") == [
+        "Error:watchdog_ms = 8389 is above the maximum 8388", "ok"]
+    assert p.send("M500") == ["ok"]
+    p.finish()
+    # A file saved when 0 was allowed still boots, with the default and a warning.
+    lines = cfg.read_text().splitlines(keepends=True)
+    at = lines.index("watchdog_ms = 4000\n")
+    lines[at] = "watchdog_ms = 0\n"
+    body = "".join(lines[:-1]).encode()
+    cfg.write_bytes(body + b"crc32 = %08x\n" % zlib.crc32(body))
+    p = SimPrinter(config_path=cfg)
+    assert p.send("M925 Iwatchdog_ms")[:2] == [
+        "echo:config %s: line %d: watchdog_ms = 0 is below the minimum 1000; kept the "
+        "default" % (cfg, at + 1),
+        "echo:M926 Iwatchdog_ms V4000 ; a main loop stuck this long resets the board "
+        "(hardware watchdog, always on), 1000..8388 (restart)"]
+    p.finish()
 
 
 def test_back_to_back_lines_feed_the_watchdog():
@@ -76,6 +112,37 @@ def test_the_main_loop_leaves_heaters_and_drivers_off():
     report = p.finish()  # the host went away: the main loop ends
     assert report["heater_duty_at_exit"] == {"hotend": 0.0, "bed": 0.0}
     assert report["drivers_enabled_at_exit"] is False
+
+
+def test_a_halt_turns_the_heaters_off_though_stopping_motion_raises():
+    p = SimPrinter()
+    assert p.send("M7104") == ["ok"]  # from now on, stopping the step path raises
+    for line in ("M104 S200", "M140 S60", "G4 S1"):
+        assert p.send(line) == ["ok"]
+    assert _duty(p.send("M7100 H0")[0]) > 0 and _duty(p.send("M7100 H1")[0]) > 0
+    assert p.send("M112") == ["Error:emergency stop (M112)",
+                              "Error:halting raised RuntimeError: fault injected by M7104",
+                              "ok"]
+    assert _duty(p.send("M7100 H0")[0]) == _duty(p.send("M7100 H1")[0]) == 0
+    assert p.send("G1 X1")[0].startswith("Error:printer halted")
+    p.proc.stdin.close()
+    assert p.proc.wait(60) != 0  # the way out raises too (the next test)
+
+
+@pytest.mark.parametrize("board,settings", [("sim", {}),
+                                            ("pico", {"step_backend": "pio_dma"})])
+def test_leaving_the_main_loop_turns_everything_off_though_stopping_steps_raises(
+        board, settings):
+    # The step timer's deinit (a DMA feed's stop) raises: the heaters went off before
+    # it, the drivers and the fan after it, and the fault still ends the firmware.
+    code, out = _run(["M7104", "M104 S200", "M140 S60", "M106 S255", "G1 X10 F3000",
+                      "G4 S2", "M7100 H0", "M7100 H1"], board, settings)
+    assert [_duty(l) > 0 for l in out if " duty:" in l] == [True, True]
+    report = json.loads([l for l in out if l.startswith("//sim ")][0][6:])
+    assert report["heater_duty_at_exit"] == {"hotend": 0.0, "bed": 0.0}
+    assert report["drivers_enabled_at_exit"] is False
+    assert report["steps"]["x"] == 800
+    assert code == 1 and out[-1] == "RuntimeError: fault injected by M7104"
 
 
 def test_m997_leaves_the_firmware_once_for_an_update(tmp_path, mp):
@@ -111,3 +178,48 @@ def test_deploy_asks_a_running_firmware_to_step_aside():
         assert bridge.proc.wait(10) == 0  # the firmware left on M997
     finally:
         bridge.close()
+
+
+BOOT_CODE = """
+import sys, json, simmachine
+sys.modules["machine"] = simmachine
+import board
+board.SETTINGS["enable_active_low"] = %(active_low)r
+simmachine.set_chip(board.SETTINGS["chip"])
+enable = [g for name, g in sorted(board.PINS.items()) if name.endswith("_enable")]
+for g in enable:
+    # After a reset: pads pulled low, which enables an active-low driver; an
+    # active-high one is enabled by a pin left high.
+    simmachine._levels[g] = 0 if %(active_low)r else 1
+import boot
+levels = [simmachine._levels[g] for g in enable]
+# M997's reset into the REPL: boot.py, then main.py starts nothing.
+from mixfw import assemble
+started = not assemble.repl_boot(%(flag)r)
+print(json.dumps([levels, [simmachine._levels[g] for g in enable], started]))
+"""
+
+
+@pytest.mark.parametrize("board,active_low", [("sim", True), ("sim", False),
+                                              ("pico", True), ("esp32_devkit", True)])
+def test_boot_turns_every_driver_off_first(tmp_path, board, active_low):
+    flag = tmp_path / "mixstep.repl"
+    flag.write_text("M997\n")
+    proc = subprocess.run(
+        [paths.micropython(), "-c", BOOT_CODE % dict(active_low=active_low, flag=str(flag))],
+        capture_output=True, env=paths.micropython_env(board), timeout=60)
+    assert proc.returncode == 0, proc.stderr.decode()
+    at_boot, in_repl, started = json.loads(proc.stdout.decode().splitlines()[-1])
+    off = 1 if active_low else 0
+    count = len([n for n in paths.load_board(board)["PINS"] if n.endswith("_enable")])
+    assert at_boot == in_repl == [off] * count
+    assert started is False
+
+
+def test_boot_imports_only_machine_and_board():
+    # Anything else would run, and could fail, with the drivers still on.
+    tree = ast.parse((paths.FIRMWARE / "boot.py").read_text())
+    imported = [alias.name for node in ast.walk(tree)
+                if isinstance(node, (ast.Import, ast.ImportFrom))
+                for alias in node.names]
+    assert imported == ["machine", "board"]

@@ -60,6 +60,7 @@ STEP_BACKENDS = {"timer": tuple(CHIPS), "pio": ("rp2040", "rp2350"),
                  "pio_dma": ("rp2040", "rp2350")}
 PIN_WRITERS = ("registers", "pin")
 TMC_ADDRESSES = range(4)  # TMC2209: MS1/MS2 straps give 0..3
+TMC_SETTINGS = ("driver_microsteps", "driver_current_ma", "driver_spreadcycle")
 
 
 def setting_value(text):
@@ -132,7 +133,7 @@ def check(board, name):
     _check_shared(pins, used, board.get("SHARED_PINS", ()), bad)
     if chip in ("rp2040", "rp2350"):
         _check_pwm_slices(pins, settings, bad)
-    _check_tmc(tmc, drives, bad)
+    _check_tmc(tmc, settings, bad)
     return problems
 
 
@@ -269,7 +270,7 @@ def _check_pwm_slices(pins, settings, bad):
                     "/".join(str(f) for _, _, f in outs)))
 
 
-def _check_tmc(tmc, drives, bad):
+def _check_tmc(tmc, settings, bad):
     if tmc is None:
         return
     if not isinstance(tmc, dict):
@@ -278,11 +279,29 @@ def _check_tmc(tmc, drives, bad):
     for key in ("tx", "rx"):
         if key not in tmc:
             bad("TMC_UART has no %r pin" % key)
+    # The firmware opens machine.UART(uart) on tx/rx and sets the drivers' current
+    # from their sense resistors.
+    if not isinstance(tmc.get("uart"), int) or isinstance(tmc.get("uart"), bool):
+        bad("TMC_UART has no 'uart': the id of the chip's UART on its tx/rx pins")
+    elif tmc["uart"] == settings.get("console_uart", -1):
+        bad("TMC_UART uart %d is also console_uart" % tmc["uart"])
+    if not isinstance(tmc.get("baud"), int):
+        bad("TMC_UART has no 'baud'")
+    sense = tmc.get("sense_mohm")
+    if not isinstance(sense, int) or not 50 <= sense <= 1000:
+        bad("TMC_UART sense_mohm is %r: the drivers' sense resistors in milliohms "
+            "(50..1000; 110 on most boards)" % (sense,))
+    for key in TMC_SETTINGS:
+        value = settings.get(key)
+        if not (isinstance(value, tuple) and len(value) == 4):
+            bad("SETTINGS has no %s for X, Y, Z, E: a board with TMC_UART states the "
+                "drivers' settings" % key)
     addresses = tmc.get("addresses")
     if not isinstance(addresses, dict) or not addresses:
         bad("TMC_UART has no addresses: state the address of every driver on the UART")
         return
-    motors = AXES + tuple("e%d" % i for i in range(drives))
+    # The driver options are per axis X Y Z E: E is the board's E socket, e0.
+    motors = AXES + ("e0",)
     seen = {}
     for driver, address in addresses.items():
         if driver not in motors:

@@ -4,8 +4,9 @@ deploy compiles every module of firmware/mixfw with mpy-cross for the board's ch
 into build/<board>/, checks that the board's MicroPython loads that .mpy version,
 copies the files with mpremote and resets the board. A board running mixstep is
 first asked with M997 to restart into the REPL, as it ignores mpremote's Ctrl-C.
-main.py and board.py stay source: MicroPython runs main.py at boot only as a .py file, and board.py is the file
-one edits on the board (pins, settings) without a host.
+boot.py, main.py and board.py stay source: MicroPython runs boot.py and main.py at
+boot only as .py files (boot.py first: it turns the drivers off), and board.py is the
+file one edits on the board (pins, settings) without a host.
 """
 import json
 import shlex
@@ -30,7 +31,7 @@ PLATFORM = {"rp2040": "rp2", "rp2350": "rp2", "esp32": "esp32"}
 # MicroPython port and board to build a frozen image with.
 PORT_BOARD = {"rp2040": ("rp2", "RPI_PICO"), "rp2350": ("rp2", "RPI_PICO2"),
               "esp32": ("esp32", "ESP32_GENERIC")}
-SOURCE_FILES = ("main.py", "board.py")
+SOURCE_FILES = ("boot.py", "main.py", "board.py")
 
 # Run on the board: what MicroPython it is, as one JSON line.
 INFO_CODE = ("import sys, json; i = sys.implementation; print(json.dumps({"
@@ -93,7 +94,8 @@ def build(board, out_dir=None):
     if out.exists():
         shutil.rmtree(out)
     compile_mixfw(out, MARCH[chip])
-    shutil.copy(paths.FIRMWARE / "main.py", out / "main.py")
+    for name in ("boot.py", "main.py"):
+        shutil.copy(paths.FIRMWARE / name, out / name)
     shutil.copy(paths.BOARDS / board / "board.py", out / "board.py")
     return out
 

@@ -24,13 +24,14 @@ def set_args(settings):
 class SimPrinter:
     def __init__(self, edges_path=None, heap_lock=False, heap_size="2M", board="sim",
                  config_path=None, files_dir=None, settings=None, code_dir=None, jitter_us=0,
-                 jitter_seed=1, console_log=None):
+                 jitter_seed=1, console_log=None, clock_hz=None):
         """board: whose pin map and settings (the chip is simulated); settings: board
         settings to override, e.g. {"pin_writer": "registers"}; code_dir: a folder
         searched before the firmware's, e.g. with its modules compiled to .mpy;
         jitter_us: the step timer's callbacks run up to this late (pseudo-random from
         jitter_seed); console_log: write every console line in and out there, with
-        the simulated time."""
+        the simulated time; clock_hz: the chip's system clock (machine.freq()), if not
+        the one it boots with."""
         cmd = [paths.micropython(), "-X", "heapsize=" + heap_size, str(SIM_MAIN)]
         cmd += set_args(settings)
         if config_path:
@@ -43,6 +44,8 @@ class SimPrinter:
             cmd.append("--heap-lock")
         if console_log:
             cmd += ["--console-log", str(console_log)]
+        if clock_hz:
+            cmd += ["--clock-hz", str(clock_hz)]
         if jitter_us:
             cmd += ["--jitter-us", str(jitter_us), "--jitter-seed", str(jitter_seed)]
         env = paths.micropython_env(board)

@@ -44,8 +44,12 @@ SHARED_PINS = (
     ("x_enable", "y_enable", "z_enable", "e0_enable", "e1_enable", "e2_enable"),
 )
 
+# The four TMC2209s on one UART (TX joined to RX through a resistor), addressed by
+# their MS1/MS2 straps, with 0.11 ohm sense resistors. The firmware sets them up over
+# it (mixfw/tmc.py): without that, the straps would give X 32, Y 16, Z 8 and E 64
+# microsteps.
 TMC_UART = {
-    "tx": 22, "rx": 21, "baud": 115200,
+    "uart": 1, "tx": 22, "rx": 21, "baud": 115200, "sense_mohm": 110,
     "addresses": {"x": 1, "y": 3, "z": 0, "e0": 2},
 }
 
@@ -57,6 +61,11 @@ SETTINGS = dict(
     pin_writer="registers",
     drives=3,
     enable_active_low=True,  # TMC2209 EN is active low
+    # 16 microsteps (the drivers' setting below), GT2 belts on 20-tooth pulleys on X/Y,
+    # an 8 mm lead screw on Z.
     steps_per_mm=(80.0, 80.0, 400.0, 415.0),
+    driver_microsteps=(16, 16, 16, 16),
+    driver_current_ma=(580, 580, 580, 650),  # as the SKR Pico's: raise to the motors' rating
+    driver_spreadcycle=(False, False, False, False),  # stealthChop
     console_uart=-1,
 )

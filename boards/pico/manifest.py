@@ -5,5 +5,6 @@
 # cache: after flashing the image, `mixstep deploy --frozen` puts those copies on.
 include("$(PORT_DIR)/boards/manifest.py")
 module("board.py")
+module("boot.py", base_path="../../firmware")
 module("main.py", base_path="../../firmware")
 package("mixfw", base_path="../../firmware")

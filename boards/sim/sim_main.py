@@ -3,14 +3,15 @@
 #                           [--jitter-us N [--jitter-seed N]]
 #                           [--tcp HOST:PORT] [--no-stdio] [--realtime FACTOR]
 #                           [--config FILE] [--files DIR] [--set KEY=VALUE ...]
-#                           [--console-log FILE]
+#                           [--console-log FILE] [--clock-hz N]
 # By default it takes G-code on stdin and answers on stdout like a serial printer, in
 # lockstep (virtual time passes only when the firmware waits). With --tcp it also
 # serves TCP connections; --realtime paces virtual time against the wall clock (0:
 # as fast as possible). When every console has closed, the queue drains and one
 # `//sim {json}` line reports the run. --config is the simulated flash file of the
 # configuration (M500/M501); without it the printer has no configuration storage.
-# --files is the simulated flash folder for printing from flash (M20-M32).
+# --files is the simulated flash folder for printing from flash (M20-M32). Both are
+# written through simfaults.Flash, whose writes can stall the chip (M7103 F).
 # --set overrides a board setting before the machine is assembled, e.g.
 # --set pin_writer=registers (VALUE: a number, a comma-separated tuple, or text).
 # --jitter-us fires the timer callbacks up to N us late (interrupt latency; seeded by
@@ -18,6 +19,8 @@
 # --console-log writes every line the consoles receive and send, stamped with the
 # simulated time: `<us> < <line>` received, `<us> > <line>` sent (as a host's serial
 # log, but in the printer's own time).
+# --clock-hz sets the simulated chip's system clock (machine.freq()) before the
+# firmware starts, as an overclocking board's boot code does.
 import sys
 
 # The script's own folder comes first on the path; board.py must be the board's from
@@ -36,12 +39,12 @@ sys.modules["time"] = simtime
 def _args(argv):
     opts = {"edges": None, "heap_lock": False, "quantum_us": 1000, "tcp": None,
             "stdio": True, "realtime": None, "config": None, "files": None, "set": [],
-            "jitter_us": 0, "jitter_seed": 1, "console_log": None}
+            "jitter_us": 0, "jitter_seed": 1, "console_log": None, "clock_hz": None}
     i = 1
     while i < len(argv):
         a = argv[i]
         if a in ("--edges", "--quantum-us", "--tcp", "--realtime", "--config", "--files",
-                 "--jitter-us", "--jitter-seed", "--console-log"):
+                 "--jitter-us", "--jitter-seed", "--console-log", "--clock-hz"):
             i += 1
             opts[a[2:].replace("-", "_")] = argv[i]
         elif a == "--set":
@@ -171,6 +174,11 @@ def main():
     # firmware's share.
     import simthermal
     import simfaults
+    import simswitch
+    import simtmc
+    # The configuration and the files are written through the simulated flash, which
+    # holds the interrupts at each write as the chip does (M7103 F): the simulation's.
+    flash = simfaults.Flash()
     data_from = _heap_bytes()
     interactive = opts["tcp"] is not None or opts["realtime"] is not None
     consoles = []
@@ -188,13 +196,18 @@ def main():
     if interactive:
         simmachine.pace(float(opts["realtime"] or 0))
     warnings = []
-    config = firmware.Config(board.SETTINGS, opts["config"], warn=warnings.append)
+    if opts["clock_hz"]:  # as a board's boot code may: the PWM divides this clock
+        simmachine.freq(int(opts["clock_hz"]))
+    config = firmware.Config(board.SETTINGS, opts["config"], flash, warn=warnings.append,
+                             clock_hz=simmachine.freq())
     config.boot()
     printer = firmware.build(config, files_root=opts["files"])
     heap_data_at_rest = _heap_bytes() - data_from
     before = _heap_bytes()
     simthermal.install(simmachine, board, printer)
-    simfaults.install(printer)
+    simfaults.install(printer, flash)
+    simswitch.install(printer)
+    simtmc.install(printer)
     # The last STEP pulse ends a few ticks after the queue empties, and a PIO state
     # machine still holds its last words: let the chip finish them before stopping.
     printer.finish.append(simmachine.idle)
@@ -203,7 +216,11 @@ def main():
     data_from += _heap_bytes() - before
     simmachine.heap_peak_bytes = 0
     simmachine.heap_lock_ticks = opts["heap_lock"]
-    firmware.run(consoles, listeners, printer, warnings, repl_flag=None)
+    fault = None
+    try:
+        firmware.run(consoles, listeners, printer, warnings, repl_flag=None)
+    except Exception as err:
+        fault = err  # raised again below, once the report says what it left on
     # The print is over: a chip would go on to its REPL (and its watchdog would reset
     # it); the simulation only finishes its trace.
     simmachine.release_watchdogs()
@@ -238,6 +255,8 @@ def main():
         "drivers_enabled_at_exit": _drivers_enabled(board),
     }
     sys.stdout.write("//sim " + json.dumps(report) + "\n")
+    if fault is not None:
+        raise fault
 
 
 main()

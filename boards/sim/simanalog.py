@@ -23,9 +23,34 @@ def set_source(gpio, fn):
 
 
 def duty_of(gpio):
-    """The duty (0..1) a PWM drives on this gpio; 0 if none does."""
+    """The duty (0..1) a PWM drives on this gpio; where none does, the pin's level (a
+    heater the firmware switches itself)."""
     p = _pwms.get(gpio)
-    return p._duty_u16 / 65535 if p is not None else 0.0
+    return p._duty_u16 / 65535 if p is not None else float(simmachine._levels[gpio])
+
+
+def _check_freq(hz, clock_hz):
+    """Refuse a frequency as the chip's MicroPython does (ValueError)."""
+    if simmachine.chip == "esp32":
+        # ports/esp32/machine_pwm.c: check_freq_ranges against half the APB clock.
+        if not 0 < hz <= min(clock_hz, 80000000) // 2:
+            raise ValueError("frequency must be from 1Hz to %dMHz"
+                             % (min(clock_hz, 80000000) // 2000000))
+        return
+    # ports/rp2/machine_pwm.c (the simulated chip is one too): the smallest divider in
+    # 16ths that keeps TOP at most 65534; the divider register stops below 256.
+    if hz <= 0:
+        raise ValueError("freq too small")
+    if (clock_hz + hz // 2) // hz < 65534:
+        div16 = 16
+    else:
+        div16 = -(-16 * clock_hz // (65534 * hz))
+    if div16 >= 256 * 16:
+        raise ValueError("freq too small")
+    # Where rp2 takes a TOP below 1 and makes another frequency, the simulated chip
+    # refuses: a test then sees it.
+    if hz > clock_hz // 2:
+        raise ValueError("freq too large")
 
 
 def pwm_of(gpio):
@@ -59,8 +84,7 @@ class PWM:
     def freq(self, hz=None):
         if hz is None:
             return self._freq
-        if not 1 <= hz <= 62500000:
-            raise ValueError("PWM frequency %s Hz out of range" % hz)
+        _check_freq(int(hz), simmachine.clock_hz)
         self._freq = int(hz)
 
     def duty_u16(self, d=None):

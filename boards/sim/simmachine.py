@@ -3,7 +3,10 @@
 # (machine.idle), and every output edge is recorded with its virtual time.
 #
 # It also models the printer around the chip: STEP/DIR edges move the axes, and the
-# min endstops read triggered at or below position 0, where the axes start.
+# min endstops read triggered at or below position 0, where the axes start. With
+# set_bounce (sim-only M7105, simswitch.py) a switch bounces as a mechanical one does:
+# for bounce_us after the step that reaches it (or leaves it), its level flips at a
+# few irregular points (_BOUNCE_64THS) before it settles.
 #
 # Edge records are 64-bit words: time_us << 8 | gpio << 1 | level, flushed to a file
 # in native (little-endian) byte order outside the step loop. Recording never
@@ -27,11 +30,23 @@ _CHIP_GPIOS = {
 }
 _INPUT_ONLY = {"esp32": (34, 35, 36, 37, 38, 39)}
 chip = "sim"
+# The system clock each chip boots with (machine.freq() changes it, as boot code may).
+_BOOT_CLOCK_HZ = {"rp2040": 125000000, "rp2350": 150000000, "esp32": 160000000}
+clock_hz = 125000000
 
 
 def set_chip(name):
-    global chip
+    global chip, clock_hz
     chip = name
+    clock_hz = _BOOT_CLOCK_HZ.get(name, 125000000)
+
+
+def freq(hz=None):
+    """machine.freq(): the system clock, which the simulated PWM divides."""
+    global clock_hz
+    if hz is None:
+        return clock_hz
+    clock_hz = int(hz)
 _CAPACITY = 8192
 _FLUSH_AT = _CAPACITY - 256  # one tick writes far fewer edges than this
 
@@ -111,6 +126,48 @@ def attach_world(pin_map, step_names_in_order, inverted=()):
         _dir_forward[g] = 0 if name in inverted else 1
     for axis, name in enumerate(("x", "y", "z")):
         _endstop_axis[pin_map[name + "_min"]] = 1 + axis
+
+
+# Switch bounce (set_bounce): per axis, whether its switch is still bouncing and the
+# time (modulo 2**30, as the step loop keeps it) of the step that reached or left it.
+bounce_us = 0
+_BOUNCE_64THS = (5, 13, 22, 31, 45, 50)  # flips, in 64ths of bounce_us: irregular
+_bouncing = bytearray(3)
+_bounce_from_w = array("i", bytes(4 * 3))
+
+
+def set_bounce(us):
+    """Bounce every min endstop for `us` after each contact and release (0: never)."""
+    global bounce_us
+    bounce_us = us
+    for axis in range(3):
+        _bouncing[axis] = 0
+    if _settle_switches not in _world_hooks:
+        add_world_hook(_settle_switches)
+
+
+def _switch_level(axis):
+    """The min endstop of `axis`: 1 at or below position 0, but for the flips of its
+    bounce. Called in the step loop (timer backends): small ints only."""
+    closed = 1 if positions[axis] <= 0 else 0
+    if not _bouncing[axis]:
+        return closed
+    since_us = (_now_w - _bounce_from_w[axis]) & _W30
+    if since_us >= bounce_us:
+        _bouncing[axis] = 0
+        return closed
+    at = (since_us << 6) // bounce_us
+    for flip in _BOUNCE_64THS:
+        if at >= flip:
+            closed ^= 1
+    return closed
+
+
+def _settle_switches(end_us):
+    # A bounce nobody read for 2**30 us would wrap: settle them here (world hook).
+    for axis in range(3):
+        if _bouncing[axis]:
+            _switch_level(axis)
 
 
 def buffer_bytes():
@@ -275,8 +332,13 @@ def _set_level(g, v):
         if idx and v:
             if _levels[_dir_of[g]] == _dir_forward[g]:
                 positions[idx - 1] += 1
+                touched = positions[idx - 1] == 1  # left the switch
             else:
                 positions[idx - 1] -= 1
+                touched = positions[idx - 1] == 0  # reached it
+            if touched and idx <= 3 and bounce_us:
+                _bouncing[idx - 1] = 1
+                _bounce_from_w[idx - 1] = _now_w
     elif now_us == 0:
         _record(g, v)  # every signal gets a value at #0
 
@@ -311,7 +373,7 @@ class Pin:
         if v is None:
             axis = _endstop_axis[g]
             if axis:
-                return 1 if positions[axis - 1] <= 0 else 0
+                return _switch_level(axis - 1)
             return _levels[g]
         _set_level(g, 1 if v else 0)
 
@@ -386,19 +448,7 @@ def idle():
         if used > heap_peak_bytes:
             heap_peak_bytes = used
     end = now_us + quantum_us
-    for t in _timers:
-        try:
-            if _jitter_max_us:
-                _fire_late(t, end)
-            else:
-                _fire_on_time(t, end)
-        except Exception as e:
-            # As MicroPython does with an interrupt handler that raised: report it and
-            # disable the handler. The timer never fires again.
-            _timers.remove(t)
-            sys.stderr.write("simmachine: uncaught exception in timer callback, timer "
-                             "disabled: %r\n" % (e,))
-            break
+    _fire_timers(end)
     for dev in _devices:
         dev(end)
     _pio_output(end)
@@ -413,6 +463,48 @@ def idle():
             walltime.ticks_us(), _wall_start_us)
         if ahead_us > 2000:
             walltime.sleep_us(int(ahead_us))
+
+
+def _fire_timers(end):
+    """Every timer callback due up to end."""
+    for t in _timers:
+        try:
+            if _jitter_max_us:
+                _fire_late(t, end)
+            else:
+                _fire_on_time(t, end)
+        except Exception as e:
+            # As MicroPython does with an interrupt handler that raised: report it and
+            # disable the handler. The timer never fires again.
+            _timers.remove(t)
+            sys.stderr.write("simmachine: uncaught exception in timer callback, timer "
+                             "disabled: %r\n" % (e,))
+            break
+
+
+# A flash write (hold_irqs): until this time every interrupt is held. rp2.py's DMA
+# raises its IRQs meanwhile as pending.
+irqs_off_until_us = 0
+
+
+def hold_irqs(us):
+    """Every interrupt held for `us` of virtual time, as the rp2 port holds them while
+    it erases and programs flash; the main loop waits too, as it runs the write. The
+    PIO and the DMA go on with the words they have. When the interrupts are back on,
+    what became pending runs at once: the DMA IRQs, and each timer's callback once
+    (the ticks it missed are lost: the step loop's time stood still)."""
+    global irqs_off_until_us
+    end = now_us + us
+    irqs_off_until_us = end
+    _set_now(now_us)
+    for t in _timers:
+        if t._next < end:
+            t._next = end
+    for dev in _devices:
+        dev(end)
+    _pio_output(end)
+    _set_now(end)
+    _fire_timers(end)
 
 
 def _fire_on_time(t, end):
@@ -529,3 +621,9 @@ try:  # heaters, fans and thermistors of the simulated board
     from simanalog import ADC, PWM  # noqa: F401
 except ImportError:
     pass
+
+
+def UART(*args, **kw):
+    """The board's TMC2209 bus (simtmc.py), loaded only by a board that opens it."""
+    from simtmc import UART as bus
+    return bus(*args, **kw)

@@ -41,9 +41,12 @@ SHARED_PINS = (
     ("e0_enable", "e1_enable", "e2_enable"),
 )
 
-# The four sockets' TMC2209s on one UART, addressed by their MS1/MS2 straps.
+# The four sockets' TMC2209s on one UART (UART1 on GPIO 8/9, TX joined to RX through
+# a resistor), addressed by their MS1/MS2 straps, with 0.11 ohm sense resistors.
+# The firmware sets them up over it (mixfw/tmc.py): without that, the straps would
+# give X 8, Y 64, Z 32 and E 16 microsteps.
 TMC_UART = {
-    "tx": 8, "rx": 9, "baud": 115200,
+    "uart": 1, "tx": 8, "rx": 9, "baud": 115200, "sense_mohm": 110,
     "addresses": {"x": 0, "y": 2, "z": 1, "e0": 3},
 }
 
@@ -58,6 +61,11 @@ SETTINGS = dict(
     invert_dir=("x", "y", "e0"),
     # Klipper's example: 16 microsteps, rotation_distance 40 (X/Y) and 8 (Z).
     steps_per_mm=(80.0, 80.0, 400.0, 415.0),
+    # The TMC2209s, as Klipper's example sets them: 16 microsteps (what steps_per_mm
+    # assumes), 580 mA (650 mA on E), stealthChop.
+    driver_microsteps=(16, 16, 16, 16),
+    driver_current_ma=(580, 580, 580, 650),
+    driver_spreadcycle=(False, False, False, False),
     endstop_active_high=True,  # Klipper reads them as ^gpioN: pulled up, high = hit
     endstop_pullup=True,
     console_uart=-1,

@@ -44,7 +44,7 @@ def _ticks(us, tick_us):
 
 def load_config(path=CONFIG_PATH, warn=print):
     """The board's defaults, overridden by the saved configuration if it is sound."""
-    config = Config(board.SETTINGS, path, warn=warn)
+    config = Config(board.SETTINGS, path, warn=warn, clock_hz=machine.freq())
     config.boot()
     return config
 
@@ -65,7 +65,7 @@ def _start_pio(mem, settings, pin_map):
 
 
 def build(config=None, pin_map=None, files_root=FILES_ROOT):
-    config = config or Config(board.SETTINGS, None)
+    config = config or Config(board.SETTINGS, None, clock_hz=machine.freq())
     settings = config.settings
     pin_map = pin_map or board.PINS
     tick_us = settings["tick_us"]
@@ -136,8 +136,14 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
     config.appliers.append(motion.apply)
     config.appliers.append(thermal.apply)
     config.appliers.append(mixing.apply)
+    tmc_uart = getattr(board, "TMC_UART", None)
+    if tmc_uart:  # the drivers' microsteps and current, before anything moves
+        from mixfw import cmd_drivers
+        cmd_drivers.setup(machine, tmc_uart, config, printer)
+    # Every flash write (configuration, uploads, deletions) waits for the moves first.
+    config.storage.wait_idle = planner.synchronize
     if files_root:
-        cmd_files.register(printer, Files(files_root, printer))
+        cmd_files.register(printer, Files(files_root, printer, config.storage))
     printer.finish.append(planner.synchronize)
     printer.mem = mem
     printer.settings = settings
@@ -228,9 +234,10 @@ def run(consoles=None, listeners=(), printer=None, warnings=None, repl_flag=REPL
     try:
         printer.serve()
     finally:
-        timer.deinit()
-        safety.all_off(printer)
+        fault = safety.all_off(printer, timer)
         micropython.kbd_intr(3)
+    if fault is not None:
+        raise fault  # everything is off: now the fault may stop the firmware
     if printer.leaving == "M997" and repl_flag:
         with open(repl_flag, "w") as f:
             f.write("M997\n")

@@ -76,7 +76,9 @@ class ConfigCommands:
             self.printer.reply("echo:config " + note)
 
     # M500: save the configuration to flash; a reset meanwhile keeps the old or the
-    # new one. Example: M500
+    # new one. It first waits for the queued moves to run, as M400 (flash is
+    # programmed with interrupts off, which would freeze the axes mid-move).
+    # Example: M500
     def m500(self, line):
         self.config.save()
 

@@ -56,17 +56,22 @@ class FileCommands:
         self.m23(line)
         self.files.start()
 
-    # M28 <name>: write the following lines to a file until M29. Example: M28 part.gcode
+    # M28 <name>: write the following lines to a file until M29; they are kept in RAM
+    # and written 4 KB at a time, each write after the queued moves have run (flash is
+    # programmed with interrupts off). Refused while a file prints from flash: M25
+    # pauses it. Example: M28 part.gcode
     def m28(self, line):
         self.files.begin_upload(line.args_text)
         self.printer.reply("Writing to file: %s" % line.args_text)
 
-    # M29: finish the upload.
+    # M29: write the rest of the upload and put the file in place, after the queued
+    # moves have run. Example: M29
     def m29(self, line):
         self.files.end_upload()
         self.printer.reply("Done saving file.")
 
-    # M30 <name>: delete a file. Example: M30 part.gcode
+    # M30 <name>: delete a file, after the queued moves have run; the file printing
+    # from flash is refused (M25 pauses it). Example: M30 part.gcode
     def m30(self, line):
         self.files.delete(line.args_text)
         self.printer.reply("File deleted:%s" % line.args_text)

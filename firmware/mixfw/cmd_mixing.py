@@ -205,8 +205,9 @@ class Mixing:
         self.collector[drive] = weight
 
     # M164 [S<tool>] [P1]: store the M163 weights as a virtual tool, by default the
-    # active one, which then prints with it. P1 also saves to flash at once, as in
-    # Repetier. An all-zero mix is refused. Example: M164 S4 P1
+    # active one, which then prints with it. P1 also saves to flash, as in Repetier,
+    # once the queued moves have run (as M500). An all-zero mix is refused.
+    # Example: M164 S4 P1
     def m164(self, line):
         tool = self._check_tool(line.int("S", self.active))
         self.store(tool, self.collector, save=line.int("P", 0, lo=0, hi=1) == 1)

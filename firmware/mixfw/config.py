@@ -11,8 +11,9 @@
 #
 # Pure logic: no `machine`; the file system is passed in (see FileStorage).
 import os
-from mixfw.options import SCHEMA, FIRMWARE_DEFAULTS, FLOAT, INT, BOOL, MIX, PAIR, EACH
+from mixfw.options import SCHEMA, FIRMWARE_DEFAULTS, FLOAT, INT, BOOL, MIX, PAIR, EACH, POW2
 from mixfw.mixer import normalize, default_tool_mixes
+from mixfw.pwm import CLOCK_HZ, HEATER_OPTIONS, range_hz, clock_text
 
 HEADER = "# mixstep configuration, version 1\n"
 _CRC_PREFIX = b"crc32 = "
@@ -42,16 +43,36 @@ class ConfigError(ValueError):
 
 
 class FileStorage:
-    """The board's file system. Tests pass an object with the same four methods to
-    simulate a reset in the middle of a save."""
+    """The board's file system, and the one way the firmware changes what is on it
+    (the configuration, uploads, deletions). The rp2 port erases and programs flash
+    with every interrupt off, 45 ms typically and up to 400 ms for a 4 KB sector,
+    while the step path runs a few ms ahead of the pins: a write while the axes move
+    would stop them dead and restart them at full speed (a layer shift and a blob).
+    So every change (a file opened for writing, a rename, a removal) first waits,
+    through wait_idle, until the step path has no work, as M400 does: the moves end
+    with their planned deceleration and the `ok` waits. A file opened for writing is
+    written and closed before anything else runs, so no move can start in between.
+    Tests pass an object with the same four methods to simulate a reset in the
+    middle of a save."""
+
+    def __init__(self):
+        self.wait_idle = None  # fn(): the planner's synchronize, once the machine is built
+
+    def _settle(self):
+        if self.wait_idle is not None:
+            self.wait_idle()
 
     def open(self, path, mode):
+        if "r" not in mode:
+            self._settle()
         return open(path, mode)
 
     def rename(self, old, new):
+        self._settle()
         os.rename(old, new)
 
     def remove(self, path):
+        self._settle()
         os.remove(path)
 
     def stat(self, path):
@@ -73,6 +94,7 @@ class Option:
         self.axis = axis
         self.name = self.key if index < 0 else self.key + "_" + axis
         self.width = width
+        self.why = ""  # where a limit comes from, if not from the schema
 
     @property
     def help(self):
@@ -99,7 +121,7 @@ class Option:
             v = float(text) if self.kind == FLOAT else int(text)
         except ValueError:
             raise ConfigError("%s: %r is not a%s" % (self.name, text, {
-                FLOAT: " number", INT: " whole number", BOOL: " 0 or 1"}[self.kind]))
+                FLOAT: " number", BOOL: " 0 or 1"}.get(self.kind, " whole number")))
         return self.check(v)
 
     def check(self, v):
@@ -121,15 +143,17 @@ class Option:
             if v not in (0, 1):
                 raise ConfigError("%s: %r is not 0 or 1" % (self.name, v))
             return bool(v)
-        if self.kind == INT and not isinstance(v, int):
+        if self.kind in (INT, POW2) and not isinstance(v, int):
             raise ConfigError("%s: %r is not a whole number" % (self.name, v))
+        if self.kind == POW2 and v & (v - 1):
+            raise ConfigError("%s = %d is not a power of two (1, 2, 4, ...)" % (self.name, v))
         v = float(v) if self.kind == FLOAT else int(v)
         if not v >= self.lo:  # also refuses nan
-            raise ConfigError("%s = %s is below the minimum %s" % (
-                self.name, self.format(v), self.format(self.lo)))
+            raise ConfigError("%s = %s is below the minimum %s%s" % (
+                self.name, self.format(v), self.format(self.lo), self.why))
         if v > self.hi:
-            raise ConfigError("%s = %s is above the maximum %s" % (
-                self.name, self.format(v), self.format(self.hi)))
+            raise ConfigError("%s = %s is above the maximum %s%s" % (
+                self.name, self.format(v), self.format(self.hi), self.why))
         return v
 
     def format(self, v):
@@ -162,10 +186,11 @@ def _put(settings, o, v):
 
 
 class Config:
-    def __init__(self, board_settings, path, storage=None, warn=None):
+    def __init__(self, board_settings, path, storage=None, warn=None, clock_hz=None):
         """board_settings: the board's SETTINGS (not modified; kept for the defaults).
         path: the file on flash. warn(text): prints one `echo:` line, used when the
-        saved file can't be loaded."""
+        saved file can't be loaded. clock_hz: the chip's system clock (machine.freq()),
+        which bounds the PWM frequencies; None: the clock the chip boots with."""
         self.path = path
         self.storage = storage or FileStorage()
         self.warn = warn or (lambda text: None)
@@ -173,6 +198,8 @@ class Config:
         self.before_save = []  # fn() each: bring running state (counters) into settings
         self.board_settings = board_settings
         defaults = self._board_defaults()
+        self.chip = defaults.get("chip", "sim")
+        self.clock_hz = clock_hz or CLOCK_HZ.get(self.chip, CLOCK_HZ["sim"])
         # Widths of the per-tool options, fixed by the board (as the firmware's arrays).
         self.mix_width = defaults.get("drives", 0)
         self.pair_width = len(defaults.get("tool_mixes", ()))
@@ -205,7 +232,21 @@ class Config:
 
     def _option(self, row, index, axis):
         width = self.mix_width if row[2] == MIX else self.pair_width if row[2] == PAIR else 0
-        return Option(row, index, axis, width)
+        o = Option(row, index, axis, width)
+        if o.key.endswith("_pwm_hz"):
+            self._pwm_limits(o)
+        return o
+
+    def _pwm_limits(self, o):
+        """Narrow a PWM frequency's limits to what the chip makes at its clock; a
+        heater's lowest stays the schema's (a software PWM goes below the chip's)."""
+        chip_lo, chip_hi = range_hz(self.chip, self.clock_hz)
+        lo = o.lo if o.key in HEATER_OPTIONS else max(o.lo, chip_lo)
+        hi = min(o.hi, chip_hi)
+        if (lo, hi) != (o.lo, o.hi):
+            o.lo, o.hi = lo, hi
+            o.why = " (the %s's PWM makes %d..%d Hz at %s)" % (
+                self.chip, chip_lo, chip_hi, clock_text(self.clock_hz))
 
     def _options_of(self, settings):
         """Every option of these settings in schema order, made one at a time."""
@@ -304,16 +345,17 @@ class Config:
         return data + (_CRC_LINE % crc32(data)).encode()
 
     def save(self):
-        """M500. Raises ConfigError if the file system refuses."""
+        """M500. Waits until the queued moves have run (see FileStorage). Raises
+        ConfigError if the file system refuses."""
         if self.path is None:
             raise ConfigError("this printer has no configuration storage")
-        for fn in self.before_save:
-            fn()
         tmp = self.path + ".tmp"
         fs = self.storage
         try:
-            f = fs.open(tmp, "wb")
+            f = fs.open(tmp, "wb")  # waits for the moves: the counters are where they end
             try:
+                for fn in self.before_save:
+                    fn()
                 f.write(self.text())
             finally:
                 f.close()
@@ -322,7 +364,11 @@ class Config:
             raise ConfigError("could not save %s: %s" % (self.path, e))
 
     def _parse(self, data):
-        """name -> value from a file's bytes; raises ConfigError naming the problem."""
+        """(name -> value, skipped) from a file's bytes; raises ConfigError naming the
+        problem if the file is damaged. The checksum says the file is as it was saved,
+        so a value this firmware no longer takes (an option it doesn't have, a limit
+        that changed with the firmware or the chip's clock) skips that line alone:
+        skipped lists why, and the option keeps its default."""
         if not data.endswith(b"\n"):
             raise ConfigError("truncated (no final newline)")
         cut = data.rfind(b"\n", 0, len(data) - 1) + 1
@@ -339,21 +385,21 @@ class Config:
         if lines[0] + "\n" != HEADER:
             raise ConfigError("unsupported header %r" % lines[0])
         values = {}
+        skipped = []
         for n in range(1, len(lines) - 1):
             name, eq, text = lines[n].partition("=")
             name = name.strip()
+            if not eq or name in values:
+                raise ConfigError("line %d: %s" % (n + 1, "%s given twice" % name if eq
+                                                   else "expected name = value"))
             try:
-                if not eq:
-                    raise ConfigError("expected name = value")
-                if name in values:
-                    raise ConfigError("%s given twice" % name)
                 values[name] = self.option(name).parse(text.strip())
             except ConfigError as e:
-                raise ConfigError("line %d: %s" % (n + 1, e))
-        return values
+                skipped.append("line %d: %s" % (n + 1, e))
+        return values, skipped
 
     def _read(self, path):
-        """The values saved in path, None if there is no such file."""
+        """(values, skipped) saved in path (_parse), None if there is no such file."""
         fs = self.storage
         try:
             size = fs.stat(path)[6]
@@ -373,23 +419,25 @@ class Config:
 
     def _read_saved(self):
         """(values, problem): values from the file, else from a complete `.tmp` left by an
-        interrupted save, else None; problem says what was wrong with the file."""
+        interrupted save, else None; problem says what was wrong with the file, or
+        which of its values were left out."""
         problem = None
         if self.path is None:
             return None, None
         try:
-            values = self._read(self.path)
-            if values is not None:
-                return values, None
+            read = self._read(self.path)
+            if read is not None:
+                return read[0], self._skipped(self.path, read[1])
         except ConfigError as e:
             problem = "%s: %s" % (self.path, e)
         tmp = self.path + ".tmp"
         try:
-            values = self._read(tmp)
+            read = self._read(tmp)
         except ConfigError:
-            values = None
-        if values is None:
+            read = None
+        if read is None:
             return None, problem
+        values = read[0]
         # Finish the interrupted save, so the next save can't truncate the only copy.
         # If that fails the values are still good; the next complete save replaces both.
         try:
@@ -398,11 +446,22 @@ class Config:
             pass
         if problem:
             problem += "; took the complete %s" % tmp
+        skipped = self._skipped(tmp, read[1])
+        if skipped:
+            problem = problem + "; " + skipped if problem else skipped
         return values, problem
 
+    @staticmethod
+    def _skipped(path, skipped):
+        if not skipped:
+            return None
+        return "%s: %s; kept the default%s" % (path, "; ".join(skipped),
+                                               "s" if len(skipped) > 1 else "")
+
     def load(self):
-        """M501: replace the settings with the saved ones (all or nothing). Returns a
-        note if the file itself was bad but an interrupted save's copy was taken."""
+        """M501: replace the settings with the saved ones (all or nothing, but for values
+        this firmware no longer takes). Returns a note if the file itself was bad but an
+        interrupted save's copy was taken, or if values were left out."""
         if self.path is None:
             raise ConfigError("this printer has no configuration storage")
         values, problem = self._read_saved()
@@ -420,7 +479,8 @@ class Config:
 
     def boot(self):
         """At start-up, before the machine is assembled: load the saved configuration.
-        A bad file leaves the defaults and warns; no file at all is a first boot."""
+        A bad file leaves the defaults and warns, as does a value left out for that
+        option; no file at all is a first boot."""
         values, problem = self._read_saved()
         if values is not None:
             self._take(values)

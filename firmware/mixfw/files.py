@@ -1,8 +1,17 @@
 # G-code files on the board's flash filesystem: listing, selecting, printing
 # (a job the printer core runs a line at a time between console lines) and uploading.
+#
+# Every write, rename and removal goes through the storage (config.FileStorage), which
+# first waits for the queued moves to end: flash is programmed with interrupts off,
+# far longer than the step path runs ahead. An upload is therefore kept in RAM and
+# written a chunk at a time (one flash sector), and refused while a file prints from
+# flash, which would otherwise stop at every chunk.
 import os
+from mixfw.compat import const
+from mixfw.config import FileStorage
 from mixfw.intake import Intake
 
+_UPLOAD_CHUNK_BYTES = const(4096)  # one flash sector: a write erases and programs one or two
 
 
 class FileError(ValueError):
@@ -69,12 +78,18 @@ class Job:
 
 
 class Files:
-    def __init__(self, root, printer):
+    def __init__(self, root, printer, storage=None):
+        """storage: what writes the flash (config.FileStorage), shared with the
+        configuration."""
         self.root = root.rstrip("/") or ""
         self.printer = printer
+        self.storage = storage or FileStorage()
         self.selected = None  # Job, printing or not
-        self.upload = None  # open file while M28 writes
-        self.upload_name = None
+        self.upload_name = None  # while M28 writes
+        self.chunk = None  # the upload's lines not yet on flash
+        self.chunk_n = 0
+        self.part_written = False  # the first chunk creates `<name>.part`, the rest append
+        self.upload_failed = None  # why a chunk could not be written: M29 reports it
 
     def path(self, name):
         return "%s/%s" % (self.root, _check_name(name))
@@ -122,31 +137,90 @@ class Files:
                 pass
             self.selected = None
 
+    def printing(self):
+        """The job printing from flash now (not paused), or None."""
+        job = self.printer.job
+        return job if job is not None and not job.paused else None
+
     def begin_upload(self, name):
-        path = self.path(name)
-        self.upload = open(path + ".part", "w")
+        # A refused upload takes the lines that follow all the same, up to M29, which
+        # then says nothing was saved: a host that sends the file anyway must never
+        # have it run as G-code.
+        self.chunk = None
+        self.chunk_n = 0
+        self.part_written = False
+        self.upload_failed = None
         self.upload_name = name
         self.printer.sink = self._write
+        try:
+            job = self.printing()
+            if job is not None:
+                raise FileError("cannot write %s while %s prints: pause it (M25) first"
+                                % (name, job.name))
+            self.path(name)  # checks the name
+            self.chunk = bytearray(_UPLOAD_CHUNK_BYTES)
+        except (FileError, MemoryError) as e:
+            self.upload_failed = str(e) or "out of memory"
+            raise FileError("%s; the lines up to M29 are not run" % self.upload_failed)
 
     def _write(self, text):
-        self.upload.write(text + "\n")
+        """One received line into the chunk, the chunk to flash when it is full. After
+        a failed write the lines are still taken (never run as G-code) until M29."""
+        if self.upload_failed is not None:
+            return
+        data = text.encode()
+        if self.chunk_n + len(data) + 1 > len(self.chunk):
+            self._flush()
+        n = self.chunk_n
+        self.chunk[n:n + len(data)] = data
+        self.chunk[n + len(data)] = 10
+        self.chunk_n = n + len(data) + 1
+
+    def _flush(self):
+        path = self.path(self.upload_name) + ".part"
+        try:
+            f = self.storage.open(path, "ab" if self.part_written else "wb")
+            try:
+                f.write(memoryview(self.chunk)[:self.chunk_n])
+            finally:
+                f.close()
+        except OSError as e:
+            self.upload_failed = str(e)
+            raise FileError("could not write %s: %s; M29 ends the upload"
+                            % (self.upload_name, e))
+        except Exception as e:  # a halt or M410 while waiting for the moves
+            self.upload_failed = str(e)
+            raise
+        self.part_written = True
+        self.chunk_n = 0
 
     def end_upload(self):
         self.printer.sink = None
-        if self.upload is None:
-            raise FileError("not writing a file (M28 <name> starts)")
-        self.upload.close()
-        path = self.path(self.upload_name)
-        # The upload replaces a file of the same name only once it is complete.
-        os.rename(path + ".part", path)
         name = self.upload_name
-        self.upload = self.upload_name = None
+        if name is None:
+            raise FileError("not writing a file (M28 <name> starts)")
+        try:
+            if self.upload_failed is None:
+                path = self.path(name)
+                self._flush()
+                # The upload replaces a file of the same name only once it is complete.
+                self.storage.rename(path + ".part", path)
+        except OSError as e:
+            raise FileError("%s not saved: %s" % (name, e))
+        finally:
+            self.upload_name = self.chunk = None
+        if self.upload_failed is not None:
+            raise FileError("%s not saved: %s" % (name, self.upload_failed))
         return name
 
     def delete(self, name):
-        if self.selected is not None and self.selected.name == name:
+        job = self.selected
+        if job is not None and job.name == name:
+            if self.printing() is job:
+                raise FileError("cannot delete %s while it prints: pause it (M25) first"
+                                % name)
             self.cancel()
         try:
-            os.remove(self.path(name))
+            self.storage.remove(self.path(name))
         except OSError:
             raise FileError("Deletion failed, File: %s." % name)

@@ -14,6 +14,7 @@ BOOL = "bool"  # written and read as 0 or 1, as in APrinter
 MIX = "mix"  # drive weights w0:w1:..., normalised to integers (mixer.normalize)
 PAIR = "pair"  # a tool pair's transition from:to:l1_mm:l2_mm; 0:0:0:0 is an empty slot
 EACH = "each"  # axes of a row whose setting is a tuple of any length: _0, _1, ...
+POW2 = "pow2"  # a whole number that is a power of two (microsteps)
 LIVE = False  # takes effect with M930
 RESTART = True  # takes effect after a restart
 
@@ -31,7 +32,9 @@ FIRMWARE_DEFAULTS = {
     # 3 KB of RAM held from boot for a debugging aid: enough for a short burst (about
     # 128 steps); a longer capture sets more and restarts.
     "trace_records": 256,
-    # A main loop stuck this long resets the board (rp2 allows up to 8388 ms); 0: none.
+    # A main loop or interrupt stuck this long resets the board. Never off, as every
+    # board drives heaters: 1000 ms at least (the ESP32's least), 8388 ms at most (the
+    # RP2040's and RP2350's most).
     "watchdog_ms": 4000,
     # The step loop counts as stopped after this long without a tick.
     "step_stall_ms": 250,
@@ -93,7 +96,17 @@ SCHEMA = (
      "endstop switches read high when hit"),
     ("endstop_pullup",             "",     "bool",  0,       1,           True,
      "enable the chip's pull-ups on the endstop inputs"),
+    # TMC2209 drivers on the board's UART (boards with TMC_UART only); E is the E
+    # socket. 1600 mA: about what the boards' 0.11 ohm sense resistors allow.
+    ("driver_microsteps",          "xyze", "pow2",  1,       256,         False,
+     "microsteps the driver is set to; steps_per_mm must match (M92)"),
+    ("driver_current_ma",          "xyze", "int",   50,      1600,        False,
+     "driver RMS run current (M906); the motor holds at half of it"),
+    ("driver_spreadcycle",         "xyze", "bool",  0,       1,           False,
+     "driver chopper: 0 stealthChop (quiet), 1 spreadCycle (M569)"),
     # Heaters (hotend, bed): thermistor (Beta or Steinhart-Hart), PID, protection.
+    # Config narrows every *_pwm_hz row to what the chip's PWM makes at its clock
+    # (pwm.range_hz); a heater's lowest stays 1 Hz, made in software.
     ("hotend_beta",                "",     "float", 500,     20000,       False,
      "hotend thermistor Beta (K)"),
     ("hotend_r25_ohm",             "",     "float", 1,       10000000,    False,
@@ -113,7 +126,7 @@ SCHEMA = (
     ("hotend_kd",                  "",     "float", 0,       10000,       False,
      "hotend PID derivative gain (duty s per C)"),
     ("hotend_pwm_hz",              "",     "int",   1,       100000,      True,
-     "hotend heater PWM frequency"),
+     "hotend heater PWM frequency; below the chip's PWM, in software (SSR)"),
     ("hotend_min_c",               "",     "float", -100,    100,         False,
      "hotend lowest sane reading (below: thermistor open)"),
     ("hotend_max_c",               "",     "float", 0,       500,         False,
@@ -146,7 +159,7 @@ SCHEMA = (
     ("bed_kd",                     "",     "float", 0,       10000,       False,
      "bed PID derivative gain (duty s per C)"),
     ("bed_pwm_hz",                 "",     "int",   1,       100000,      True,
-     "bed heater PWM frequency"),
+     "bed heater PWM frequency; below the chip's PWM, in software (SSR)"),
     ("bed_min_c",                  "",     "float", -100,    100,         False,
      "bed lowest sane reading (below: thermistor open)"),
     ("bed_max_c",                  "",     "float", 0,       500,         False,
@@ -163,7 +176,7 @@ SCHEMA = (
     ("min_extrude_c",              "",     "float", 0,       500,         False,
      "refuse extrusion below this hot end temperature"),
     ("fan_pwm_hz",                 "",     "int",   1,       100000,      True,
-     "part fan PWM frequency"),
+     "part fan PWM frequency, within what the chip's PWM makes at its clock"),
     ("thermal_period_ms",          "",     "int",   10,      10000,       True,
      "heater control period"),
     ("retract_policy",             "",     "int",   0,       2,           False,
@@ -189,8 +202,8 @@ SCHEMA = (
      "mix of this virtual tool, drive weights w0:w1:... (M164/M165/M567 set it)"),
     ("trace_records",              "",     "int",   0,       100000,      True,
      "step events the on-board trace ring holds (M7300/M7301), 12 bytes each"),
-    ("watchdog_ms",                "",     "int",   0,       8000,        True,
-     "a main loop stuck this long resets the board (hardware watchdog), 0 for none"),
+    ("watchdog_ms",                "",     "int",   1000,    8388,        True,
+     "a main loop stuck this long resets the board (hardware watchdog, always on)"),
     ("step_stall_ms",              "",     "int",   10,      10000,       True,
      "no step-loop tick for this long halts the printer, heaters off"),
     ("console_uart",               "",     "int",   -1,      4,           True,

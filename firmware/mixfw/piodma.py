@@ -21,10 +21,12 @@
 # another handler: machine.disable_irq() sections (the planner's queue hand-over, a
 # few us), other interrupt handlers of the same priority (USB, a few us), and flash
 # erase/program, which the rp2 port runs with interrupts off (a 4 kB erase takes tens
-# of ms, many batches): saving the configuration (M500) or writing a file while
-# printing costs late refills. gc.collect() runs with interrupts on (a hard handler
+# of ms, many batches): so every flash write waits for the moves to end first
+# (config.FileStorage), and its late refills come at a standstill, where they stall
+# nothing. gc.collect() runs with interrupts on (a hard handler
 # that allocated would fail during it; refill allocates nothing), so it delays
 # nothing: M122, which collects, ran during the emulated prints with no late refill.
+import sys
 from array import array
 from mixfw.compat import micropython, const, ptr32
 from mixfw import heap, stepper as st
@@ -46,10 +48,24 @@ _TRANS_COUNT = const(2)
 _CTRL_TRIG = const(3)
 _AL1_CTRL = const(4)
 _CH_WORDS = const(16)
-_MULTI_CHAN_TRIGGER = const(0x430 // 4)
 _INTR = const(0x400 // 4)
 _INTS0 = const(0x40C // 4)
-BUSY_BIT = {11: 24, 13: 26}  # CHAIN_TO's place tells the chip: RP2040, RP2350
+_EN = const(1)  # CTRL's enable bit, bit 0 on both chips
+# What differs between the chips' DMAs (RP2040 and RP2350 datasheets, DMA register
+# lists): the word offsets of MULTI_CHAN_TRIGGER and CHAN_ABORT, the lowest bit of
+# CHAIN_TO and the BUSY bit in a channel's CTRL, and the NVIC number of DMA_IRQ_0 (the
+# one MicroPython's rp2.DMA raises). One is chosen at start from settings["chip"].
+DMA_CHIPS = {
+    "rp2040": {"multi_chan_trigger": 0x430 // 4, "chan_abort": 0x444 // 4,
+               "chain_to_lsb": 11, "busy_bit": 24, "dma_irq_0": 11},
+    "rp2350": {"multi_chan_trigger": 0x450 // 4, "chan_abort": 0x464 // 4,
+               "chain_to_lsb": 13, "busy_bit": 26, "dma_irq_0": 10},
+}
+_ABORT_POLLS = const(1000)  # an abort ends within a few bus cycles
+# Where rp2.asm_pio's program (a list) keeps out_init: third from its end, before
+# set_init and sideset_init (MicroPython 1.28 has an offset per PIO before it, 3 on
+# any chip).
+_PROG_OUT_PINS = const(-3)
 
 # The step loop's words refill uses, as constants viper folds (checked below).
 _R_BATCHES = const(95)
@@ -110,8 +126,9 @@ def make_ring(ticks):
 def refill(mem_buf, io, done: int):
     """Channel `done` (0 or 1) has read its segment: arm it with the ready one, chain
     the running channel to it, and fill the freed segment with the next batch. io:
-    (DMA registers, PIO registers, ring, step loop's io (stepper.tick), tail), one
-    tuple because a viper call with more arguments allocates."""
+    (DMA registers, PIO registers, ring, step loop's io (stepper.tick), tail, the
+    chip's MULTI_CHAN_TRIGGER word), one tuple because a viper call with more
+    arguments allocates."""
     mem = ptr32(mem_buf)
     regs = ptr32(io[0])
     pio = ptr32(io[1])
@@ -130,7 +147,7 @@ def refill(mem_buf, io, done: int):
         # The running channel may have ended before its CHAIN_TO pointed here: then
         # nothing triggered this one (it neither runs nor has read a word).
         if (regs[r + _CTRL_TRIG] & busy) == 0 and regs[r + _READ_ADDR] == start:
-            regs[_MULTI_CHAN_TRIGGER] = 1 << ch
+            regs[int(io[5])] = 1 << ch
             # Late only if the FIFO had run dry: idle batches are 2 words, so with
             # words enough in the FIFO both channels may end before the IRQ runs.
             if (pio[_FLEVEL] >> (mem[_R_SM] << 3)) & 15 == 0:
@@ -156,15 +173,41 @@ def refill(mem_buf, io, done: int):
     mem[_R_READY] = freed
 
 
+def chain_to_lsb(dma):
+    """Where this MicroPython's rp2.DMA.pack_ctrl puts CHAIN_TO's lowest bit: the
+    chip it was built for."""
+    diff = dma.pack_ctrl(chain_to=1) ^ dma.pack_ctrl(chain_to=0)
+    lsb = 0
+    while diff >> lsb > 1:
+        lsb += 1
+    return lsb
+
+
+def check_chip(chip, cpu, lsb):
+    """Refuse to run with DMA_CHIPS[chip] where it would be wrong: on the RP2350's
+    RISC-V cores (cpu: sys.implementation._machine), which have no NVIC for the
+    planner to mask the DMA IRQ in, and on a MicroPython built for the other chip
+    (lsb: chain_to_lsb), whose registers lie elsewhere."""
+    if "RISCV" in cpu:
+        raise ValueError("step_backend pio_dma needs the RP2350's Arm cores; this "
+                         "MicroPython runs on its RISC-V cores (%s): flash the Arm build"
+                         % cpu)
+    if lsb != DMA_CHIPS[chip]["chain_to_lsb"]:
+        raise ValueError("step_backend pio_dma: chip is %r, but this MicroPython's DMA has "
+                         "CHAIN_TO at bit %d (the %s's is at bit %d): flash the MicroPython "
+                         "for the board's chip" % (chip, lsb, chip,
+                                                   DMA_CHIPS[chip]["chain_to_lsb"]))
+
+
 class Feed:
     """The ring, the state machine and the two channels of one printer's steps. Made
     right after the step loop's memory (its ring is the next largest block), set up
     by the first start(), once the pins and their masks are there."""
 
     def __init__(self, machine, mem, settings, pin_map, sm_id=0, batch_us=_BATCH_US):
-        if settings.get("chip") not in ("rp2040", "rp2350"):
-            raise ValueError("step_backend pio_dma needs an RP2040 or RP2350, not %r"
-                             % settings.get("chip"))
+        chip = settings.get("chip")
+        if chip not in DMA_CHIPS:
+            raise ValueError("step_backend pio_dma needs an RP2040 or RP2350, not %r" % chip)
         import rp2
         self.rp2 = rp2
         self.machine = machine
@@ -184,6 +227,9 @@ class Feed:
         # hold them when the ring no longer does.
         self.tail = array("i", bytes(4 * _TAIL_WORDS))
         self.dmas = [rp2.DMA(), rp2.DMA()]
+        self.chip = DMA_CHIPS[chip]
+        check_chip(chip, getattr(sys.implementation, "_machine", ""),
+                   chain_to_lsb(self.dmas[0]))
         # What the planner needs to hold the refill back while it rewrites a queued
         # block's record (lookahead.recalculate): (ICER, ISER, bit) of the DMA's IRQ in
         # the NVIC, as words of an array 'i'; None on the simulated chip (no NVIC: the
@@ -193,12 +239,11 @@ class Feed:
         # mask is lifted, tens of us later, and the ring is two batches (4 ms) ahead
         # of the pins, so no step is late or lost. It costs the chip about 1 us, where
         # machine.disable_irq() and enable_irq() cost 6 us a record (up to 13 records
-        # a line on curves). MicroPython's rp2.DMA takes DMA_IRQ_0: IRQ 11 on the
-        # RP2040, 10 on the RP2350. ICER and ISER are at 0xE000E180 and 0xE000E100 on
-        # ARMv6-M and ARMv8-M alike: above 2**31, so stored as negative words.
+        # a line on curves). ICER and ISER are at 0xE000E180 and 0xE000E100 on ARMv6-M
+        # and ARMv8-M alike: above 2**31, so stored as negative words.
         self.irq = None if getattr(rp2, "dma_register_bank", None) else array(
             "i", [0xE000E180 - (1 << 32), 0xE000E100 - (1 << 32),
-                  1 << (11 if settings["chip"] == "rp2040" else 10)])
+                  1 << self.chip["dma_irq_0"]])
         self.pins = None
         self.sm = None
         self.running = False
@@ -242,19 +287,15 @@ class Feed:
         sm_id = self.sm_id
         self.ctrl = d.pack_ctrl(size=2, inc_read=True, inc_write=False, chain_to=0,
                                 treq_sel=sm_id, irq_quiet=False)
-        shift = 0
-        while not (d.pack_ctrl(size=2, inc_read=True, inc_write=False, chain_to=1,
-                               treq_sel=sm_id, irq_quiet=False) ^ self.ctrl) >> shift & 1:
-            shift += 1
         mem[st.R_CTRL] = self.ctrl
-        mem[st.R_CHAIN_SHIFT] = shift
-        mem[st.R_BUSY_BIT] = BUSY_BIT.get(shift, 24)
+        mem[st.R_CHAIN_SHIFT] = self.chip["chain_to_lsb"]
+        mem[st.R_BUSY_BIT] = self.chip["busy_bit"]
         for i, dma in enumerate(self.dmas):
             mem[st.R_CH + i] = dma.channel
         mem[st.R_SM] = sm_id
         # The step loop's own io (stepper.tick) is io[3].
         io = self.io = (self.regs, self.pio_regs, self.ring, (mem, self.ring, pins.endstops),
-                        self.tail)
+                        self.tail, self.chip["multi_chan_trigger"])
 
         # Bound once: the interrupt does no lookups and allocates nothing.
         def irq0(_dma):
@@ -266,7 +307,7 @@ class Feed:
         self.handlers = (irq0, irq1)
         # Assembled once: it takes ms on the chip. The homing ones first look at the
         # endstop (the state machine's jmp pin) and hold every pin where it is from the
-        # word after it reads triggered: high, or low.
+        # word after it reads triggered (high, or low) until the next start().
         self.programs = self._programs()
 
     def _programs(self):
@@ -293,26 +334,31 @@ class Feed:
             word()
             wrap()  # noqa: F821
 
-        # One cycle more per word than step_events (the simulated chip counts it too).
+        # Homing: one look at the endstop (the jmp pin) before each word. From the
+        # first look that finds it triggered, the state machine loops in place until
+        # it is made again (start()): the first closure of a switch is home, and its
+        # bounces open let no word through. One cycle more per word than step_events
+        # (the simulated chip counts it too).
         @rp2.asm_pio(**options)
-        def step_events_hold_high():
+        def step_events_latch_high():
             wrap_target()  # noqa: F821
-            label("top")  # noqa: F821
-            jmp(pin, "top")  # noqa: F821
+            jmp(pin, "latched")  # noqa: F821
             word()
             wrap()  # noqa: F821
+            label("latched")  # noqa: F821
+            jmp("latched")  # noqa: F821
 
         @rp2.asm_pio(**options)
-        def step_events_hold_low():
+        def step_events_latch_low():
             wrap_target()  # noqa: F821
-            label("top")  # noqa: F821
             jmp(pin, "go")  # noqa: F821
-            jmp("top")  # noqa: F821
+            label("latched")  # noqa: F821
+            jmp("latched")  # noqa: F821
             label("go")  # noqa: F821
             word()
             wrap()  # noqa: F821
 
-        return {None: step_events, 1: step_events_hold_high, 0: step_events_hold_low}
+        return {None: step_events, 1: step_events_latch_high, 0: step_events_latch_low}
 
     def _fill(self, seg):
         mem = self.mem
@@ -328,6 +374,14 @@ class Feed:
             self._setup(pins)
         mem = self.mem
         rp2 = self.rp2
+        # A StateMachine drives its out pins to its program's out_init as it is made:
+        # the levels they have now, so a restart (each homed axis, each resume) moves
+        # no DIR pin. STEP pins are low between words.
+        levels = mem[st.S_LEVELS] >> self.first
+        init = tuple(rp2.PIO.OUT_HIGH if levels >> i & 1 else rp2.PIO.OUT_LOW
+                     for i in range(self.count))
+        for program in self.programs.values():
+            program[_PROG_OUT_PINS] = init
         if self.watch:
             pin, level = self.watch
             self.sm = rp2.StateMachine(self.sm_id, self.programs[level], freq=_PIO_HZ,
@@ -380,20 +434,37 @@ class Feed:
         where = self._first_unsent()
         for dma in self.dmas:
             dma.irq(None)
-            dma.active(0)
+        self._abort()
         self.running = False
         self._clear_flags()
         return where
 
+    def _abort(self):
+        """Abort both channels in the datasheet's order, as RP2350-E5 needs it (a
+        channel aborted with EN set can start again and feed the FIFO stale words):
+        EN off and no CHAIN_TO on both, one abort of both, then wait until neither
+        channel is BUSY: BUSY, not CHAN_ABORT, says the transfers in flight are done
+        (RP2040-E13), as pico-sdk's dma_channel_abort waits."""
+        regs = self._regs_view()
+        off = self.ctrl & ~_EN
+        shift = self.chip["chain_to_lsb"]
+        mask = 0
+        for dma in self.dmas:
+            regs[dma.channel * _CH_WORDS + _AL1_CTRL] = off | (dma.channel << shift)
+            mask |= 1 << dma.channel
+        regs[self.chip["chan_abort"]] = mask
+        a, b = self.dmas
+        for _ in range(_ABORT_POLLS):
+            if not (a.active() or b.active()):
+                return
+        raise RuntimeError("DMA channels %d and %d did not stop" % (a.channel, b.channel))
+
     def _clear_flags(self):
         """Both channels' raw interrupt flags (INTR; INTS0 is INTR masked)."""
         mask = (1 << self.dmas[0].channel) | (1 << self.dmas[1].channel)
-        if isinstance(self.regs, int):
-            self.machine.mem32[self.regs + 4 * _INTR] = mask
-            self.machine.mem32[self.regs + 4 * _INTS0] = mask
-        else:
-            self.regs[_INTR] = mask
-            self.regs[_INTS0] = mask
+        regs = self._regs_view()
+        regs[_INTR] = mask
+        regs[_INTS0] = mask
 
     def _first_unsent(self):
         mem = self.mem
@@ -442,9 +513,10 @@ class Feed:
 
     def watch_endstop(self, pin=None, level=1):
         """Homing: from now on the pins hold from the first word after `pin` reads
-        `level` (the endstop triggered), so no step the ring held past the switch gets
-        out; the homing code then takes them back (stop_and_take_back). None: stop
-        watching. Called with the queue run out (the ring holds no step)."""
+        `level` (the endstop triggered), and go on holding whatever it reads after,
+        so no step the ring held past the switch gets out; the homing code then takes
+        them back (stop_and_take_back). None: stop watching. Called with the queue run
+        out (the ring holds no step)."""
         self.stop_and_take_back()
         self.watch = (pin, level) if pin is not None else None
         self.start()
@@ -519,3 +591,6 @@ class _Mem32:
 
     def __getitem__(self, i):
         return self.mem32[self.base + 4 * i]
+
+    def __setitem__(self, i, value):
+        self.mem32[self.base + 4 * i] = value

@@ -21,6 +21,19 @@ _FILE_LINES_PER_READ = const(4)  # a file's lines between reads of the channels
 _ANY_TOOL = command_key("T", -1)  # the handler of every T<n>
 
 
+def run_each(hooks):
+    """Call every hook, even after one raised, as safety hooks must: returns the first
+    fault, or None."""
+    fault = None
+    for fn in hooks:
+        try:
+            fn()
+        except Exception as err:
+            if fault is None:
+                fault = err
+    return fault
+
+
 class Halted(Exception):
     """Raised out of a wait when the printer halted meanwhile (M112, heater fault)."""
 
@@ -193,7 +206,10 @@ class Printer:
         self.current = None  # channel whose command is running
         self.background = []  # fn(now_ms), run from the main loop and every wait
         self._background_at_ms = time.ticks_ms()
-        self.on_halt = []  # run first when the printer halts: heaters off, motion stop
+        # Heaters off: the first thing a halt and every way out of the main loop do, so
+        # that nothing which can allocate or raise comes before it (thermal.py).
+        self.heaters_off = []
+        self.on_halt = []  # then, when the printer halts: motion stopped, a print paused
         self.on_quick_stop = []  # M410: drop the queued moves, the heaters stay on
         self.busy_every_ms = BUSY_EVERY_MS  # M113; 0: no busy lines
         # M108s received, and those that ended a wait or whose turn has passed: an
@@ -329,12 +345,17 @@ class Printer:
 
     # --- halting ---
     def halt(self, reason):
-        """Stop heaters and motion first, then tell every host."""
-        for fn in self.on_halt:
-            fn()
+        """Heaters off first, then motion stopped, then every host told. A hook that
+        raises skips none after it; its fault is reported after the reason."""
+        fault = run_each(self.heaters_off)
+        later = run_each(self.on_halt)
         self.halted = reason
         self.halt_count += 1
         self.broadcast("Error:%s" % reason)
+        if fault is None:
+            fault = later
+        if fault is not None:
+            self.broadcast("Error:halting raised %s: %s" % (type(fault).__name__, fault))
 
     def emergency_stop(self):
         if not self.halted or "M112" not in self.halted:

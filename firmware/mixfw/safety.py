@@ -1,9 +1,16 @@
 # What keeps a board safe when the firmware itself goes wrong: a step loop that stopped
-# (a hard timer callback that raised is disabled and never runs again), a main loop that
-# hangs (the hardware watchdog resets the chip), and every way out of the main loop
-# (heaters and drivers off).
+# (a hard timer callback that raised is disabled and never runs again), a main loop or
+# an interrupt that hangs (the hardware watchdog resets the chip), and every way out of
+# the main loop (heaters off first, then the step loop, drivers and fan).
+#
+# A reset does not leave every output off: the RP2040's and RP2350's pads come up with
+# pull-downs, so an active-low driver ENABLE is active from power-on, and after every
+# watchdog reset, until boot.py drives it inactive. An external pull-up on EN (10 kOhm
+# to the driver's VIO) keeps the drivers off until then, on any chip. Heater and fan
+# outputs come up low, which leaves their MOSFETs off.
 import time
 from mixfw import stepper as st
+from mixfw.printer import run_each
 
 
 class StepWatch:
@@ -31,19 +38,32 @@ class StepWatch:
 
 
 def start_watchdog(machine, printer, timeout_ms):
-    """The chip's watchdog, fed from the main loop and every wait: a main loop stuck
-    for timeout_ms resets the board, which leaves every output pin off. 0: none."""
-    if not timeout_ms:
-        return None
+    """The chip's watchdog, fed from the main loop and every wait: a main loop (or an
+    interrupt) stuck for timeout_ms resets the board. It can't be turned off once
+    started, and options.py keeps watchdog_ms within what every chip takes."""
     wdt = machine.WDT(timeout=timeout_ms)
     feed = wdt.feed
     printer.add_background(lambda now_ms: feed())
     return wdt
 
 
-def all_off(printer):
-    """Heaters, fan and drivers off: on any way out of the main loop."""
-    printer.thermal.all_off()
-    printer.thermal.set_fan(0.0)
-    printer.pins.all_enabled(False)
-    printer.motion.enabled = 0
+def all_off(printer, step_loop):
+    """On any way out of the main loop: heaters off first, as stopping the step loop
+    (step_loop.deinit(): a timer's, or a DMA feed's, which allocates) can raise; then
+    the drivers and the fan. Each runs even if one before it raised; returns the first
+    fault, or None."""
+    fault = run_each(printer.heaters_off)
+    try:
+        step_loop.deinit()
+    except Exception as err:
+        fault = fault or err
+    try:
+        printer.pins.all_enabled(False)
+        printer.motion.enabled = 0
+    except Exception as err:
+        fault = fault or err
+    try:
+        printer.thermal.set_fan(0.0)
+    except Exception as err:
+        fault = fault or err
+    return fault

@@ -472,6 +472,18 @@ def tick(io) -> int:
             elif flags & F_DWELL:  # a zero-length dwell
                 _finish(io[0])
                 run = 0
+        # Homing looks at the endstops every tick, not only when a step is due: the
+        # first closure of a bouncing switch can be shorter than a step, and it is
+        # home. S_HOME_STOP latches: an axis stopped stays stopped for the rest of the
+        # block, whatever the switch reads as it bounces.
+        stopped = 0
+        if run and (flags & F_HOMING):
+            homing = (flags >> F_HOME_SHIFT) & 7
+            stopped = mem[S_HOME_STOP] | (int(io[2]()) & homing)
+            mem[S_HOME_STOP] = stopped
+            if stopped == homing:
+                _finish(io[0])
+                run = 0
         while run:
             # Velocity ramp, per tick so speed is linear in time.
             ramp = mem[_S_RAMP_TICKS] + 1
@@ -567,14 +579,6 @@ def tick(io) -> int:
                 run = 1
         if cruise:
             continue
-        stopped = 0
-        if run and (flags & F_HOMING):
-            homing = (flags >> F_HOME_SHIFT) & 7
-            stopped = mem[S_HOME_STOP] | (int(io[2]()) & homing)
-            mem[S_HOME_STOP] = stopped
-            if stopped == homing:
-                _finish(io[0])
-                run = 0
         if run:
             stepped = 1
             n = blk[B_N]

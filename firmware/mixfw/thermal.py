@@ -10,6 +10,7 @@ import math
 import time
 from mixfw.compat import const
 from mixfw.gcode import GcodeError
+from mixfw.pwm import heater_output
 
 HEATER_NAMES = ("hotend", "bed")
 
@@ -142,7 +143,7 @@ class Heater:
         self.watch_rise_c = _setting(settings, n + "_watch_rise_c", 0)
         self.runaway_c = _setting(settings, n + "_runaway_c", REACHED_C)
         self.runaway_ms = int(_setting(settings, n + "_runaway_s", 0) * 1000)
-        self.pwm.freq(int(_setting(settings, n + "_pwm_hz", 1)))
+        # *_pwm_hz takes a restart: the output was made for its frequency (heater_output).
 
     def read_c(self):
         raw = 0
@@ -162,6 +163,7 @@ class Heater:
     def off(self):
         self.target_c = 0.0
         self.state = _OFF
+        self.duty_u16 = -1  # written whatever it says: a write that raised left it wrong
         self.output(0.0)
 
     def set_target(self, target_c, now_ms):
@@ -250,12 +252,13 @@ class Thermal:
         self.printer = printer
         self.heaters = []
         self.hotend = self.bed = None
+        chip = settings.get("chip", "sim")
         for name in HEATER_NAMES:
             if name + "_heater" not in pin_map or name + "_thermistor" not in pin_map:
                 continue  # the bed is optional
             adc = machine.ADC(machine.Pin(pin_map[name + "_thermistor"]))
-            pwm = machine.PWM(machine.Pin(pin_map[name + "_heater"]),
-                              freq=int(settings[name + "_pwm_hz"]), duty_u16=0)
+            pwm = heater_output(machine, chip, pin_map[name + "_heater"],
+                                int(settings[name + "_pwm_hz"]), printer.add_background)
             heater = Heater(name, adc, pwm)
             self.heaters.append(heater)
             setattr(self, name, heater)
@@ -276,7 +279,9 @@ class Thermal:
         self.last_ms = now
         self.next_ms = now
         printer.add_background(self.background)
-        printer.on_halt.append(self.all_off)
+        # One hook per heater: a heater whose PWM write raises leaves no other one on.
+        for h in self.heaters:
+            printer.heaters_off.append(h.off)
 
     def apply(self, settings):
         """Re-read every thermal setting (after M930, M502...)."""
@@ -284,8 +289,6 @@ class Thermal:
             h.configure(settings)
         self.period_ms = int(_setting(settings, "thermal_period_ms", 1, 10000))
         self.min_extrude_c = settings["min_extrude_c"]
-        if self.fan is not None:
-            self.fan.freq(int(_setting(settings, "fan_pwm_hz", 1)))
         for fn in self.on_change:
             fn()
 
@@ -312,10 +315,6 @@ class Thermal:
         """Read every sensor now, for reports between control periods."""
         for h in self.heaters:
             h.read_c()
-
-    def all_off(self):
-        for h in self.heaters:
-            h.off()
 
     def set_target(self, heater, target_c):
         heater.set_target(target_c, time.ticks_ms())
