@@ -2,17 +2,18 @@
 # Marlin's M906 (run current), M569 (stealthChop or spreadCycle) and M122 (driver
 # report). Handlers parse; the settings live in the configuration (driver_* options,
 # M503 lists them) and tmc.Drivers writes them to the drivers.
-from mixfw.gcode import GcodeError
+from mixfw.gcode import GcodeError, command_key
 from mixfw.tmc import Drivers, TmcError
 
 _LETTERS = "XYZE"
 
 
 class DriverCommands:
-    def __init__(self, printer, config, drivers):
+    def __init__(self, printer, config, drivers, diagnostics):
         self.printer = printer
         self.config = config
         self.drivers = drivers
+        self.diagnostics = diagnostics  # M122's report of the printer, which comes first
 
     def _set(self, pairs):
         """Store driver options and write them; a setting no driver can take is
@@ -67,6 +68,8 @@ class DriverCommands:
     # why it doesn't answer. A driver that was reset (its motor power cycled) or
     # never answered is set up again first. Example: M122
     def m122(self, line):
+        if self.diagnostics is not None:
+            self.diagnostics(line)
         for text in self.drivers.status(self.config.settings):
             self.printer.reply("echo:" + text)
 
@@ -86,7 +89,8 @@ def setup(machine, tmc_uart, config, printer):
     for text in problems:
         config.warn("echo:Warning: %s; it steps on its MS1/MS2 straps until M122 sets "
                     "it up" % text)
-    c = DriverCommands(printer, config, drivers)
+    c = DriverCommands(printer, config, drivers,
+                       printer.commands.get(command_key("M", 122)))
 
     def apply(settings):
         for text in drivers.apply(settings):
