@@ -95,8 +95,8 @@ class Commands:
         self.parser = Parser(cmd_config.RAW_COMMANDS)
         cmd_config.register(self, config)
 
-    def register(self, name, fn):
-        self.handlers[name] = fn
+    def add_command(self, letter, number, fn):
+        self.handlers[letter + str(number)] = fn
 
     def reply(self, text):
         self.lines.append(text)

@@ -20,8 +20,9 @@ _BUILD = """
 import sys, simmachine, simtime
 sys.modules["machine"] = simmachine
 sys.modules["time"] = simtime
+import mixfw
 from mixfw import inram
-inram._FROZEN_PREFIX = %r
+mixfw.FROZEN_PREFIX = %r
 inram.RAM_DIR = %r
 try:
     from mixfw import assemble
@@ -114,3 +115,18 @@ def test_deploy_frozen_dry_run(capsys):
 def test_the_freeze_recipe_ends_with_the_ram_copies(name):
     text = deploy.freeze_text(name)
     assert "mixstep deploy --board %s --port PORT --frozen" % name in text.splitlines()
+
+
+def test_a_build_from_mpy_files_loads_neither_inram_nor_the_software_pwm():
+    # Each module loaded interns its names for good: these are of no use to this board.
+    code = ("import sys, simmachine, simtime\n"
+            "sys.modules['machine'] = simmachine\n"
+            "sys.modules['time'] = simtime\n"
+            "from mixfw import assemble\n"
+            "assemble.build()\n"
+            "print(sorted(m for m in ('mixfw.inram', 'mixfw.softpwm') if m in sys.modules))\n")
+    proc = subprocess.run([paths.micropython(), "-X", "heapsize=4M", "-c", code],
+                          capture_output=True, text=True,
+                          env=paths.micropython_env("pico_6drives"), timeout=120)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert proc.stdout.strip() == "[]"

@@ -5,10 +5,15 @@ import gc
 import sys
 import machine
 import micropython
+from micropython import const
 import board
-from mixfw import heap, inram
+import mixfw
+from mixfw import heap
 # A frozen image: the step path's code into RAM, before anything imports it (inram.py).
-inram.load(board.SETTINGS)
+# Other deployments load every module into RAM anyway, and do without inram's names.
+if mixfw.__path__.startswith(mixfw.FROZEN_PREFIX):
+    from mixfw import inram
+    inram.load(board.SETTINGS)
 if board.SETTINGS.get("step_backend") == "pio_dma":
     import rp2  # noqa: F401 (Feed's: loaded before the reserve, which it would split)
 # The modules from here on load beside a reserve that build() takes its arrays from
@@ -31,18 +36,18 @@ from mixfw import safety  # noqa: E402
 RAW_COMMANDS = (cmd_config.RAW_COMMANDS + cmd_files.RAW_COMMANDS + cmd_mixing.RAW_COMMANDS
                 + cmd_report.RAW_COMMANDS)
 # Where G-code files for printing from flash live.
-FILES_ROOT = "/"
+_FILES_ROOT = const("/")
 # Where the configuration lives on the board's flash filesystem.
-CONFIG_PATH = "/mixstep.cfg"
+_CONFIG_PATH = const("/mixstep.cfg")
 # Left by M997: the next boot skips the firmware once and leaves the REPL to mpremote.
-REPL_FLAG = "/mixstep.repl"
+_REPL_FLAG = const("/mixstep.repl")
 
 
 def _ticks(us, tick_us):
     return max(1, -(-us // tick_us))
 
 
-def load_config(path=CONFIG_PATH, warn=print):
+def load_config(path=_CONFIG_PATH, warn=print):
     """The board's defaults, overridden by the saved configuration if it is sound."""
     config = Config(board.SETTINGS, path, warn=warn, clock_hz=machine.freq())
     config.boot()
@@ -64,7 +69,7 @@ def _start_pio(mem, settings, pin_map):
     return sm.put  # bound once: the interrupt must not look it up
 
 
-def build(config=None, pin_map=None, files_root=FILES_ROOT):
+def build(config=None, pin_map=None, files_root=_FILES_ROOT):
     config = config or Config(board.SETTINGS, None, clock_hz=machine.freq())
     settings = config.settings
     pin_map = pin_map or board.PINS
@@ -161,15 +166,15 @@ def build(config=None, pin_map=None, files_root=FILES_ROOT):
 
 # rp2 timer callbacks can be hard (run in the interrupt) only since MicroPython 1.26;
 # a soft one waits for the interpreter and would make the step timing worthless.
-HARD_TIMER_SINCE = (1, 26, 0)
+_HARD_TIMER_SINCE = const((1, 26, 0))
 
 
 def check_timer_support(chip, version):
     """Refuse to run the step loop on a MicroPython that can't time it properly."""
-    if chip in ("rp2040", "rp2350") and tuple(version[:3]) < HARD_TIMER_SINCE:
+    if chip in ("rp2040", "rp2350") and tuple(version[:3]) < _HARD_TIMER_SINCE:
         raise RuntimeError("mixstep needs MicroPython %d.%d or newer on %s for a hard "
                            "machine.Timer; this is %d.%d.%d: flash a newer MicroPython"
-                           % (HARD_TIMER_SINCE[:2] + (chip,) + tuple(version[:3])))
+                           % (_HARD_TIMER_SINCE[:2] + (chip,) + tuple(version[:3])))
 
 
 def start_timer(printer, tick_us):
@@ -205,7 +210,7 @@ def board_consoles(settings):
     return consoles, listeners
 
 
-def run(consoles=None, listeners=(), printer=None, warnings=None, repl_flag=REPL_FLAG):
+def run(consoles=None, listeners=(), printer=None, warnings=None, repl_flag=_REPL_FLAG):
     """Serve until every console closes or M997; repl_flag: where M997 leaves its flag
     before the reset (None: no flag, no reset; the simulation)."""
     if printer is None:
@@ -245,7 +250,7 @@ def run(consoles=None, listeners=(), printer=None, warnings=None, repl_flag=REPL
     return printer
 
 
-def repl_boot(flag=REPL_FLAG):
+def repl_boot(flag=_REPL_FLAG):
     """True once after M997: the flag is taken away and the firmware stays off."""
     import os
     try:

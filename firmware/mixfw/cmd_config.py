@@ -2,12 +2,13 @@
 # Marlin's aliases M92 M201 M203 M204 M205. Handlers parse; Config checks and stores.
 # M926 and friends change the settings only; M930 applies them. The Marlin aliases
 # apply at once, as Marlin users expect.
+from mixfw.compat import const
 from mixfw.gcode import GcodeError
 
 # Option names are text, so the parser hands these commands their arguments raw.
 RAW_COMMANDS = (("M", 925), ("M", 926))
 
-_JERK_LETTERS = "XYZEST"
+_JERK_LETTERS = const("XYZEST")
 
 
 def _words(text, letters):
@@ -137,16 +138,16 @@ class ConfigCommands:
 
 def register(printer, config):
     c = ConfigCommands(printer, config)
-    printer.register("M503", c.m503)  # print the configuration as M926 lines
-    printer.register("M925", c.m925)  # print one option: I<option>
-    printer.register("M926", c.m926)  # set an option: I<option> V<value> (no V: default)
-    printer.register("M502", c.m502)  # every option to its default
-    printer.register("M501", c.m501)  # load the saved configuration
-    printer.register("M500", c.m500)  # save the configuration
-    printer.register("M930", c.m930)  # apply the configuration
-    printer.register("M92", c.m92)  # steps per mm: X Y Z E
-    printer.register("M201", c.m201)  # maximum acceleration mm/s^2: X Y Z E
-    printer.register("M203", c.m203)  # maximum speed mm/s: X Y Z E
-    printer.register("M204", c.m204)  # acceleration mm/s^2: P print, R retract
-    printer.register("M205", c.m205)  # junction deviation J<mm>, min move time B<us>
+    printer.add_command("M", 503, c.m503)  # print the configuration as M926 lines
+    printer.add_command("M", 925, c.m925)  # print one option: I<option>
+    printer.add_command("M", 926, c.m926)  # set an option: I<option> V<value> (no V: default)
+    printer.add_command("M", 502, c.m502)  # every option to its default
+    printer.add_command("M", 501, c.m501)  # load the saved configuration
+    printer.add_command("M", 500, c.m500)  # save the configuration
+    printer.add_command("M", 930, c.m930)  # apply the configuration
+    printer.add_command("M", 92, c.m92)  # steps per mm: X Y Z E
+    printer.add_command("M", 201, c.m201)  # maximum acceleration mm/s^2: X Y Z E
+    printer.add_command("M", 203, c.m203)  # maximum speed mm/s: X Y Z E
+    printer.add_command("M", 204, c.m204)  # acceleration mm/s^2: P print, R retract
+    printer.add_command("M", 205, c.m205)  # junction deviation J<mm>, min move time B<us>
     return c

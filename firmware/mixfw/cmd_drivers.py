@@ -97,7 +97,7 @@ def setup(machine, tmc_uart, config, printer):
             printer.reply("echo:Warning: " + text)
 
     config.appliers.append(apply)
-    printer.register("M906", c.m906)  # driver run current mA: X Y Z E
-    printer.register("M569", c.m569)  # driver chopper: S0 stealthChop, S1 spreadCycle
-    printer.register("M122", c.m122)  # driver report; sets up drivers that were reset
+    printer.add_command("M", 906, c.m906)  # driver run current mA: X Y Z E
+    printer.add_command("M", 569, c.m569)  # driver chopper: S0 stealthChop, S1 spreadCycle
+    printer.add_command("M", 122, c.m122)  # driver report; sets up drivers that were reset
     return drivers

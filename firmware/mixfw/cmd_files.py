@@ -79,19 +79,19 @@ class FileCommands:
 
 def register(printer, files):
     c = FileCommands(printer, files)
-    for name, fn in (
-        ("M21", c.m21),  # mount the card (flash: always mounted)
-        ("M20", c.m20),  # list files
-        ("M23", c.m23),  # select a file
-        ("M25", c.m25),  # pause the file print
-        ("M26", c.m26),  # file position S<byte> (rewind without S)
-        ("M27", c.m27),  # file print progress
-        ("M28", c.m28),  # write lines to a file until M29
-        ("M29", c.m29),  # end of upload
-        ("M30", c.m30),  # delete a file
+    for letter, number, fn in (
+        ("M", 21, c.m21),  # mount the card (flash: always mounted)
+        ("M", 20, c.m20),  # list files
+        ("M", 23, c.m23),  # select a file
+        ("M", 25, c.m25),  # pause the file print
+        ("M", 26, c.m26),  # file position S<byte> (rewind without S)
+        ("M", 27, c.m27),  # file print progress
+        ("M", 28, c.m28),  # write lines to a file until M29
+        ("M", 29, c.m29),  # end of upload
+        ("M", 30, c.m30),  # delete a file
     ):
-        printer.register(name, fn)
-    printer.register("M24", c.m24, guarded=True)  # start or resume the file print
-    printer.register("M32", c.m32, guarded=True)  # select a file and print it
+        printer.add_command(letter, number, fn)
+    printer.add_command("M", 24, c.m24, guarded=True)  # start or resume the file print
+    printer.add_command("M", 32, c.m32, guarded=True)  # select a file and print it
     printer.on_halt.append(files.pause)
     return c

@@ -2,12 +2,13 @@
 # (Marlin: the whole mix at once; R reports every tool), M567 (RepRapFirmware: a tool's
 # mix), T<n>. Virtual tools live in the configuration (options tool_mixes_<n>), so
 # M500 keeps them across a reboot and M503 prints them.
+from mixfw.compat import const
 from mixfw.gcode import GcodeError
 from mixfw.mixer import normalize
 from mixfw.gradient import Gradient, ALONG_Z, ALONG_E
 from mixfw.planner import NM_PER_MM
 
-_MARLIN_LETTERS = "ABCDHI"  # Marlin's letters for drives 0..5 in M165
+_MARLIN_LETTERS = const("ABCDHI")  # Marlin's letters for drives 0..5 in M165
 
 
 class Mixing:
@@ -305,13 +306,13 @@ RAW_COMMANDS = (("M", 567), ("M", 168), ("M", 169))
 
 
 def register(printer, mixing):
-    printer.register("M163", mixing.m163)  # set a drive's weight: S<drive> P<weight>
+    printer.add_command("M", 163, mixing.m163)  # set a drive's weight: S<drive> P<weight>
     # store the weights as virtual tool S<tool> [P1 save]
-    printer.register("M164", mixing.m164)
-    printer.register("M165", mixing.m165)  # whole mix A B C D H I; R reports every tool
-    printer.register("M567", mixing.m567)  # a tool's mix: P<tool> E<w0>:<w1>:...
-    printer.register("M167", mixing.m167)  # filament used per drive; R clears
-    printer.register("M168", mixing.m168)  # palette: mixtures over the drives, w0:w1,...
-    printer.register("M166", mixing.m166)  # Z gradient A<z0> Z<z1> I<tool0> J<tool1> S T
-    printer.register("M169", mixing.m169)  # gradient of stops along Z or E
-    printer.register("T", mixing.t)  # select virtual tool
+    printer.add_command("M", 164, mixing.m164)
+    printer.add_command("M", 165, mixing.m165)  # whole mix A B C D H I; R reports every tool
+    printer.add_command("M", 567, mixing.m567)  # a tool's mix: P<tool> E<w0>:<w1>:...
+    printer.add_command("M", 167, mixing.m167)  # filament used per drive; R clears
+    printer.add_command("M", 168, mixing.m168)  # palette: mixtures over the drives, w0:w1,...
+    printer.add_command("M", 166, mixing.m166)  # Z gradient A<z0> Z<z1> I<tool0> J<tool1> S T
+    printer.add_command("M", 169, mixing.m169)  # gradient of stops along Z or E
+    printer.add_command("T", -1, mixing.t)  # select virtual tool

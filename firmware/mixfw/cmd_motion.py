@@ -7,8 +7,8 @@ from mixfw.planner import (array_offsets, nm_from_mm, scaled_round, spm_digits,
 from mixfw import stepper as st
 from mixfw.compat import const, micropython, ptr8, ptr32
 
-AXIS_LETTERS = "XYZE"
-_AXIS_INDEX = tuple(letter_index(ch) for ch in AXIS_LETTERS)
+_AXIS_LETTERS = const("XYZE")
+_AXIS_INDEX = tuple(letter_index(ch) for ch in _AXIS_LETTERS)
 # Constants, which the compiler folds: a module's global costs every line a lookup.
 _F_INDEX = const(5)  # letter_index("F")
 _NM_DECIMALS = const(6)  # axis words are read as exact nanometres
@@ -415,9 +415,9 @@ class Motion:
         if verdict <= -_OUTSIDE:
             i = -_OUTSIDE - verdict
             raise GcodeError("move to %s%.3f is outside the soft limits 0..%g mm"
-                             % (AXIS_LETTERS[i], target[i] / NM_PER_MM, self.travel_mm[i]))
+                             % (_AXIS_LETTERS[i], target[i] / NM_PER_MM, self.travel_mm[i]))
         raise GcodeError("%s beyond +-%d mm: positions are kept in 32-bit integers of "
-                         "nanometres" % (AXIS_LETTERS[-_BEYOND - verdict],
+                         "nanometres" % (_AXIS_LETTERS[-_BEYOND - verdict],
                                          _NM_MAX // NM_PER_MM))
 
     # G10: firmware retraction by retract_mm at retract_feed_mm_s; the logical E stays.
@@ -452,7 +452,7 @@ class Motion:
 
     # G28 [X] [Y] [Z]: home the named axes, or all, to their min endstops. Example: G28 X Y
     def g28(self, line):
-        axes = [i for i in range(3) if line.has(AXIS_LETTERS[i])] or [0, 1, 2]
+        axes = [i for i in range(3) if line.has(_AXIS_LETTERS[i])] or [0, 1, 2]
         planner = self.planner
         mem = planner.mem
         feed = self.feed
@@ -476,7 +476,7 @@ class Motion:
                     feed.watch_endstop(None)
             if not (mem[st.S_HOME_STOP] >> i) & 1:
                 raise GcodeError("homing %s failed: no endstop within %.0f mm"
-                                 % (AXIS_LETTERS[i], reach_mm))
+                                 % (_AXIS_LETTERS[i], reach_mm))
             mem[st.S_POS + i] = 0
             steps = list(planner.position_steps)
             steps[i] = 0
@@ -522,7 +522,7 @@ class Motion:
 
     # G92 [X Y Z E]: say where the axes are now, without moving. Example: G92 E0
     def g92(self, line):
-        named = [i for i in range(4) if line.has(AXIS_LETTERS[i])] or range(4)
+        named = [i for i in range(4) if line.has(_AXIS_LETTERS[i])] or range(4)
         values = [line.fixed_at(_AXIS_INDEX[i], _NM_DECIMALS, 0) for i in named]
         for i, v in zip(named, values):
             # X Y Z and their offsets stay within what xyz_targets takes.
@@ -551,7 +551,7 @@ class Motion:
     def _axes_named(self, line):
         mask = 0
         for i in range(4):
-            if line.has(AXIS_LETTERS[i]):
+            if line.has(_AXIS_LETTERS[i]):
                 mask |= 1 << i
         return mask or 15
 
@@ -623,25 +623,25 @@ def _queue(self, steps, xyz, e_nm, feed_mm_s):
 
 def register(printer, motion):
     m = motion
-    for name, fn in (
-        ("G0", m.g1),  # rapid move (same as G1)
-        ("G1", m.g1),  # straight move X Y Z E F
-        ("G4", m.g4),  # dwell P<ms> or S<s>
-        ("G28", m.g28),  # home axes to min endstops
-        ("G90", m.g90),  # absolute coordinates
-        ("G91", m.g91),  # relative coordinates
-        ("G92", m.g92),  # set position
-        ("G20", m.g20),  # inch units (refused)
-        ("G21", m.g21),  # millimetre units
-        ("M82", m.m82),  # absolute E
-        ("M83", m.m83),  # relative E
-        ("M400", m.m400),  # wait for moves to finish
-        ("M17", m.m17),  # enable drivers
-        ("G10", m.g10),  # firmware retraction
-        ("G11", m.g11),  # firmware unretraction
-        ("M18", m.m18),  # disable drivers
-        ("M84", m.m18),  # disable drivers
+    for letter, number, fn, guarded in (
+        ("G", 0, m.g1, True),  # rapid move (same as G1)
+        ("G", 1, m.g1, True),  # straight move X Y Z E F
+        ("G", 4, m.g4, True),  # dwell P<ms> or S<s>
+        ("G", 28, m.g28, True),  # home axes to min endstops
+        ("G", 90, m.g90, False),  # absolute coordinates
+        ("G", 91, m.g91, False),  # relative coordinates
+        ("G", 92, m.g92, False),  # set position
+        ("G", 20, m.g20, False),  # inch units (refused)
+        ("G", 21, m.g21, False),  # millimetre units
+        ("M", 82, m.m82, False),  # absolute E
+        ("M", 83, m.m83, False),  # relative E
+        ("M", 400, m.m400, False),  # wait for moves to finish
+        ("M", 17, m.m17, True),  # enable drivers
+        ("G", 10, m.g10, True),  # firmware retraction
+        ("G", 11, m.g11, True),  # firmware unretraction
+        ("M", 18, m.m18, False),  # disable drivers
+        ("M", 84, m.m18, False),  # disable drivers
     ):
-        printer.register(name, fn, guarded=name in ("G0", "G1", "G4", "G10", "G11", "G28", "M17"))
-    printer.register("M119", m.m119)  # endstop states
-    printer.register("M211", m.m211)  # soft limits S0/S1
+        printer.add_command(letter, number, fn, guarded)
+    printer.add_command("M", 119, m.m119)  # endstop states
+    printer.add_command("M", 211, m.m211)  # soft limits S0/S1

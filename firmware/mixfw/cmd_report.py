@@ -9,14 +9,15 @@ RAW_COMMANDS = (("M", 117), ("M", 118))
 # What hosts may rely on, in Marlin's M115 form. EEPROM and SDCARD depend on the
 # printer (Reports): a simulation without storage says 0. HOST_ACTION_COMMANDS is
 # left out: OctoPrint reads ":0" as "supported but disabled" and warns the user to
-# turn on what this firmware doesn't have.
+# turn on what this firmware doesn't have. Whole lines: a name on its own would be
+# interned at load, and the chip holds interned names for good.
 CAPABILITIES = (
-    ("SERIAL_XON_XOFF", 0), ("VOLUMETRIC", 0), ("AUTOREPORT_TEMP", 1),
-    ("PROGRESS", 0), ("PRINT_JOB", 1), ("AUTOLEVEL", 0), ("Z_PROBE", 0),
-    ("LEVELING_DATA", 0), ("BUILD_PERCENT", 0), ("SOFTWARE_POWER", 0),
-    ("TOGGLE_LIGHTS", 0), ("CASE_LIGHT_BRIGHTNESS", 0), ("EMERGENCY_PARSER", 1),
-    ("PROMPT_SUPPORT", 0), ("AUTOREPORT_SD_STATUS", 0),
-    ("THERMAL_PROTECTION", 1), ("MIXING_EXTRUDER", 1),
+    "Cap:SERIAL_XON_XOFF:0", "Cap:VOLUMETRIC:0", "Cap:AUTOREPORT_TEMP:1",
+    "Cap:PROGRESS:0", "Cap:PRINT_JOB:1", "Cap:AUTOLEVEL:0", "Cap:Z_PROBE:0",
+    "Cap:LEVELING_DATA:0", "Cap:BUILD_PERCENT:0", "Cap:SOFTWARE_POWER:0",
+    "Cap:TOGGLE_LIGHTS:0", "Cap:CASE_LIGHT_BRIGHTNESS:0", "Cap:EMERGENCY_PARSER:1",
+    "Cap:PROMPT_SUPPORT:0", "Cap:AUTOREPORT_SD_STATUS:0", "Cap:THERMAL_PROTECTION:1",
+    "Cap:MIXING_EXTRUDER:1",
 )
 
 
@@ -45,7 +46,7 @@ class Reports:
         self.motion = motion
         self.planner = planner
         self.board_name = board_name
-        self.capabilities = CAPABILITIES + (("EEPROM", int(storage)), ("SDCARD", int(files)))
+        self.capabilities = CAPABILITIES + ("Cap:EEPROM:%d" % storage, "Cap:SDCARD:%d" % files)
         self.message = ""  # M117's text, for a display or a status report
 
     # M114: logical position and step counts, in Marlin's form.
@@ -60,7 +61,7 @@ class Reports:
         self.printer.reply("FIRMWARE_NAME:mixstep 0.1 (MicroPython) PROTOCOL_VERSION:1.0 "
                            "MACHINE_TYPE:%s EXTRUDER_COUNT:1" % self.board_name)
         for cap in self.capabilities:
-            self.printer.reply("Cap:%s:%d" % cap)
+            self.printer.reply(cap)
 
     # M122: diagnostics, as RepRapFirmware's: the planner's underruns (the step loop
     # ran dry between two moves with no wait between them) and the free heap, as it is
@@ -97,9 +98,9 @@ class Reports:
 
 
 def register(printer, reports):
-    printer.register("M114", reports.m114)  # report position
-    printer.register("M115", reports.m115)  # firmware info
-    printer.register("M122", reports.m122)  # diagnostics: underruns, free heap
-    printer.register("M117", reports.m117)  # status message: M117 <text>
+    printer.add_command("M", 114, reports.m114)  # report position
+    printer.add_command("M", 115, reports.m115)  # firmware info
+    printer.add_command("M", 122, reports.m122)  # diagnostics: underruns, free heap
+    printer.add_command("M", 117, reports.m117)  # status message: M117 <text>
     # send text to the host: M118 [A1] [E1] [Pn] <text>
-    printer.register("M118", reports.m118)
+    printer.add_command("M", 118, reports.m118)

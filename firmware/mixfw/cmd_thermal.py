@@ -150,20 +150,20 @@ class ThermalCommands:
 
 def register(printer, thermal, motion):
     c = ThermalCommands(printer, thermal)
-    for name, fn, guarded in (
-        ("M104", c.m104, True),  # set hot end temperature S<C>
-        ("M109", c.m109, True),  # set hot end temperature S<C> and wait
-        ("M140", c.m140, True),  # set bed temperature S<C>
-        ("M190", c.m190, True),  # set bed temperature S<C> and wait
-        ("M116", c.m116, True),  # wait for every heater to reach its target
-        ("M105", c.m105, False),  # report temperatures
-        ("M155", c.m155, False),  # report temperatures every S<s> seconds (S0: stop)
-        ("M106", c.m106, False),  # part fan on S<0-255>
-        ("M107", c.m107, False),  # part fan off
-        ("M302", c.m302, False),  # cold extrusion: P1 allow, P0 refuse, S<C> minimum
-        ("M922", c.m922, False),  # re-arm heaters after a thermal fault
+    for letter, number, fn, guarded in (
+        ("M", 104, c.m104, True),  # set hot end temperature S<C>
+        ("M", 109, c.m109, True),  # set hot end temperature S<C> and wait
+        ("M", 140, c.m140, True),  # set bed temperature S<C>
+        ("M", 190, c.m190, True),  # set bed temperature S<C> and wait
+        ("M", 116, c.m116, True),  # wait for every heater to reach its target
+        ("M", 105, c.m105, False),  # report temperatures
+        ("M", 155, c.m155, False),  # report temperatures every S<s> seconds (S0: stop)
+        ("M", 106, c.m106, False),  # part fan on S<0-255>
+        ("M", 107, c.m107, False),  # part fan off
+        ("M", 302, c.m302, False),  # cold extrusion: P1 allow, P0 refuse, S<C> minimum
+        ("M", 922, c.m922, False),  # re-arm heaters after a thermal fault
     ):
-        printer.register(name, fn, guarded)
+        printer.add_command(letter, number, fn, guarded)
     motion.extrusion_guards.append(c.check_extrusion)
     thermal.on_change.append(motion.recheck_guards)
     printer.add_background(c.autoreport)

@@ -66,5 +66,5 @@ class Trace:
 
 
 def register(printer, trace):
-    printer.register("M7300", trace.m7300)  # trace capture: S1 start, S0 stop, no S report
-    printer.register("M7301", trace.m7301)  # trace capture: send the recorded step events
+    printer.add_command("M", 7300, trace.m7300)  # trace capture: S1 start, S0 stop, no S report
+    printer.add_command("M", 7301, trace.m7301)  # trace capture: send the recorded step events

@@ -11,14 +11,15 @@
 #
 # Pure logic: no `machine`; the file system is passed in (see FileStorage).
 import os
+from mixfw.compat import const
 from mixfw.options import SCHEMA, FIRMWARE_DEFAULTS, FLOAT, INT, BOOL, MIX, PAIR, EACH, POW2
 from mixfw.mixer import normalize, default_tool_mixes
 from mixfw.pwm import CLOCK_HZ, HEATER_OPTIONS, range_hz, clock_text
 
-HEADER = "# mixstep configuration, version 1\n"
-_CRC_PREFIX = b"crc32 = "
-_CRC_LINE = "crc32 = %08x\n"
-_MAX_FILE_BYTES = 16384  # far above a real file; bounds what a junk file costs in RAM
+_HEADER = const("# mixstep configuration, version 1\n")
+_CRC_PREFIX = const(b"crc32 = ")
+_CRC_LINE = const("crc32 = %08x\n")
+_MAX_FILE_BYTES = const(16384)  # far above a real file; bounds what a junk file costs in RAM
 
 # CRC-32 (zlib's polynomial) four bits at a time: a 16-entry table instead of 256.
 _CRC_NIBBLE = (
@@ -339,7 +340,7 @@ class Config:
 
     # --- storage ---
     def text(self):
-        body = HEADER + "".join(
+        body = _HEADER + "".join(
             "%s = %s\n" % (o.name, o.format(self._read_setting(o))) for o in self.options)
         data = body.encode()
         return data + (_CRC_LINE % crc32(data)).encode()
@@ -382,7 +383,7 @@ class Config:
             lines = body.decode().split("\n")
         except UnicodeError:
             raise ConfigError("not text")
-        if lines[0] + "\n" != HEADER:
+        if lines[0] + "\n" != _HEADER:
             raise ConfigError("unsupported header %r" % lines[0])
         values = {}
         skipped = []

@@ -8,7 +8,7 @@
 # path's modules also live as .mpy files in RAM_DIR on the board's filesystem, from
 # which MicroPython loads their machine code into the heap (`mixstep deploy --frozen`
 # puts them there). Deployed as .mpy files (`mixstep deploy`), every module loads into
-# RAM anyway, and load() does nothing.
+# RAM anyway, and the firmware does not import this module.
 import mixfw
 
 # What the interrupts run, in import order: the step loop (stepper; mixer's pick and
@@ -18,19 +18,11 @@ STEP_LOOP = ("ramp", "mixer", "stepper")
 DMA_FEED = ("pio", "piodma")
 STEP_PATH = STEP_LOOP + DMA_FEED
 RAM_DIR = "/mixfw_ram"
-_FROZEN_PREFIX = ".frozen"
-
-
-def frozen(package=mixfw):
-    """True if the firmware package runs from a frozen image."""
-    return package.__path__.startswith(_FROZEN_PREFIX)
 
 
 def load(settings, package=mixfw):
-    """In a frozen image, import the step path's modules for these settings from
-    RAM_DIR, before anything else imports them."""
-    if not frozen(package):
-        return
+    """In a frozen image (mixfw.FROZEN_PREFIX), import the step path's modules for
+    these settings from RAM_DIR, before anything else imports them."""
     names = STEP_PATH if settings.get("step_backend") == "pio_dma" else STEP_LOOP
     import sys
     here = package.__path__

@@ -2,7 +2,7 @@
 # G-code line; on the chips every float operation allocates, so the float version cost
 # about 2 ms a line there, and the garbage a collection every few dozen lines.
 #
-# Speeds are kept squared, as V2 = (mm/s)**2 * 64 (V2_SCALE), below 2**29 (about
+# Speeds are kept squared, as V2 = (mm/s)**2 * 64 (_V2_SCALE), below 2**29 (about
 # 2,900 mm/s): then the passes only add and compare (v**2 = v0**2 + 2 a s), a sum of
 # three stays below 2**31, and the 32-bit chips and the 64-bit unix port give the same
 # integers. A record's rates come from V2 by an exact integer square root.
@@ -11,7 +11,7 @@ from mixfw import ramp
 from mixfw import stepper as st
 from mixfw.ramp import isqrt_limbs, product
 
-V2_SCALE = 64
+_V2_SCALE = const(64)
 _V2_MAX = const(0x1FFFFFFF)
 
 # Words per slot in the planner's lk array.
@@ -166,7 +166,7 @@ def plan_words(w4: int):
     e_mm = w[_W_E + F_MM] - _BIAS
     m_a = w[_W_M + F_ACCEL]
     e_a = w[_W_E + F_ACCEL] - _BIAS
-    # GAIN = 2 V2_SCALE a mm (V2_SCALE = 2**6)
+    # GAIN = 2 _V2_SCALE a mm (_V2_SCALE = 2**6)
     w[_A] = m_a
     w[_B] = m_mm
     w[_C] = 1
@@ -242,7 +242,7 @@ def plan_words(w4: int):
     else:
         floor = floor >> (0 - t) if t > -31 else 0
     lk[at + L_FLOOR] = floor
-    # rate = k sqrt(V2 / V2_SCALE) = isqrt(V2 * K2) scaled by 2**K_SHIFT, with K2 in
+    # rate = k sqrt(V2 / _V2_SCALE) = isqrt(V2 * K2) scaled by 2**K_SHIFT, with K2 in
     # [2**24, 2**26): V2 * K2 stays below 2**55, and the root keeps 15 bits or more.
     # k**2 / 2**6 = km**2 2**(2 ke - 6) = K2 4**K_SHIFT with K2 = km**2 >> 26: the
     # square in two limbs as product() makes them, written out (a call costs the chip

@@ -1,9 +1,9 @@
 # Pins: how the step loop's GPIO masks reach the pins, and the ENABLE and endstop
 # pins. With pin_writer "registers" the step loop writes the chip's set/clear
 # registers itself (see the end of stepper.tick); "pin" is the portable Pin.value path.
-from mixfw.compat import micropython, ptr32
+from mixfw.compat import const, micropython, ptr32
 
-AXIS_NAMES = ("x", "y", "z")
+_AXIS_NAMES = const(("x", "y", "z"))
 # Per chip: register block address, and byte offsets of the GPIO output set and clear
 # registers, then of the set and clear registers for GPIO 32+ (0: none).
 REGISTERS = {
@@ -46,7 +46,7 @@ class Pins:
         self.step_masks = []  # X Y Z then drives
         self.dir_masks = []
         self.enable = []  # X Y Z then drives
-        names = list(AXIS_NAMES) + ["e%d" % i for i in range(self.drives)]
+        names = list(_AXIS_NAMES) + ["e%d" % i for i in range(self.drives)]
         for name in names:
             self.step_masks.append(self._out(Pin, pin_map, name + "_step", 0))
             self.dir_masks.append(self._out(Pin, pin_map, name + "_dir", 0))
@@ -56,7 +56,7 @@ class Pins:
             self.enable.append(Pin(gpio, Pin.OUT, value=1 - self.enable_level))
         endstop_high = settings["endstop_active_high"]
         pull = Pin.PULL_UP if settings.get("endstop_pullup") else None
-        self.endstop_pins = [Pin(pin_map[a + "_min"], Pin.IN, pull) for a in AXIS_NAMES]
+        self.endstop_pins = [Pin(pin_map[a + "_min"], Pin.IN, pull) for a in _AXIS_NAMES]
         self.endstop_level = 1 if endstop_high else 0
         top = 0
         for g in range(32):

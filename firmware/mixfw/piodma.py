@@ -55,11 +55,15 @@ _EN = const(1)  # CTRL's enable bit, bit 0 on both chips
 # lists): the word offsets of MULTI_CHAN_TRIGGER and CHAN_ABORT, the lowest bit of
 # CHAIN_TO and the BUSY bit in a channel's CTRL, and the NVIC number of DMA_IRQ_0 (the
 # one MicroPython's rp2.DMA raises). One is chosen at start from settings["chip"].
+# A tuple per chip, read by the indices below: string keys would each be interned.
+_MULTI_CHAN_TRIGGER = const(0)
+_CHAN_ABORT = const(1)
+_CHAIN_TO_LSB = const(2)
+_BUSY_BIT = const(3)
+_DMA_IRQ_0 = const(4)
 DMA_CHIPS = {
-    "rp2040": {"multi_chan_trigger": 0x430 // 4, "chan_abort": 0x444 // 4,
-               "chain_to_lsb": 11, "busy_bit": 24, "dma_irq_0": 11},
-    "rp2350": {"multi_chan_trigger": 0x450 // 4, "chan_abort": 0x464 // 4,
-               "chain_to_lsb": 13, "busy_bit": 26, "dma_irq_0": 10},
+    "rp2040": (0x430 // 4, 0x444 // 4, 11, 24, 11),
+    "rp2350": (0x450 // 4, 0x464 // 4, 13, 26, 10),
 }
 _ABORT_POLLS = const(1000)  # an abort ends within a few bus cycles
 # Where rp2.asm_pio's program (a list) keeps out_init: third from its end, before
@@ -192,11 +196,11 @@ def check_chip(chip, cpu, lsb):
         raise ValueError("step_backend pio_dma needs the RP2350's Arm cores; this "
                          "MicroPython runs on its RISC-V cores (%s): flash the Arm build"
                          % cpu)
-    if lsb != DMA_CHIPS[chip]["chain_to_lsb"]:
+    if lsb != DMA_CHIPS[chip][_CHAIN_TO_LSB]:
         raise ValueError("step_backend pio_dma: chip is %r, but this MicroPython's DMA has "
                          "CHAIN_TO at bit %d (the %s's is at bit %d): flash the MicroPython "
                          "for the board's chip" % (chip, lsb, chip,
-                                                   DMA_CHIPS[chip]["chain_to_lsb"]))
+                                                   DMA_CHIPS[chip][_CHAIN_TO_LSB]))
 
 
 class Feed:
@@ -243,7 +247,7 @@ class Feed:
         # and ARMv8-M alike: above 2**31, so stored as negative words.
         self.irq = None if getattr(rp2, "dma_register_bank", None) else array(
             "i", [0xE000E180 - (1 << 32), 0xE000E100 - (1 << 32),
-                  1 << self.chip["dma_irq_0"]])
+                  1 << self.chip[_DMA_IRQ_0]])
         self.pins = None
         self.sm = None
         self.running = False
@@ -288,14 +292,14 @@ class Feed:
         self.ctrl = d.pack_ctrl(size=2, inc_read=True, inc_write=False, chain_to=0,
                                 treq_sel=sm_id, irq_quiet=False)
         mem[st.R_CTRL] = self.ctrl
-        mem[st.R_CHAIN_SHIFT] = self.chip["chain_to_lsb"]
-        mem[st.R_BUSY_BIT] = self.chip["busy_bit"]
+        mem[st.R_CHAIN_SHIFT] = self.chip[_CHAIN_TO_LSB]
+        mem[st.R_BUSY_BIT] = self.chip[_BUSY_BIT]
         for i, dma in enumerate(self.dmas):
             mem[st.R_CH + i] = dma.channel
         mem[st.R_SM] = sm_id
         # The step loop's own io (stepper.tick) is io[3].
         io = self.io = (self.regs, self.pio_regs, self.ring, (mem, self.ring, pins.endstops),
-                        self.tail, self.chip["multi_chan_trigger"])
+                        self.tail, self.chip[_MULTI_CHAN_TRIGGER])
 
         # Bound once: the interrupt does no lookups and allocates nothing.
         def irq0(_dma):
@@ -342,18 +346,18 @@ class Feed:
         @rp2.asm_pio(**options)
         def step_events_latch_high():
             wrap_target()  # noqa: F821
-            jmp(pin, "latched")  # noqa: F821
+            jmp(pin, "hold")  # noqa: F821
             word()
             wrap()  # noqa: F821
-            label("latched")  # noqa: F821
-            jmp("latched")  # noqa: F821
+            label("hold")  # noqa: F821
+            jmp("hold")  # noqa: F821
 
         @rp2.asm_pio(**options)
         def step_events_latch_low():
             wrap_target()  # noqa: F821
             jmp(pin, "go")  # noqa: F821
-            label("latched")  # noqa: F821
-            jmp("latched")  # noqa: F821
+            label("hold")  # noqa: F821
+            jmp("hold")  # noqa: F821
             label("go")  # noqa: F821
             word()
             wrap()  # noqa: F821
@@ -447,12 +451,12 @@ class Feed:
         (RP2040-E13), as pico-sdk's dma_channel_abort waits."""
         regs = self._regs_view()
         off = self.ctrl & ~_EN
-        shift = self.chip["chain_to_lsb"]
+        shift = self.chip[_CHAIN_TO_LSB]
         mask = 0
         for dma in self.dmas:
             regs[dma.channel * _CH_WORDS + _AL1_CTRL] = off | (dma.channel << shift)
             mask |= 1 << dma.channel
-        regs[self.chip["chan_abort"]] = mask
+        regs[self.chip[_CHAN_ABORT]] = mask
         a, b = self.dmas
         for _ in range(_ABORT_POLLS):
             if not (a.active() or b.active()):

@@ -14,9 +14,9 @@ from mixfw.compat import const, micropython, ptr8
 from mixfw.gcode import Parser, GcodeError, WordsError, command_key
 from mixfw.intake import Intake, LINE_OK, LINE_CUT
 
-BUSY_EVERY_MS = 2000
-REPORT_EVERY_MS = 1000  # temperatures while a heating wait runs, as Marlin
-BACKGROUND_EVERY_MS = 10  # background tasks at least this often, however busy
+_BUSY_EVERY_MS = const(2000)
+_REPORT_EVERY_MS = const(1000)  # temperatures while a heating wait runs, as Marlin
+_BACKGROUND_EVERY_MS = const(10)  # background tasks at least this often, however busy
 _FILE_LINES_PER_READ = const(4)  # a file's lines between reads of the channels
 _ANY_TOOL = command_key("T", -1)  # the handler of every T<n>
 
@@ -211,7 +211,7 @@ class Printer:
         self.heaters_off = []
         self.on_halt = []  # then, when the printer halts: motion stopped, a print paused
         self.on_quick_stop = []  # M410: drop the queued moves, the heaters stay on
-        self.busy_every_ms = BUSY_EVERY_MS  # M113; 0: no busy lines
+        self.busy_every_ms = _BUSY_EVERY_MS  # M113; 0: no busy lines
         # M108s received, and those that ended a wait or whose turn has passed: an
         # M108 ends the heating wait running when it arrives, or one still ahead of
         # it in the ring; once its own line runs, no later wait sees it.
@@ -231,28 +231,31 @@ class Printer:
         self.failed = False
         self.sink = None  # M28 upload: takes each received line's text instead of running it
         self.job = None  # a file being printed: next_line() -> its intake's status, .paused
-        for name, fn in (
-            ("M110", self.m110),  # set the line number: M110 N<n>
-            ("M112", self.m112),  # emergency stop
-            ("M108", self.m108),  # end a heating wait
-            ("M410", self.m410),  # quick stop: drop the queued moves, heaters stay on
-            ("M876", self.m876),  # answer a host prompt: S<choice>
-            ("M113", self.m113),  # busy keep-alive interval S<s> (0: none)
-            ("M999", self.m999),  # clear a halt and resume
-            ("M997", self.m997),  # stop serving and restart into the REPL (for an update)
-            ("M932", self.m932),  # refuse commands after the first error
-            ("M933", self.m933),  # leave refuse-after-error mode
+        for letter, number, fn in (
+            ("M", 110, self.m110),  # set the line number: M110 N<n>
+            ("M", 112, self.m112),  # emergency stop
+            ("M", 108, self.m108),  # end a heating wait
+            ("M", 410, self.m410),  # quick stop: drop the queued moves, heaters stay on
+            ("M", 876, self.m876),  # answer a host prompt: S<choice>
+            ("M", 113, self.m113),  # busy keep-alive interval S<s> (0: none)
+            ("M", 999, self.m999),  # clear a halt and resume
+            ("M", 997, self.m997),  # stop serving and restart into the REPL (for an update)
+            ("M", 932, self.m932),  # refuse commands after the first error
+            ("M", 933, self.m933),  # leave refuse-after-error mode
         ):
-            self.register(name, fn)
+            self.add_command(letter, number, fn)
 
     # --- registration and replies ---
     def register(self, name, handler, guarded=False):
-        """name like "G1" or "M163"; "T" takes every tool number. guarded: refused
+        """name like "G1" or "M163"; "T" takes every tool number. The firmware's own
+        commands use add_command: "G1" as text would be interned for good."""
+        self.add_command(name[0], int(name[1:]) if len(name) > 1 else -1, handler, guarded)
+
+    def add_command(self, letter, number, handler, guarded=False):
+        """G1 as ("G", 1); ("T", -1) takes every tool number. guarded: refused
         while the printer is halted (moves, heating). Each command's help is a comment
         where it is registered: nothing prints it, and as strings the texts held about
         3.5 KB of a chip's heap for good (a .mpy file's constants load into RAM)."""
-        letter = name[0]
-        number = int(name[1:]) if len(name) > 1 else -1
         key = command_key(letter, number)
         self.commands[key] = handler
         if guarded:
@@ -287,7 +290,7 @@ class Printer:
     def _background_if_due(self):
         """Between lines that need no wait: heater control, the step-loop check and the
         watchdog must not starve while a host streams such lines back to back."""
-        if time.ticks_diff(time.ticks_ms(), self._background_at_ms) >= BACKGROUND_EVERY_MS:
+        if time.ticks_diff(time.ticks_ms(), self._background_at_ms) >= _BACKGROUND_EVERY_MS:
             self._run_background()
 
     def pump_all(self):
@@ -336,7 +339,7 @@ class Printer:
                 self.idle()
                 if report is not None:
                     now = time.ticks_ms()
-                    if time.ticks_diff(now, report_at_ms) >= REPORT_EVERY_MS:
+                    if time.ticks_diff(now, report_at_ms) >= _REPORT_EVERY_MS:
                         report_at_ms = self._busy_at_ms = now
                         self.reply(report())
         except Halted:

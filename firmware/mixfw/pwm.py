@@ -1,9 +1,9 @@
 # Heater and fan PWM: the frequencies each chip's machine.PWM can make at its system
-# clock, and a software PWM for heaters slower than that (a solid-state relay on a
-# bed wants 1-5 Hz; rp2's divider stops at 8 Hz at 125 MHz).
+# clock, and where a heater is slower than that (a solid-state relay on a bed wants
+# 1-5 Hz; rp2's divider stops at 8 Hz at 125 MHz), a software PWM (softpwm.py).
 #
 # Pure logic: imports on CPython too. The machine module is passed in.
-import time
+from mixfw.compat import const
 
 # The system clock each chip boots with; a board's boot code may change it with
 # machine.freq(), so the firmware asks the chip rather than trusting this.
@@ -12,12 +12,12 @@ CLOCK_HZ = {"rp2040": 125000000, "rp2350": 150000000, "esp32": 160000000,
 # The options that set a heater's PWM frequency: below what the chip makes, a software
 # PWM takes over. Other PWM frequencies (the fan's) must be within the chip's range.
 HEATER_OPTIONS = ("hotend_pwm_hz", "bed_pwm_hz")
-_ESP32_APB_HZ = 80000000
+_ESP32_APB_HZ = const(80000000)
 # rp2: the counter wraps at TOP + 1 with TOP at most 65534 (so duty 65535 is 100 %),
 # behind an 8.4 fractional divider below 256. MicroPython takes the smallest divider
 # that fits, div16 = ceil(16 * clock / (65534 * f)), and refuses a div16 of 4096: the
 # lowest f is the one whose div16 is 4095.
-_RP2_DIV16_TOP = 65534 * 4095
+_RP2_DIV16_TOP = const(65534 * 4095)
 
 
 def range_hz(chip, clock_hz):
@@ -44,51 +44,8 @@ def heater_output(machine, chip, gpio, hz, add_background):
     add_background(fn(now_ms)). Either takes duty_u16(d); duty_u16(0) is off at once."""
     if hz >= range_hz(chip, machine.freq())[0]:
         return machine.PWM(machine.Pin(gpio), freq=hz, duty_u16=0)
+    # Imported only here: most boards' heaters never need it.
+    from mixfw.softpwm import SoftPwm
     out = SoftPwm(machine.Pin(gpio, machine.Pin.OUT, value=0), hz)
     add_background(out.update)
     return out
-
-
-class SoftPwm:
-    """A heater switched from the main loop's background tasks: one pulse a period (a
-    relay switches twice a period, no more), as long as the duty asks. A lower duty
-    ends the pulse at once, a higher one waits for the next period; duty 0 turns the
-    pin off before duty_u16 returns. The edges are as exact as the main loop's turns
-    (a few ms, 10 at most while busy). A main loop that stalls leaves the pin as it
-    was, on or off, until the watchdog resets the board (which releases the pin)."""
-
-    def __init__(self, pin, hz):
-        self.pin = pin
-        self.period_ms = 1000 // hz
-        self.on_ms = 0  # what the duty asks for
-        self.pulse_ms = 0  # this period's pulse; 0 once it has ended
-        self.start_ms = time.ticks_ms()
-        self.level = 0
-
-    def duty_u16(self, d):
-        self.on_ms = d * self.period_ms // 65535  # below 2**26: a small int anywhere
-        if d == 0:
-            self._set(0)  # at once: a halt turns the heaters off first, then reports
-
-    def update(self, now_ms):
-        elapsed_ms = time.ticks_diff(now_ms, self.start_ms)
-        if elapsed_ms >= self.period_ms:
-            # Periods keep their length while the loop keeps up; after a long turn
-            # the next one starts now.
-            if elapsed_ms < 2 * self.period_ms:
-                self.start_ms = time.ticks_add(self.start_ms, self.period_ms)
-                elapsed_ms -= self.period_ms
-            else:
-                self.start_ms = now_ms
-                elapsed_ms = 0
-            self.pulse_ms = self.on_ms
-        if elapsed_ms < self.pulse_ms and elapsed_ms < self.on_ms:
-            self._set(1)
-        else:
-            self.pulse_ms = 0
-            self._set(0)
-
-    def _set(self, level):
-        if level != self.level:
-            self.level = level
-            self.pin.value(level)

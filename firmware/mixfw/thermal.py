@@ -12,7 +12,7 @@ from mixfw.compat import const
 from mixfw.gcode import GcodeError
 from mixfw.pwm import heater_output
 
-HEATER_NAMES = ("hotend", "bed")
+_HEATER_NAMES = const(("hotend", "bed"))
 
 # Protection states of one heater.
 _OFF = const(0)  # no target: only the safe-range check runs
@@ -253,7 +253,7 @@ class Thermal:
         self.heaters = []
         self.hotend = self.bed = None
         chip = settings.get("chip", "sim")
-        for name in HEATER_NAMES:
+        for name in _HEATER_NAMES:
             if name + "_heater" not in pin_map or name + "_thermistor" not in pin_map:
                 continue  # the bed is optional
             adc = machine.ADC(machine.Pin(pin_map[name + "_thermistor"]))
