@@ -1,4 +1,4 @@
-"""The chip rows of `make bench` (issue 13): the firmware on the emulated Pico.
+"""The chip rows of `make bench`: the firmware on the emulated Pico.
 
 Every figure comes from the real MicroPython v1.28 rp2 firmware running mixstep on
 rp2040js (mixstep.emu.Chip and emu/harness.mjs, the image in mixstep.emu.DEFAULT_IMAGE),
@@ -84,7 +84,7 @@ HEAP_PRINT_S = 3.0
 # The planner part builds two printers, and at ticks under 50 us the second one's
 # pio_dma ring finds no whole block left in the heap: that part steps at 50 us ticks
 # (a --set tick_us overrides it). The CPU share a step path leaves at 20,000 steps/s
-# is the same at both ticks (chip_cpu_left_while_stepping, README).
+# is the same at both ticks (chip_cpu_left_while_stepping, docs/Benchmarks.md).
 PLANNER_TICK_US = 50
 # The stepping planner row is the median over these heap layouts: a spacer of so many
 # bytes allocated first moves both printers' objects. The same firmware's row moved by
@@ -101,11 +101,11 @@ NOTES = {
         "through printer.parser.parse and printer.run_line into the planner, the queue "
         "retired by hand: after each line, the oldest block where the ring is full "
         "(boards/sim/plan_only.py's make_room, one viper call, which also works out the "
-        "block's ramp schedule, as the step path does when it starts a block; since "
-        "stop 32 the look-ahead leaves that to it), so the look-ahead stays "
+        "block's ramp schedule, as the step path does when it starts a block; the "
+        "look-ahead leaves that to it), so the look-ahead stays "
         "full and the planner never waits, as on a board whose step path retires "
-        "blocks (until stop 28 it was retired in the planner's wait hook, which charged "
-        "the hook's calls, about 0.1 ms a line, to the planner), WHILE the step path runs a six-drive mixed move of "
+        "blocks (retiring them in the planner's wait hook would charge the hook's "
+        "calls, about 0.1 ms a line, to the planner), WHILE the step path runs a six-drive mixed move of "
         "about 20,000 steps/s (X, Y, E 8:6:6). The stepping is a second printer built "
         "by the same assemble.build and started by assemble.start_timer with one long move, so "
         "what is planned never waits for the pins (bench/chip_main.py); it has no trace "
@@ -425,7 +425,7 @@ def chip_stepping(res, work, sweep=True):
         if late is not None:
             res["chip_late_refills"] = late
         # CPU share on a ramp: curves' short segments never stop accelerating or
-        # braking, and until stop 32 the step path ran a ramp tick by tick.
+        # braking: the step path must pass over a ramp's ticks, not run each one.
         ramp_a = v / RAMP_S
         _command(chip, "M204 P%.3f" % ramp_a)
         _command(chip, _move(CPU_RATE, 0, sign=-1, accel=ramp_a)[0])

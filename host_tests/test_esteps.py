@@ -1,5 +1,5 @@
 """`mixstep esteps`: steps/mm from drive geometry, checked against the worked examples
-of the seed (a RepRap 3 mm extruder, early firmware's steps per mm of extrudate)."""
+of the RepRap extruder document (a RepRap 3 mm extruder, early firmware's steps per mm of extrudate)."""
 import math
 
 import pytest
@@ -15,15 +15,15 @@ def test_common_geared_extruder_filament_steps_per_mm():
 
 
 @pytest.mark.parametrize("drive_mm, gear, step_volume_mm3, extrudate_spm", [
-    # Seed: 5 mm splined shaft, direct: 0.278 mm^3 per half step, E_STEPS_PER_MM 0.705.
+    # The document: 5 mm splined shaft, direct: 0.278 mm^3 per half step, E_STEPS_PER_MM 0.705.
     (5.0, 1, 0.278, 0.705),
-    # Seed: 8 mm brass insert, 5:1 gears: 0.0885 mm^3 per half step, 2.21.
+    # The document: 8 mm brass insert, 5:1 gears: 0.0885 mm^3 per half step, 2.21.
     (8.0, 5, 0.0885, 2.21),
 ])
-def test_seed_worked_examples(drive_mm, gear, step_volume_mm3, extrudate_spm):
+def test_the_documents_worked_examples(drive_mm, gear, step_volume_mm3, extrudate_spm):
     # 200 steps driven in half steps = 400 per turn, 3 mm filament, 0.5 mm nozzle.
     spm = esteps.filament_steps_per_mm(200, 2, gear, drive_mm)
-    # The seed rounds its intermediate values to 3 figures, hence 0.5 %.
+    # The document rounds its intermediate values to 3 figures, hence 0.5 %.
     assert esteps.step_volume_mm3(spm, 3.0) == pytest.approx(step_volume_mm3, rel=5e-3)
     assert esteps.extrudate_steps_per_mm(spm, 3.0, 0.5) == pytest.approx(extrudate_spm, rel=5e-3)
 

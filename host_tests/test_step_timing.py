@@ -12,7 +12,7 @@ from hypothesis import assume, given, settings, strategies as st
 from mixstep import paths, steptiming
 
 SAMPLES = paths.ROOT / "testdata"
-BOUND_US = 25  # Klipper's step-compression bound (issue 6)
+BOUND_US = 25  # Klipper's step-compression bound
 
 
 @pytest.mark.parametrize("gcode, lines", [

@@ -322,7 +322,7 @@ _PAIR_SETTINGS = {"retract_policy": 2, "transition_l1_mm": 1.0, "transition_l2_m
 
 
 def test_a_print_with_per_pair_transitions_passes(tmp_path):
-    """transition_pairs given to the firmware the way the README says (M926, M500, a
+    """transition_pairs given to the firmware the way docs/G-Codes.md says (M926, M500, a
     restart) and to the check as a setting: the trace passes, and the same trace
     checked without any one of the pairs (that change at the default lengths) fails,
     so each pair counts. Not by `--set`: its VALUE is numbers or text split at commas
@@ -478,7 +478,7 @@ def test_exactly_half_a_step_rounds_away_from_zero_not_as_doubles_fall(tmp_path)
 
 
 def test_the_mixer_schedule_is_the_one_the_readme_specifies():
-    """README: from a fresh start, weights 20/30/50 give drives 3,2,1,3,2,3,3,1,2,3."""
+    """docs/Mixing.md: from a fresh start, weights 20/30/50 give drives 3,2,1,3,2,3,3,1,2,3."""
     picks = []
     before = [0, 0, 0]
     for n in range(1, 11):
@@ -525,7 +525,7 @@ _EQUAL_SETTINGS = {"retract_policy": 1, "transition_l1_mm": 1.0, "transition_l2_
 
 
 def test_policy_1_retracts_every_drive_equally_before_a_transitioned_change(tmp_path):
-    """retract_policy 1 pulls every drive equally (README); a transition moves where
+    """retract_policy 1 pulls every drive equally (docs/G-Codes.md); a transition moves where
     the *printing* mix changes, not how a retraction pulls. So G10 just before T1, with
     transitions on, still takes 2 mm / 6 from each drive."""
     gcode = tmp_path / "equal.gcode"
@@ -621,7 +621,7 @@ _L0_1_25 = {"transition_l1_mm": 0.5, "transition_l2_mm": 1.5}
 
 
 def test_moves_wait_for_l0_of_printing_after_a_split():
-    """First principles (README): a move waits until L0 of printing extrusion follows
+    """First principles (docs/G-Codes.md): a move waits until L0 of printing extrusion follows
     it, and a change applies over the L0 before it. T2 comes 2 mm of printing after
     T1's split, so it reaches back over all of X30's 1 mm and the last 0.25 mm of X20:
     e2 prints 1.25 mm before T2's own move, 519 steps."""

@@ -1,8 +1,8 @@
 """`mixstep advance`: move every tool change earlier by the purge amount.
 
 A mixing hot end still holds the old mix when a tool change reaches it: what comes out
-of the nozzle changes only after some millimetres of filament (seed 002's purge amount,
-or Ovenbird's L0 = L1 + L2/2 with delay L1 and transition L2, seed 003). Moving each
+of the nozzle changes only after some millimetres of filament (the purge amount of mixing-extruder practice,
+or Ovenbird's L0 = L1 + L2/2 with delay L1 and transition L2). Moving each
 `T<n>` that much extrusion earlier puts the colour boundary where the slicer drew it,
 without a wipe tower.
 
@@ -24,8 +24,8 @@ Where a change goes
 
     Changes are never reordered: a change is never placed before an earlier one. With
     one purge amount, closely spaced changes (closer than P) all move by P and keep
-    their spacing (seed 002's bug was measuring each from the previous *original*
-    place). With a purge matrix, a change whose pair needs more than the gap to the
+    their spacing (measured from the previous change's *original* place, they would
+    bunch up). With a purge matrix, a change whose pair needs more than the gap to the
     previous change is held just behind the previous one, with a warning. Near the
     start of the print, where less than P mm was extruded before a change, it goes
     just before the first printing move after the previous change, with a warning.

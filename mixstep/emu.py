@@ -341,7 +341,7 @@ def stream(chip, gcode_path, diag_every=50):
 
 def run(gcode_path, board="pico", trace_path=None, report_path=None, image_dir=None,
         diag_every=50, max_emu_s=600.0, max_wall_s=3600.0, settings=None):
-    """Print gcode_path on the emulated board; returns the report (see the README)."""
+    """Print gcode_path on the emulated board; returns the report (docs/Emulator.md)."""
     wall0 = time.perf_counter()
     with Chip(board, image_dir, settings, max_emu_s=max_emu_s, max_wall_s=max_wall_s) as chip:
         printed = stream(chip, gcode_path, diag_every)

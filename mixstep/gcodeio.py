@@ -1,7 +1,7 @@
 """Reading G-code on the host: one streaming reader that keeps the modal state.
 
 Every host tool that reads G-code (advance, detool, preview, trace checks) reads it
-through `Reader`, so the modal rules exist once and follow the firmware's (see README,
+through `Reader`, so the modal rules exist once and follow the firmware's (see docs/G-Codes.md,
 "G-code"):
 
     from mixstep import gcodeio

@@ -1,6 +1,6 @@
 """`mixstep preview`: draw a toolpath coloured by the mixture that leaves the nozzle.
 
-The mixture model is Ovenbird's moving average (seed 003). Let m(s) be the mix the
+The mixture model is Ovenbird's moving average (the mixing-nozzle model). Let m(s) be the mix the
 drives are fed with at extruded length s (a stochastic vector over the filaments) and
 r(x) the mix that comes out of the nozzle at extruded length x:
 

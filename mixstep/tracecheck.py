@@ -29,7 +29,7 @@ Checks
                    drive steps outside its block. Fails at the first step that does
                    not fit.
     mix            the order of the steps within a block is the mixer's and is not
-                   predicted step by step (the README specifies the schedule, not the
+                   predicted step by step (docs/Mixing.md specifies the schedule, not the
                    weights a block hands it; only replays of part of a block need the
                    order, and there the model assumes the block's counts over their
                    common divisor): within each stretch of one mix, every window of

@@ -3,7 +3,7 @@
 `mixstep trace check` compares a trace with this model, so the model must not share
 code with the firmware it checks: a bug in the firmware's parser, mixer or rounding
 would otherwise be copied into the check meant to catch it. Nothing here imports
-`mixfw`. The model follows the firmware's *specification* (the README's G-code
+`mixfw`. The model follows the firmware's *specification* (docs/G-Codes.md's
 section, "How the mixer picks a drive" and the options' meaning), in exact arithmetic:
 
 - Lengths. An axis or E word is read as an exact decimal (at most 9 significant
@@ -24,7 +24,7 @@ section, "How the mixer picks a drive" and the options' meaning), in exact arith
   shares, so an unretraction restores every drive exactly); 1 moves every drive
   equally (weights 1:1:...); 2 replays the newest steps of the latest extrusion blocks
   (at most 64 blocks, up to 50 mm), the order within a block being the mixer's
-  schedule as the README specifies it (a drive's k-th step of a period is due at
+  schedule as docs/Mixing.md specifies it (a drive's k-th step of a period is due at
   (2k+1)/(2w), earliest first, ties to the lower drive), and the unretraction pushes
   exactly those steps back; what the record does not cover follows the mix.
 - Transitions (transition_l1_mm, transition_l2_mm, transition_pairs): a mix change
@@ -372,7 +372,7 @@ def _gcd(a, b):
 
 def default_mixes(drives, count):
     """T<n> prints with drive n alone below the drive count, and every drive equally
-    above (README)."""
+    above (docs/Mixing.md)."""
     return [tuple(int(i == t) for i in range(drives)) if t < drives else (1,) * drives
             for t in range(count)]
 
@@ -408,7 +408,7 @@ class Gradient:
         return mix_weights(shares, self.drives)
 
 
-# --- the mixer's schedule, from the README's specification ----------------------------
+# --- the mixer's schedule, from docs/Mixing.md's specification ----------------------------
 
 _period_cache = {}
 

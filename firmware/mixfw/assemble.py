@@ -179,7 +179,7 @@ def check_timer_support(chip, version):
 
 def start_timer(printer, tick_us):
     """The timer owns the step loop: hard on rp2; soft on ESP32, whose timers have no
-    hard callbacks (see the README for the jitter that gives)."""
+    hard callbacks (docs/Step_Timing.md: the jitter that gives)."""
     chip = printer.settings.get("chip", "sim")
     if printer.feed:
         printer.feed.start(printer.pins)  # the DMA IRQ runs the step loop: no timer

@@ -3,8 +3,8 @@
 # Weights are integers that never change inside a block. The choice is an exact
 # divisor (Sainte-Lague) schedule: drive i takes its k-th step of a period at the
 # "due time" (2k+1)/(2*w_i), and the step goes to the drive with the earliest due
-# time, ties to the lowest index. From a fresh start 20/30/50 gives the seed's
-# sequence 3,2,1,3,2,3,3,1,2,3. Unlike the seed's largest-error rule this schedule
+# time, ties to the lowest index. From a fresh start 20/30/50 gives the mixing
+# document's sequence 3,2,1,3,2,3,3,1,2,3. Unlike a largest-error rule this schedule
 # has an exact inverse: stepping back takes the drive with the latest previous due
 # time, ties to the highest index, so n steps back and n forward restore every
 # count and every drive position, however lopsided the weights.

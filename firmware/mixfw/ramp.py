@@ -35,7 +35,7 @@ _LO = const(IO_LO)
 _REM = const(10)
 # The last five: product()'s operands a, b, c, s and how (see there), which its callers
 # store (a viper call's int argument costs the chip about 1 us, a store a few cycles).
-# Private, as every name a module keeps costs the chips' heap (README: the qstr pools):
+# Private, as every name a module keeps is interned and costs the chips' heap:
 # the modules that store them check theirs against IO_WORDS.
 _A = const(11)
 _B = const(12)
