@@ -53,17 +53,10 @@ def all_off(printer, step_loop):
     the drivers and the fan. Each runs even if one before it raised; returns the first
     fault, or None."""
     fault = run_each(printer.heaters_off)
-    try:
-        step_loop.deinit()
-    except Exception as err:
-        fault = fault or err
-    try:
+
+    def drivers_off():
         printer.pins.all_enabled(False)
         printer.motion.enabled = 0
-    except Exception as err:
-        fault = fault or err
-    try:
-        printer.thermal.set_fan(0.0)
-    except Exception as err:
-        fault = fault or err
-    return fault
+
+    later = run_each((step_loop.deinit, drivers_off, lambda: printer.thermal.set_fan(0.0)))
+    return fault or later
