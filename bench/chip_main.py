@@ -13,8 +13,8 @@
 #                          functions timed (bench/chip_profile.py): `bench:{json}`.
 #   functions              where each loaded function's code starts, for
 #                          bench/chip_pcprofile.py.
-# Written against the firmware's API: heap.reserve/release/step_loop_bytes (one more
-# reserve, for the second printer), assemble.build(config, files_root=None), Config,
+# Written against the firmware's API: heap.reserve/release and planner.step_loop_bytes
+# (one more reserve, for the second printer), assemble.build(config, files_root=None), Config,
 # assemble.start_timer(printer, tick_us) (returns what has deinit()), printer.parser.parse,
 # printer.run_line, printer.planner (.idle, .queue, .synchronize), printer.mem with the
 # stepper's S_HEAD/S_TAIL/S_ACTIVE/S_POS words (plan_only.retire_one).
@@ -99,8 +99,8 @@ LINES = {PLAN_FILE: Lines(PLAN_FILE)}
 # (mixfw/heap.py), and the stepping printer, built second, gets a reserve too. Each
 # printer is built once and kept: a request's garbage would split a later one's heap.
 import board  # noqa: E402
-from mixfw import heap  # noqa: E402
-heap.reserve(heap.step_loop_bytes(board.SETTINGS))
+from mixfw import heap, planner  # noqa: E402
+heap.reserve(planner.step_loop_bytes(board.SETTINGS))
 from mixfw import assemble  # noqa: E402
 from mixfw.config import Config  # noqa: E402
 from mixfw import stepper as st  # noqa: E402

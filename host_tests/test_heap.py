@@ -27,13 +27,13 @@ before = gc.mem_alloc()
 b = array("i", bytes(4 * words))
 two = gc.mem_alloc() - before
 gc.enable()
-from mixfw import assemble
+from mixfw import assemble, planner
 held = [len(r) for r in heap._reserves]
 simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(6)])
 printer = assemble.build(files_root=None)
 print(json.dumps({"zeros": list(a) == [0] * words, "one": one, "two": two,
                   "held": held, "left": len(heap._reserves),
-                  "need": heap.step_loop_bytes(printer.settings),
+                  "need": planner.step_loop_bytes(printer.settings),
                   "arrays": 4 * (len(printer.mem) + len(printer.planner.lk))}))
 """
 

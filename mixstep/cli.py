@@ -66,8 +66,11 @@ def main(argv=None):
         tool.add_parser(sub)
     from mixstep import advance  # `mixstep advance`: tool changes moved earlier by the purge
     advance.add_parser(sub)
-    from mixstep import trace  # `mixstep trace check|pull`
-    trace.add_parser(sub)
+    from mixstep import tracecheck, tracepull  # `mixstep trace check|pull`
+    p = sub.add_parser("trace", help="check a STEP/DIR trace against G-code; pull a board's capture")
+    tsub = p.add_subparsers(dest="trace_command", required=True)
+    tracecheck.add_parser(tsub)
+    tracepull.add_parser(tsub)
     from mixstep import boards  # `mixstep boards check`: pin-map validation
     boards.add_parser(sub)
     from mixstep import deploy  # `mixstep deploy|freeze|board-check`: onto a board

@@ -81,12 +81,3 @@ def positions_of(times, gpios, levels, board, axis):
     rising = (~is_dir) & (lv == 1) & (t > 0)
     forward = 0 if axis in spec["SETTINGS"].get("invert_dir", ()) else 1
     return t[rising], np.cumsum(np.where(level_at[rising] == forward, 1, -1))
-
-
-def add_parser(sub):
-    """`mixstep trace check` and `mixstep trace pull`."""
-    from mixstep import tracecheck, tracepull
-    p = sub.add_parser("trace", help="check a STEP/DIR trace against G-code; pull a board's capture")
-    tsub = p.add_subparsers(dest="trace_command", required=True)
-    tracecheck.add_parser(tsub)
-    tracepull.add_parser(tsub)

@@ -3,7 +3,15 @@
 # The chip knows nothing of thermistors or heaters: a model of the world (simthermal)
 # tells each ADC input what it reads, with set_source(), and reads back what each PWM
 # output drives, with duty_of().
-import simmachine
+
+# The simulated chip (simmachine.py), which binds itself here when it loads this module.
+simmachine = None
+
+
+def bind(machine):
+    global simmachine
+    simmachine = machine
+
 
 _sources = {}  # gpio -> fn() returning a read_u16() value
 _pwms = {}  # gpio -> the PWM driving it

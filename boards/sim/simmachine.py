@@ -617,13 +617,19 @@ def unique_id():
     return b"mixstep-sim"
 
 
+# The chip's peripherals in modules of their own, which reach this one through bind():
+# they are its parts, so they don't import it.
+_this = sys.modules[__name__]
 try:  # heaters, fans and thermistors of the simulated board
-    from simanalog import ADC, PWM  # noqa: F401
+    import simanalog
+    simanalog.bind(_this)
+    ADC, PWM = simanalog.ADC, simanalog.PWM
 except ImportError:
     pass
 
 
 def UART(*args, **kw):
     """The board's TMC2209 bus (simtmc.py), loaded only by a board that opens it."""
-    from simtmc import UART as bus
-    return bus(*args, **kw)
+    import simtmc
+    simtmc.bind(_this)
+    return simtmc.UART(*args, **kw)

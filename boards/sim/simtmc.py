@@ -13,8 +13,16 @@
 #   M7106 P<address> S<0|1>  motor power off or on; on, the driver starts again from
 #                            its reset values (GSTAT's reset flag set)
 import os
-import simmachine
 from mixfw import tmc
+
+# The simulated chip (simmachine.py), which binds itself here when it loads this module.
+simmachine = None
+
+
+def bind(machine):
+    global simmachine
+    simmachine = machine
+
 
 # Power-on values (TMC2209 datasheet): GCONF I_scale_analog and pdn_disable, GSTAT
 # reset, CHOPCONF 0x10000053 (MRES 0: 256 microsteps, but the MS1/MS2 pins count

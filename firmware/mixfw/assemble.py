@@ -8,7 +8,7 @@ import micropython
 from micropython import const
 import board
 import mixfw
-from mixfw import heap
+from mixfw import heap, planner
 # A frozen image: the step path's code into RAM, before anything imports it (inram.py).
 # Other deployments load every module into RAM anyway, and do without inram's names.
 if mixfw.__path__.startswith(mixfw.FROZEN_PREFIX):
@@ -18,7 +18,7 @@ if board.SETTINGS.get("step_backend") == "pio_dma":
     import rp2  # noqa: F401 (Feed's: loaded before the reserve, which it would split)
 # The modules from here on load beside a reserve that build() takes its arrays from
 # (heap.py): their code would leave the heap in pieces too small for the arrays.
-heap.reserve(heap.step_loop_bytes(board.SETTINGS))
+heap.reserve(planner.step_loop_bytes(board.SETTINGS))
 from mixfw import stepper as st, mixer  # noqa: E402
 from mixfw.pins import Pins  # noqa: E402
 from mixfw.planner import Planner, lk_words  # noqa: E402

@@ -10,19 +10,6 @@ from mixfw.compat import micropython, ptr32
 _reserves = []
 
 
-def step_loop_bytes(settings):
-    """What build() takes in big blocks for these settings: the step loop's memory, the
-    look-ahead's words and the DMA ring at most, and room to spare."""
-    from mixfw import options, planner, stepper
-    trace = settings.get("trace_records", options.FIRMWARE_DEFAULTS["trace_records"])
-    q = settings["queue_blocks"]
-    words = stepper.mem_words(q, trace) + planner.lk_words(q)
-    if settings.get("step_backend") == "pio_dma":
-        from mixfw import piodma
-        words += piodma.ring_words(settings["tick_us"])
-    return 4 * words + 2048
-
-
 def reserve(nbytes):
     """Hold nbytes of the heap in one block, for a build to come, while the modules
     load."""

@@ -708,6 +708,20 @@ def lk_words(queue_blocks):
     return lookahead.L_WORDS * queue_blocks
 
 
+def step_loop_bytes(settings):
+    """What build() takes in big blocks for these settings (heap.reserve holds them
+    while the modules load): the step loop's memory, the look-ahead's words and the DMA
+    ring at most, and room to spare."""
+    from mixfw import options
+    trace = settings.get("trace_records", options.FIRMWARE_DEFAULTS["trace_records"])
+    q = settings["queue_blocks"]
+    words = st.mem_words(q, trace) + lk_words(q)
+    if settings.get("step_backend") == "pio_dma":
+        from mixfw import piodma
+        words += piodma.ring_words(settings["tick_us"])
+    return 4 * words + 2048
+
+
 class Planner:
     def __init__(self, mem, settings, idle, irq_off, irq_on, lk=None, irq=None):
         """irq_off, irq_on: mask every interrupt and restore (machine.disable_irq,
