@@ -83,7 +83,8 @@ emu: setup emu-setup
 	$(VENV)/bin/mixstep emu print $(EMU_GCODE) --board pico --trace $(EMU_TRACE) \
 		--report $(EMU_REPORT) $(if $(IMAGE),--image $(IMAGE))
 
-# Cost of one step-loop call (viper vs bytecode vs an empty viper call) on the unix port.
+# Cost of one step-loop call (a stepping tick, an idle tick, the Pin.value path), each as a
+# ratio to an empty viper call, on the unix port.
 .PHONY: step-cost
 step-cost: setup
 	MICROPYPATH=firmware:boards/sim $${MIXSTEP_MICROPYTHON:-$(VENV)/bin/micropython} bench/step_cost.py
