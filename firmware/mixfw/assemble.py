@@ -8,7 +8,7 @@ import micropython
 from micropython import const
 import board
 import mixfw
-from mixfw import heap, planner
+from mixfw import heap
 # A frozen image: the step path's code into RAM, before anything imports it (inram.py).
 # Other deployments load every module into RAM anyway, and do without inram's names.
 if mixfw.__path__.startswith(mixfw.FROZEN_PREFIX):
@@ -16,6 +16,9 @@ if mixfw.__path__.startswith(mixfw.FROZEN_PREFIX):
     inram.load(board.SETTINGS)
 if board.SETTINGS.get("step_backend") == "pio_dma":
     import rp2  # noqa: F401 (Feed's: loaded before the reserve, which it would split)
+# The planner sizes the reserve, so it and what it imports load before it (after
+# inram.load, which must come first).
+from mixfw import planner  # noqa: E402
 # The modules from here on load beside a reserve that build() takes its arrays from
 # (heap.py): their code would leave the heap in pieces too small for the arrays.
 heap.reserve(planner.step_loop_bytes(board.SETTINGS))

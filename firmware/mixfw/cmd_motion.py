@@ -3,20 +3,20 @@
 from array import array
 from mixfw.gcode import GcodeError, letter_index
 from mixfw.planner import (array_offsets, nm_from_mm, scaled_round, spm_digits,
-                           steps_per_nm, NM_PER_MM, SPM_SCALE)
+                           steps_per_nm, NM_PER_MM)
 from mixfw import stepper as st
 from mixfw.compat import const, micropython, ptr8, ptr32
 
 _AXIS_LETTERS = const("XYZE")
 _AXIS_INDEX = tuple(letter_index(ch) for ch in _AXIS_LETTERS)
 # Constants, which the compiler folds: a module's global costs every line a lookup.
+# gcode.letter_index's (copies):
 _F_INDEX = const(5)  # letter_index("F")
-_NM_DECIMALS = const(6)  # axis words are read as exact nanometres
 _X_INDEX = const(23)  # letter_index("X"), then Y and Z
 _E_INDEX = const(4)  # letter_index("E")
-_NM_MAX = const(0x3FFFFFFF)  # a position's nanometres: a 32-bit chip's small ints
-assert (_X_INDEX, _X_INDEX + 1, _X_INDEX + 2, _E_INDEX) == _AXIS_INDEX
-assert _F_INDEX == letter_index("F")
+_NM_DECIMALS = const(6)  # axis words are read as exact nanometres
+# compat.MASK30: a position's nanometres stay within +-_MASK30, the chips' small ints.
+_MASK30 = const(0x3FFFFFFF)
 _XYZ_BITS = const(7 << _X_INDEX)
 # X Y Z E in a parsed line's masks: the words a G0/G1 moves by, which xyz_targets reads.
 MOVE_BITS = const(_XYZ_BITS | 1 << _E_INDEX)
@@ -31,28 +31,27 @@ _AXIS_MOVED = const(16)
 _SPM_LAST = const(9)
 _SPM_HELD = const(15)
 # Then the modes it moves in (_MODE_*: G90/G91, M211 and the soft_limits option), as
-# a word it reads rather than arguments (each costs the chip about 1.1 us a call).
+# a word it reads rather than arguments (each costs the chip about 1 us a call: see
+# ramp.py).
 _SPM_MODES = const(16)
 _MODE_RELATIVE = const(1)
 _MODE_SOFT = const(2)
 _MODE_SOFT_OPTION = const(4)  # the option as last applied: M211 holds until it changes
 # Then where the arrays it reads are (ramp.array_offsets): the parsed line's
 # mantissas and decimals, G92's offsets, the steps it works out, the soft limits'
-# travel. ptr32() of an array costs the chip about 1.4 us, of an address nothing.
+# travel. ptr32() of an address costs nothing, of an array much more (see
+# ramp.array_offsets).
 _SPM_MANT = const(17)
 _SPM_DEC = const(18)
 _SPM_OFF = const(19)
 _SPM_STEPS = const(20)
 _SPM_TRAVEL = const(21)
-_AT_BIAS = const(0x20000000)  # as array_offsets adds
-SPM_WORDS = const(22)
-assert _SPM_TRAVEL + 1 == SPM_WORDS  # the places are the last five words
+SPM_WORDS = const(22)  # the places are its last five words
+_AT_BIAS = const(0x20000000)  # ramp.py's (a copy): as array_offsets adds
 # 10**12 (NM_PER_MM * SPM_SCALE) in 30-bit limbs, and 2 * 10**12 = 2**13 * (5**6)**2.
 _E12_HI = const(931)
 _E12_LO = const(346361856)
 _FIVE6 = const(15625)
-_M30 = const(0x3FFFFFFF)
-assert (_E12_HI << 30) + _E12_LO == NM_PER_MM * SPM_SCALE == _FIVE6 ** 2 << 12
 # retract_policy: retractions follow the mix and run it exactly backwards, or pull every
 # drive equally (and push them back equally), or take back exactly the steps each drive
 # made in the latest extrusion (and push exactly those back).
@@ -70,7 +69,7 @@ def xyz_targets(spm_buf, named: int, pos_buf, target_buf, at) -> int:
     machine position (target + G92's offset) into the steps array, with the steps/mm
     planner.spm_digits put in spm_buf (SPM_WORDS: the step an axis had at the same
     position is taken again, as a line mostly leaves Z). An E word named goes, as
-    nanometres, into the steps array's word 4 where it is within +-_NM_MAX. The line's
+    nanometres, into the steps array's word 4 where it is within +-_MASK30. The line's
     words, the offsets, the steps and the soft limits' travel are the arrays whose
     places spm_buf holds (_SPM_MANT on: planner.array_offsets).
 
@@ -78,17 +77,17 @@ def xyz_targets(spm_buf, named: int, pos_buf, target_buf, at) -> int:
     planner.scaled_round gives, in small ints where scaled_round's products pass them
     for most steps/mm: (2 |nm| spm + 10**12) in three 30-bit limbs, shifted right 13
     bits, then over 5**6 twice, each in three machine divisions. Written out here, as
-    a call of its own cost the chip about 5 us an axis.
+    a call of its own would cost the chip about 5 us an axis.
 
     Returns bits: the axes named (X=1, Y=2, Z=4), _E_READ if the steps' word 4 holds
     E's word, and (_AXIS_MOVED << a) for each axis a whose step differs from at[a]
     (at: the queue's position, or None). Or, refused, -_BEYOND - a if axis a's word,
-    target or machine position is beyond +-_NM_MAX nanometres (1,073 mm, the chips'
+    target or machine position is beyond +-_MASK30 nanometres (1,073 mm, the chips'
     small ints), or with soft limits (the modes word; the travel: each axis's in nm)
     -_OUTSIDE - a if its machine position is outside 0..travel. pos, target, the
     offsets and the travel are arrays 'i' of X Y Z nanometres, read and written as
     words. In one viper call, where Line.fixed_at, the sums, the checks and
-    scaled_round, per axis, cost the chip about 0.15 ms a line."""
+    scaled_round, per axis, would cost the chip about 0.15 ms a line."""
     spm = ptr32(spm_buf)
     base = int(spm) - _AT_BIAS  # the arrays' offsets are from here (_SPM_MANT on)
     mant = ptr32(base + spm[_SPM_MANT])
@@ -112,7 +111,7 @@ def xyz_targets(spm_buf, named: int, pos_buf, target_buf, at) -> int:
         if word:
             m = mant[k]
             if (m >> 30) & 1:  # |m| < 10**9: bit 30 is the sign, which a 64-bit build's
-                m |= ~0x3FFFFFFF  # viper leaves unextended
+                m |= ~_MASK30  # viper leaves unextended
             neg = m < 0
             if neg:
                 m = 0 - m
@@ -128,7 +127,7 @@ def xyz_targets(spm_buf, named: int, pos_buf, target_buf, at) -> int:
                 m = q
             else:
                 while d < 6:
-                    if m > _NM_MAX // 10:
+                    if m > _MASK30 // 10:
                         if a == 3:
                             return moved  # E: read in Python (big ints)
                         return 0 - _BEYOND - a
@@ -141,24 +140,24 @@ def xyz_targets(spm_buf, named: int, pos_buf, target_buf, at) -> int:
                 return moved | _E_READ
             if relative:
                 p = pos[a]
-                if p > _NM_MAX:  # negative: a 64-bit port's ptr32 reads it zero-extended
-                    p = 0 - ((0 - p) & _NM_MAX)
+                if p > _MASK30:  # negative: a 64-bit port's ptr32 reads it zero-extended
+                    p = 0 - ((0 - p) & _MASK30)
                 m += p
-            if m > _NM_MAX or m < 0 - _NM_MAX:
+            if m > _MASK30 or m < 0 - _MASK30:
                 return 0 - _BEYOND - a
             moved |= 1 << a
         elif a == 3:
             return moved
         else:
             m = pos[a]
-            if m > _NM_MAX:
-                m = 0 - ((0 - m) & _NM_MAX)
+            if m > _MASK30:
+                m = 0 - ((0 - m) & _MASK30)
         target[a] = m
         o = off[a]
-        if o > _NM_MAX:
-            o = 0 - ((0 - o) & _NM_MAX)
+        if o > _MASK30:
+            o = 0 - ((0 - o) & _MASK30)
         nm = m + o  # the machine's position
-        if nm > _NM_MAX or nm < 0 - _NM_MAX:
+        if nm > _MASK30 or nm < 0 - _MASK30:
             return 0 - _BEYOND - a
         if word and soft and (nm < -1 or nm > travel[a] + 1):
             return 0 - _OUTSIDE - a
@@ -175,20 +174,20 @@ def xyz_targets(spm_buf, named: int, pos_buf, target_buf, at) -> int:
             d3 = x1 * spm[j + 2]
             h0 = x0 * spm[j] + ((d1 & 0x7FFF) << 15)
             h1 = x1 * spm[j + 1] + x0 * spm[j + 2] + (d1 >> 15) + (h0 >> 30)
-            h0 &= _M30
+            h0 &= _MASK30
             h2 = h1 >> 30
-            h1 = (h1 & _M30) + ((d3 & 0x7FFF) << 15)
+            h1 = (h1 & _MASK30) + ((d3 & 0x7FFF) << 15)
             h2 += (h1 >> 30) + (d3 >> 15)
-            h1 &= _M30
+            h1 &= _MASK30
             # times 2, plus 10**12
             h0 = h0 << 1
             h1 = (h1 << 1) + (h0 >> 30)
-            h0 = (h0 & _M30) + _E12_LO
+            h0 = (h0 & _MASK30) + _E12_LO
             h2 = (h2 << 1) + (h1 >> 30)
-            h1 = (h1 & _M30) + _E12_HI + (h0 >> 30)
-            h0 &= _M30
+            h1 = (h1 & _MASK30) + _E12_HI + (h0 >> 30)
+            h0 &= _MASK30
             h2 += h1 >> 30
-            h1 &= _M30
+            h1 &= _MASK30
             # >> 13, then // 5**6 twice (remainders below 2**14, 15-bit digits): below
             # 2**27
             hi = (h1 >> 13) | (h2 << 17)
@@ -258,7 +257,7 @@ class Motion:
         # Called before a move that extrudes; each raises GcodeError to refuse it
         # (cold extrusion, ...). Once they have all passed, they are called again only
         # after recheck_guards(), which their owners call where a verdict may change (a
-        # reading, a setting): a guard's call cost the chip 12 us a line and more.
+        # reading, a setting): a guard's call costs the chip 12 us a line and more.
         self.extrusion_guards = []
         self._guards_passed = False
         # Called as fn(z2_nm, e_nm) before a move that extrudes (gradients set the mix):
@@ -296,8 +295,8 @@ class Motion:
 
     def _travel(self, travel_mm):
         self.travel_mm = travel_mm
-        # Positions stay within +-_NM_MAX: a longer travel is as good as that.
-        self._travel_nm = array("i", [min(nm_from_mm(t), _NM_MAX) for t in travel_mm])
+        # Positions stay within +-_MASK30: a longer travel is as good as that.
+        self._travel_nm = array("i", [min(nm_from_mm(t), _MASK30) for t in travel_mm])
         array_offsets(self._xyz_spm, _SPM_TRAVEL, (self._travel_nm,))
 
     # A method, not a property: a class with a property makes every attribute stored on
@@ -418,7 +417,7 @@ class Motion:
                              % (_AXIS_LETTERS[i], target[i] / NM_PER_MM, self.travel_mm[i]))
         raise GcodeError("%s beyond +-%d mm: positions are kept in 32-bit integers of "
                          "nanometres" % (_AXIS_LETTERS[-_BEYOND - verdict],
-                                         _NM_MAX // NM_PER_MM))
+                                         _MASK30 // NM_PER_MM))
 
     # G10: firmware retraction by retract_mm at retract_feed_mm_s; the logical E stays.
     def g10(self, line):
@@ -526,8 +525,8 @@ class Motion:
         values = [line.fixed_at(_AXIS_INDEX[i], _NM_DECIMALS, 0) for i in named]
         for i, v in zip(named, values):
             # X Y Z and their offsets stay within what xyz_targets takes.
-            if i < 3 and not (-_NM_MAX <= v <= _NM_MAX and
-                              -_NM_MAX <= self.offset_nm[i] + self.pos_nm[i] - v <= _NM_MAX):
+            if i < 3 and not (-_MASK30 <= v <= _MASK30 and
+                              -_MASK30 <= self.offset_nm[i] + self.pos_nm[i] - v <= _MASK30):
                 self._refuse_target(self.pos_nm, -_BEYOND - i)
         for i, v in zip(named, values):
             if i == 3:
@@ -585,9 +584,9 @@ class Motion:
 @micropython.native
 def _queue(self, steps, xyz, e_nm, feed_mm_s):
     """Motion self queues a move of X Y Z (axes in xyz) to steps, with e_nm of
-    filament. A function of the module's, not a method: Motion._queue cost a line the
-    class's lookup too, about 2.5 us on the emulated Pico (a method looked up on self
-    is first missed among the instance's attributes: about 9 us)."""
+    filament. A function of the module's, not a method: Motion._queue would cost a line
+    the class's lookup too, about 2.5 us on the chip (a method looked up on self is
+    first missed among the instance's attributes: about 9 us)."""
     if e_nm:
         most = self._max_extrude_nm
         if e_nm > most or e_nm < -most:
@@ -598,7 +597,7 @@ def _queue(self, steps, xyz, e_nm, feed_mm_s):
                 guard()
             self._guards_passed = True
     # Mostly the move's drivers are on already. Not all of them may be: a print
-    # that never moves Z left it off, and enable_for's bytecode call then cost
+    # that never moves Z leaves it off, and enable_for's bytecode call then costs
     # the chip 35 us a line.
     if (xyz | (self._drive_bits if e_nm else 0)) & ~self.enabled:
         self.enable_for(xyz | (8 if e_nm else 0))

@@ -31,7 +31,7 @@ class Job:
     lines are, with the same comment stripping and the same limit on a line's words:
     the file is read straight into the intake's ring, which holds several lines, so
     that most lines cost a call into it and no more (a chunk of its own, copied into
-    the ring a line at a time, cost the chip about 0.3 ms a line)."""
+    the ring a line at a time, would cost the chip about 0.3 ms a line)."""
 
     def __init__(self, path, name, announce, line_bytes):
         self.name = name

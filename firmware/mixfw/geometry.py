@@ -1,6 +1,6 @@
 # A move's lengths and its junction with the move before, for the planner, in viper on
-# integers. They run for every G1 line; on the chips every float operation allocates,
-# and the float version took about 25 of them a line, and their garbage a collection
+# integers. They run for every G1 line, and on the chips every float operation
+# allocates: in floats they would take about 25 a line, and their garbage a collection
 # every few dozen lines.
 #
 # A move's X Y Z E come in as whole steps (E also as nanometres), each with its mm per
@@ -11,7 +11,6 @@
 # intermediate stays below 2**31, so the 32-bit chips and the 64-bit unix port give
 # the same integers.
 from mixfw.compat import const, micropython, ptr32
-from mixfw import ramp
 from mixfw.ramp import div_limbs, isqrt_limbs, product
 
 # Words of the geometry array g (array 'i', G_WORDS): first ramp.py's io words, which
@@ -28,13 +27,12 @@ _G_PREV_LEN = const(32)
 # Then their inputs: where the geometry floats (below) and the
 # planner's floats (lookahead.F_*) are, as byte offsets from g's own plus _AT_BIAS (see
 # ramp.array_offsets: set once, as g is made), and the flags (FL_*), which the planner
-# stores for each move. A viper call's argument costs the chip about 1.1 us, and
-# ptr32() of an array 1.4 us; a store a few cycles.
+# stores for each move (a viper call's argument and ptr32() of an array cost the chip
+# far more than a store: see ramp.py). planner.py keeps copies of these words.
 _G_AT_GF = const(33)
 _G_AT_F = const(34)
 _G_FLAGS = const(35)
 G_WORDS = const(36)
-assert _G_FLAGS == G_WORDS - 1
 # Words of the geometry floats (array 'f', GF_WORDS): mm per unit.
 GF_SCALE = const(0)  # X Y Z E: mm per step
 GF_E_NM = const(4)  # E: mm per nanometre
@@ -44,7 +42,8 @@ GF_WORDS = const(6)
 FL_E_NM = const(16)  # E is in nanometres
 FL_JOIN = const(32)  # the move follows one it may join at speed: work out the junction
 
-_AT_BIAS = const(0x20000000)  # as ramp.array_offsets adds
+# ramp.py's: the io words its helpers read, and product()'s modes (copies).
+_AT_BIAS = const(0x20000000)
 _IO_HI = const(8)
 _IO_LO = const(9)
 _IO_A = const(11)
@@ -52,19 +51,16 @@ _IO_B = const(12)
 _IO_C = const(13)
 _IO_S = const(14)
 _IO_HOW = const(15)
-_P_TRUNC = const(1)
 _P_ROUND = const(2)
-_BIAS = const(150)  # float32's exponent bias and its 23 fraction bits
+_MASK30 = const(0x3FFFFFFF)  # compat.MASK30
+# lookahead.py's (copies): float32's exponent bias and its 23 fraction bits, and the
+# V2 range.
+_BIAS = const(150)
+_V2_MAX = const(0x1FFFFFFF)
 _ONE = const(0x10000000)  # the cosine's and the sine's fixed point: 2**28
 # The moves are one line within this (1e-6 of ONE) either way: a straight junction, or
 # a reversal to a stop.
 _STRAIGHT = const(268)
-_V2_MAX = const(0x1FFFFFFF)  # lookahead's V2 range
-assert (_IO_HI, _IO_LO, _P_TRUNC, _P_ROUND) == (
-    ramp.IO_HI, ramp.IO_LO, ramp.P_TRUNC, ramp.P_ROUND)
-# product()'s operands: io's last five words
-assert (_IO_A, _IO_B, _IO_C, _IO_S, _IO_HOW) == tuple(range(ramp.IO_WORDS - 5, ramp.IO_WORDS))
-assert G_D >= ramp.IO_WORDS
 
 
 @micropython.viper
@@ -105,9 +101,9 @@ def lengths(g4: int) -> int:
             if i == 3 and (flags & FL_E_NM):
                 k = GF_E_NM
             bits = gf[k]
-            # a * mantissa (below 2**30 and 2**24) in two 30-bit limbs, as product()
-            # makes them, then shifted right u bits: below 2**27 by the choice of top.
-            # Written out, as the squares below: a call costs the chip several
+            # a * mantissa (below 2**30 and 2**24) in two 30-bit limbs, in
+            # ramp.product's form, then shifted right u bits: below 2**27 by the choice
+            # of top. Written out, as the squares below: a call costs the chip several
             # microseconds, and this runs for every axis of every line.
             m = (bits & 0x7FFFFF) | 0x800000
             u = top - 27 - ((bits >> 23) & 0xFF) + _BIAS
@@ -118,7 +114,7 @@ def lengths(g4: int) -> int:
             mid = a1 * m0 + a0 * m1
             lo = ((mid & 0x7FFF) << 15) + a0 * m0
             hi = a1 * m1 + (mid >> 15) + (lo >> 30)
-            lo = lo & 0x3FFFFFFF
+            lo = lo & _MASK30
             if u <= 0:
                 c = lo << (0 - u)  # the product itself below 2**27: hi is 0
             elif u >= 60:
@@ -130,8 +126,9 @@ def lengths(g4: int) -> int:
         g[G_C + i] = c
     g[_G_SIGNS] = flags & 15
     # Sums of squares, in two limbs: X Y Z, then E. Each square c * c (c below 2**27)
-    # in two 30-bit limbs as product() makes them, written out: a call costs the chip
-    # several microseconds, and this runs for every line.
+    # in two 30-bit limbs, in ramp.product's form (for a square: 2 c1 c0 in the middle),
+    # written out: a call costs the chip several microseconds, and this runs for every
+    # line.
     hi = 0
     lo = 0
     dist = g[G_C + 3]  # a move of E alone
@@ -150,9 +147,9 @@ def lengths(g4: int) -> int:
             c0 = c & 0x7FFF
             mid = 2 * c1 * c0
             low = ((mid & 0x7FFF) << 15) + c0 * c0
-            lo += low & 0x3FFFFFFF
+            lo += low & _MASK30
             hi += c1 * c1 + (mid >> 15) + (low >> 30) + (lo >> 30)
-            lo = lo & 0x3FFFFFFF
+            lo = lo & _MASK30
     g[_IO_HI] = hi
     g[_IO_LO] = lo
     g[G_LEN] = int(isqrt_limbs(g4))
@@ -172,7 +169,7 @@ def lengths(g4: int) -> int:
     f = ptr32(base + g[_G_AT_F])
     bits = ((top - 27 + nb - 24 + _BIAS) << 23) | (mant & 0x7FFFFF)
     f[0] = bits
-    return (bits >> 1) & 0x3FFFFFFF
+    return (bits >> 1) & _MASK30
 
 
 @micropython.viper
@@ -196,8 +193,8 @@ def junction(g4: int) -> int:
         diff_hi = 0
         diff_lo = 0
         signs = g[_G_SIGNS] ^ g[_G_PREV_SIGNS]
-        # Each product a * b (below 2**28 both) in two 30-bit limbs as product() makes
-        # them, written out as in lengths(): the components', then the lengths'.
+        # Each product a * b (below 2**28 both) in two 30-bit limbs, in ramp.product's
+        # form, written out as in lengths(): the components', then the lengths'.
         d_hi = 0
         d_lo = 0
         for i in range(5):
@@ -215,18 +212,18 @@ def junction(g4: int) -> int:
                 mid = a1 * b0 + a0 * b1
                 low = ((mid & 0x7FFF) << 15) + a0 * b0
                 p_hi = a1 * b1 + (mid >> 15) + (low >> 30)
-                p_lo = low & 0x3FFFFFFF
+                p_lo = low & _MASK30
                 if i == 4:
                     d_hi = p_hi
                     d_lo = p_lo
                 elif (signs >> i) & 1:
                     diff_lo += p_lo
                     diff_hi += p_hi + (diff_lo >> 30)
-                    diff_lo = diff_lo & 0x3FFFFFFF
+                    diff_lo = diff_lo & _MASK30
                 else:
                     same_lo += p_lo
                     same_hi += p_hi + (same_lo >> 30)
-                    same_lo = same_lo & 0x3FFFFFFF
+                    same_lo = same_lo & _MASK30
         if diff_hi > same_hi or (diff_hi == same_hi and diff_lo > same_lo):
             sign = 1
             hi = diff_hi - same_hi
@@ -235,7 +232,7 @@ def junction(g4: int) -> int:
             hi = same_hi - diff_hi
             lo = same_lo - diff_lo
         if lo < 0:
-            lo += 0x3FFFFFFF  # and 1: 2**30 is no small int on the chips
+            lo += _MASK30  # and 1: 2**30 is no small int on the chips
             lo += 1
             hi -= 1
         # Over the product of the lengths (below 2**56), both taken down to 29 bits of

@@ -5,8 +5,8 @@
 # and answered with an error when its end arrives; the stream goes on.
 #
 # Every byte a host sends passes through here twice (into the ring, then into the
-# line), so both loops are viper: in bytecode they cost about 100 us a byte on an
-# RP2040, 3 ms of a 30-byte G1 line.
+# line), so both loops are viper: in bytecode they would cost about 100 us a byte on
+# an RP2040, 3 ms of a 30-byte G1 line.
 from array import array
 from mixfw.compat import const, micropython, ptr8, ptr32
 

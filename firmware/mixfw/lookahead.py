@@ -1,13 +1,12 @@
 # The planner's look-ahead and its records, in viper on integers. It runs for every
-# G-code line; on the chips every float operation allocates, so the float version cost
-# about 2 ms a line there, and the garbage a collection every few dozen lines.
+# G-code line, and on the chips every float operation allocates: its garbage would take
+# a collection every few dozen lines.
 #
 # Speeds are kept squared, as V2 = (mm/s)**2 * 64 (_V2_SCALE), below 2**29 (about
 # 2,900 mm/s): then the passes only add and compare (v**2 = v0**2 + 2 a s), a sum of
 # three stays below 2**31, and the 32-bit chips and the 64-bit unix port give the same
 # integers. A record's rates come from V2 by an exact integer square root.
 from mixfw.compat import const, micropython, ptr32
-from mixfw import ramp
 from mixfw import stepper as st
 from mixfw.ramp import isqrt_limbs, product
 
@@ -21,26 +20,23 @@ L_NOMINAL = const(2)
 _L_BACK = const(3)  # the fastest entry that can still stop by the end of the queue
 L_ENTRY = const(4)
 L_EXIT = const(5)  # the exit baked into the slot's record
-L_K2 = const(6)  # rate = isqrt(V2 * K2) << K_SHIFT (>> -K_SHIFT)
-L_K_SHIFT = const(7)  # plus _SHIFT_BIAS: a 64-bit build's viper reads words unsigned
+L_K2 = const(6)  # rate = isqrt(V2 * K2) << K_SHIFT (>> -K_SHIFT): see plan_words
+L_K_SHIFT = const(7)  # plus SHIFT_BIAS: a 64-bit build's viper reads words unsigned
 L_RATE_NOM = const(8)  # the nominal speed's rate
 L_FLOOR = const(9)  # the slowest rate: reached from rest within half a step
 L_ACC = const(10)
 L_DWELL = const(11)
-L_WORDS = const(12)
-assert L_WORDS == 12  # plan_words clears each word by name
-SHIFT_BIAS = st.SHIFT_BIAS  # the step loop reads K_SHIFT from a record too
-_SHIFT_BIAS = const(64)  # checked below
+L_WORDS = const(12)  # plan_words clears each word by name
+SHIFT_BIAS = st.SHIFT_BIAS  # the step loop's: it reads K_SHIFT from a record too
 
-# The step loop's words (checked against stepper.py below: viper folds only this
-# module's constants).
-_S_HEAD = const(0)
+# stepper.py's layout: the step loop's words and its records' (copies, as viper folds
+# only this module's constants).
+_SHIFT_BIAS = const(64)
 _S_TAIL = const(1)
 _S_ACTIVE = const(2)
 _S_QUEUE = const(26)
 _BLOCK_BASE = const(112)
 _B_WORDS = const(24)
-_B_N = const(0)
 _B_FLAGS = const(7)
 _B_RATE_INIT = const(8)
 _B_RATE_NOM = const(9)
@@ -52,13 +48,6 @@ _B_RATE_DECEL = const(22)
 _F_SCHEDULE = const(2048)
 _F_RATES = const(4096)
 _V2_AT_NOMINAL = const(0x20000000)
-assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _S_QUEUE, _BLOCK_BASE, _B_WORDS, _B_FLAGS,
-        _B_RATE_INIT, _B_RATE_NOM, _B_RATE_FINAL, _B_ACCEL, _B_ACCEL_UNTIL, _B_DECEL_AFTER,
-        _B_RATE_DECEL, _F_SCHEDULE, _F_RATES, _V2_AT_NOMINAL, _SHIFT_BIAS) == (
-    st.S_HEAD, st.S_TAIL, st.S_ACTIVE, st.S_QUEUE, st.BLOCK_BASE, st.B_WORDS, st.B_FLAGS,
-    st.B_RATE_INIT, st.B_RATE_NOM, st.B_RATE_FINAL, st.B_ACCEL, st.B_ACCEL_UNTIL,
-    st.B_DECEL_AFTER, st.B_RATE_DECEL, st.F_SCHEDULE, st.F_RATES, st.V2_AT_NOMINAL,
-    st.SHIFT_BIAS)
 
 
 # A block's planning data comes in as float32 in an array('f'), whose bits viper reads
@@ -70,7 +59,7 @@ F_NOMINAL2 = const(3)  # its square
 F_TICK_ONE = const(4)  # the step loop's tick in s, times ONE (its rate of a step a tick)
 F_ACCEL_TICK = const(5)  # F_ACCEL times the tick in s: the speed gained a tick
 F_WORDS = const(6)
-# Scratch words of the planning io array, after the limbs ramp.py uses.
+# Scratch words of the planning io array, after ramp.py's (its IO_WORDS).
 _W_M = const(16)  # F_WORDS mantissas (with the hidden bit; 0 for 0)
 _W_E = const(22)  # and their exponent fields: x = m * 2**(field - _BIAS)
 _BIAS = const(150)  # float32's exponent bias and its 23 fraction bits
@@ -79,11 +68,11 @@ _BIAS = const(150)  # float32's exponent bias and its 23 fraction bits
 _W_N2_BITS = const(28)
 _W_N2_V2 = const(29)
 # plan_words and recalculate take io as its address over 4 (as ramp's helpers take
-# theirs). Then their inputs, which the planner stores (a viper call's
-# argument costs the chip about 1.1 us, and ptr32() of an array 1.4 us; a store a few
-# cycles): where lk, the floats and the step loop's words are, as byte offsets from
-# io's own plus _AT_BIAS (see ramp.array_offsets), then the block's slot, its n, the
-# junction's entry_v2 and the rate_cap (see plan_words).
+# theirs). Then their inputs, which the planner stores (a viper call's argument and
+# ptr32() of an array cost the chip far more than a store: see ramp.py): where lk, the
+# floats and the step loop's words are, as byte offsets from io's own plus _AT_BIAS
+# (see ramp.array_offsets), then the block's slot, its n, the junction's entry_v2 and
+# the rate_cap (see plan_words). planner.py keeps copies of these words.
 _W_AT_LK = const(30)
 _W_AT_F = const(31)
 _W_AT_MEM = const(32)
@@ -92,40 +81,41 @@ _W_N = const(34)
 _W_ENTRY_V2 = const(35)
 _W_RATE_CAP = const(36)
 W_WORDS = const(37)
-_AT_BIAS = const(0x20000000)  # as array_offsets adds
-assert _W_RATE_CAP == W_WORDS - 1
-_CAP = const(0x3FFFFFFF)
-_HI = const(8)
-_LO = const(9)
-_A = const(11)
-_B = const(12)
-_C = const(13)
-_S = const(14)
-_HOW = const(15)
-_P_LIMBS = const(0)
+# ramp.py's: the io words product() and isqrt_limbs() read, and product()'s modes
+# (copies).
+_AT_BIAS = const(0x20000000)
+_IO_HI = const(8)
+_IO_LO = const(9)
+_IO_A = const(11)
+_IO_B = const(12)
+_IO_C = const(13)
+_IO_S = const(14)
+_IO_HOW = const(15)
 _P_TRUNC = const(1)
 _P_ROUND = const(2)
 _P_TOP = const(3)
-assert (_HI, _LO, _W_M, _CAP, _P_LIMBS, _P_TRUNC, _P_ROUND, _P_TOP) == (
-    ramp.IO_HI, ramp.IO_LO, ramp.IO_WORDS, ramp.CAP, ramp.P_LIMBS, ramp.P_TRUNC,
-    ramp.P_ROUND, ramp.P_TOP)
-# product()'s operands: io's last five words
-assert (_A, _B, _C, _S, _HOW) == tuple(range(ramp.IO_WORDS - 5, ramp.IO_WORDS))
+_MASK30 = const(0x3FFFFFFF)  # compat.MASK30
 
 
 @micropython.viper
 def plan_words(w4: int):
     """A new block's words in lk (its slot's) from its floats (F_*), n, its lead-axis
     steps (0 for a dwell), and entry_v2, the junction's limit (V2, see
-    geometry.junction), each in the io array w's words (_W_*). Speeds become V2 within the range kept; what the
-    block adds to v**2 over its length is 2 a s; mm/s becomes the step loop's rate with
-    k = TICK_ONE n / mm, and mm/s**2 its rate change per tick, k a TICK_S.
+    geometry.junction), each in the io array w's words (_W_*). Speeds become V2 within
+    the range kept; what the block adds to v**2 over its length is 2 a s; mm/s becomes
+    the step loop's rate with k = TICK_ONE n / mm, and mm/s**2 its rate change per
+    tick, k a TICK_S.
+
+    k is the one conversion of a speed to a rate, made here: RATE_NOM is the nominal
+    speed times k, and K2 and K_SHIFT are k as stepper.schedule takes it for a V2's
+    rate, k sqrt(V2 / 64), worked out as the block starts (host_tests/test_layouts.py
+    checks that the two agree).
 
     rate_cap (0: none) is the fastest rate the lead axis may step at (the step pulse's
     high and low time): a nominal rate above it becomes it, and the nominal V2 the
-    V2 whose rate it is. In integers here, as the rate is: the same limit in mm/s was
-    a speed worked out in floats for every fast line (each float operation allocates
-    on the chips)."""
+    V2 whose rate it is. In integers here, as the rate is: the same limit in mm/s
+    would be a speed worked out in floats for every fast line (each float operation
+    allocates on the chips)."""
     w = ptr32(w4 << 2)
     base = int(w) - _AT_BIAS  # the arrays' offsets are from here
     lk = ptr32(base + w[_W_AT_LK])
@@ -167,18 +157,18 @@ def plan_words(w4: int):
     m_a = w[_W_M + F_ACCEL]
     e_a = w[_W_E + F_ACCEL] - _BIAS
     # GAIN = 2 _V2_SCALE a mm (_V2_SCALE = 2**6)
-    w[_A] = m_a
-    w[_B] = m_mm
-    w[_C] = 1
-    w[_S] = e_a + e_mm + 7
-    w[_HOW] = _P_ROUND
+    w[_IO_A] = m_a
+    w[_IO_B] = m_mm
+    w[_IO_C] = 1
+    w[_IO_S] = e_a + e_mm + 7
+    w[_IO_HOW] = _P_ROUND
     x = int(prod(w4))
     lk[at + L_GAIN] = x if x < _V2_MAX else _V2_MAX
     bits = f[F_NOMINAL2]
     if bits != w[_W_N2_BITS]:
-        w[_A] = w[_W_M + F_NOMINAL2]
-        w[_B] = 1
-        w[_S] = w[_W_E + F_NOMINAL2] - _BIAS + 6
+        w[_IO_A] = w[_W_M + F_NOMINAL2]
+        w[_IO_B] = 1
+        w[_IO_S] = w[_W_E + F_NOMINAL2] - _BIAS + 6
         x = int(prod(w4))  # C and HOW as for GAIN
         w[_W_N2_V2] = x if x < _V2_MAX else _V2_MAX
         w[_W_N2_BITS] = bits
@@ -197,61 +187,62 @@ def plan_words(w4: int):
         b = b >> 1
     if ns < 0:
         ns = 0
-    w[_A] = w[_W_M + F_TICK_ONE] << 6
-    w[_B] = n << ns
-    w[_C] = m_mm
-    w[_S] = 26
-    w[_HOW] = _P_TOP
+    w[_IO_A] = w[_W_M + F_TICK_ONE] << 6
+    w[_IO_B] = n << ns
+    w[_IO_C] = m_mm
+    w[_IO_S] = 26
+    w[_IO_HOW] = _P_TOP
     ke = int(prod(w4))
     ke += w[_W_E + F_TICK_ONE] - _BIAS - 6 - ns - e_mm
-    km = w[_LO]
+    km = w[_IO_LO]
     # RATE_NOM = nominal k, truncated.
-    w[_A] = w[_W_M + F_NOMINAL]
-    w[_B] = km
-    w[_C] = 1
-    w[_S] = w[_W_E + F_NOMINAL] - _BIAS + ke
-    w[_HOW] = _P_TRUNC
+    w[_IO_A] = w[_W_M + F_NOMINAL]
+    w[_IO_B] = km
+    w[_IO_C] = 1
+    w[_IO_S] = w[_W_E + F_NOMINAL] - _BIAS + ke
+    w[_IO_HOW] = _P_TRUNC
     r_nom = int(prod(w4))
     # acc = k a TICK_S, the rate change per tick, as km * m_at 2**s (a TICK_S comes
     # in as one float, worked out where the acceleration changes: a product less a
     # line): ACC rounded, at least 1.
     m_at = w[_W_M + F_ACCEL_TICK]
     s = ke + w[_W_E + F_ACCEL_TICK] - _BIAS
-    w[_A] = km
-    w[_B] = m_at
-    w[_S] = s
-    w[_HOW] = _P_ROUND
+    w[_IO_A] = km
+    w[_IO_B] = m_at
+    w[_IO_S] = s
+    w[_IO_HOW] = _P_ROUND
     acc = int(prod(w4))  # C as for RATE_NOM
     lk[at + L_ACC] = acc if acc > 1 else 1
     # FLOOR, the slowest rate a block may fall to: reached from rest within half a
     # step, so a block that ends at a stop still finishes. sqrt(acc ONE), ONE = 2**28:
     # the root of acc taken to 54 bits, or 55 for an even exponent, truncated.
-    w[_S] = 54
-    w[_HOW] = _P_TOP
+    w[_IO_S] = 54
+    w[_IO_HOW] = _P_TOP
     t = int(prod(w4)) + s + 28  # A B C as for ACC
     if t & 1:
-        hi = w[_HI]
-        lo = w[_LO]
-        w[_HI] = (hi << 1) | (lo >> 29)
-        w[_LO] = (lo << 1) & _CAP
+        hi = w[_IO_HI]
+        lo = w[_IO_LO]
+        w[_IO_HI] = (hi << 1) | (lo >> 29)
+        w[_IO_LO] = (lo << 1) & _MASK30
         t -= 1
     floor = int(isqrt_limbs(w4))
     t = t >> 1
     if t >= 0:
-        floor = _CAP if t > 30 or floor > (_CAP >> t) else floor << t
+        floor = _MASK30 if t > 30 or floor > (_MASK30 >> t) else floor << t
     else:
         floor = floor >> (0 - t) if t > -31 else 0
     lk[at + L_FLOOR] = floor
     # rate = k sqrt(V2 / _V2_SCALE) = isqrt(V2 * K2) scaled by 2**K_SHIFT, with K2 in
     # [2**24, 2**26): V2 * K2 stays below 2**55, and the root keeps 15 bits or more.
     # k**2 / 2**6 = km**2 2**(2 ke - 6) = K2 4**K_SHIFT with K2 = km**2 >> 26: the
-    # square in two limbs as product() makes them, written out (a call costs the chip
-    # about 6 us; km has 26 bits, so the high limb has 22 and nothing is capped).
+    # square in two limbs, in ramp.product's form (for a square: 2 a b in the middle),
+    # written out (a call costs the chip about 6 us; km has 26 bits, so the high limb
+    # has 22 and nothing is capped).
     a = km >> 15
     b = km & 0x7FFF
     x = 2 * a * b
     lo = ((x & 0x7FFF) << 15) + b * b
-    k2 = ((a * a + (x >> 15) + (lo >> 30)) << 4) | ((lo & _CAP) >> 26)
+    k2 = ((a * a + (x >> 15) + (lo >> 30)) << 4) | ((lo & _MASK30) >> 26)
     lk[at + L_K2] = k2
     shift = ke + 10
     lk[at + L_K_SHIFT] = shift + _SHIFT_BIAS
@@ -265,11 +256,11 @@ def plan_words(w4: int):
         elif shift > -30 and (rate_cap >> (30 + shift)) == 0:
             a = rate_cap << (0 - shift)
         if a:  # else the cap's V2 is past any V2 kept
-            w[_A] = a
-            w[_B] = a
-            w[_C] = k2
-            w[_S] = 0
-            w[_HOW] = _P_TRUNC
+            w[_IO_A] = a
+            w[_IO_B] = a
+            w[_IO_C] = k2
+            w[_IO_S] = 0
+            w[_IO_HOW] = _P_TRUNC
             x = int(prod(w4))
             if x < lk[at + L_NOMINAL]:
                 lk[at + L_NOMINAL] = x
@@ -290,7 +281,7 @@ def recalculate(w4: int, hooks):
     BACK stays the same (Grbl's and Marlin's optimal marker): the plan before it stands,
     and the forward pass starts there. A record is written here, not in a function of
     its own: on curves a line rewrites a dozen, and the call with its arrays' lookups
-    cost the chip about 14 us a record."""
+    would cost the chip about 14 us a record."""
     w = ptr32(w4 << 2)
     base = int(w) - _AT_BIAS
     lk = ptr32(base + w[_W_AT_LK])
@@ -365,8 +356,8 @@ def recalculate(w4: int, hooks):
             # block starts (stepper.schedule, F_RATES): the record gets the two V2s
             # (V2_AT_NOMINAL where the nominal rate is theirs) and what a rate comes
             # from. On curves, whose queue is shorter than the braking distance, a
-            # line rewrites a dozen records, and their roots here cost the chip about
-            # 0.3 ms a line.
+            # line rewrites a dozen records, and their roots here would cost the chip
+            # about 0.3 ms a line.
             nominal = rec[L_NOMINAL]
             c0 = v0 if v0 < nominal else _V2_AT_NOMINAL
             c1 = v1 if v1 < nominal else _V2_AT_NOMINAL

@@ -23,9 +23,9 @@
 # erase/program, which the rp2 port runs with interrupts off (a 4 kB erase takes tens
 # of ms, many batches): so every flash write waits for the moves to end first
 # (config.FileStorage), and its late refills come at a standstill, where they stall
-# nothing. gc.collect() runs with interrupts on (a hard handler
-# that allocated would fail during it; refill allocates nothing), so it delays
-# nothing: M122, which collects, ran during the emulated prints with no late refill.
+# nothing. gc.collect() runs with interrupts on (a hard handler that allocated would
+# fail during it; refill allocates nothing), so it delays nothing: the emulated prints
+# run M122, which collects, without a late refill.
 import sys
 from array import array
 from mixfw.compat import micropython, const, ptr32
@@ -35,7 +35,7 @@ from mixfw.pio import out_range
 
 _PIO_HZ = const(8000000)
 _CYCLES_PER_US = const(8)
-_BATCH_US = const(2000)  # 1 ms batches gave late refills on the emulated chip
+_BATCH_US = const(2000)  # 1 ms is too short: the emulated chip's refills come late
 _SEGMENTS = const(3)
 _FIFO_WORDS = const(8)  # the TX FIFO, joined
 _DMA_BASE = const(0x50000000)
@@ -71,7 +71,8 @@ _ABORT_POLLS = const(1000)  # an abort ends within a few bus cycles
 # any chip).
 _PROG_OUT_PINS = const(-3)
 
-# The step loop's words refill uses, as constants viper folds (checked below).
+# stepper.py's layout: the step loop's words refill uses, as constants viper folds
+# (copies).
 _R_BATCHES = const(95)
 _R_BUSY_BIT = const(101)
 _R_CH = const(102)
@@ -90,12 +91,6 @@ _R_W = const(92)
 _R_SM = const(107)
 _S_LEVELS = const(45)
 _TAIL_WORDS = const(9)  # the FIFO's words and the one before them
-assert (_R_BATCHES, _R_BUSY_BIT, _R_CH, _R_CHAIN_SHIFT, _R_CH_SEG, _R_CTRL, _R_FIRED,
-        _R_LATE, _R_READY, _R_RING_ADDR, _R_SEG_LV, _R_SEG_N, _R_SEG_SEQ, _R_SEG_WORDS,
-        _R_W, _R_SM, _S_LEVELS) == (
-    st.R_BATCHES, st.R_BUSY_BIT, st.R_CH, st.R_CHAIN_SHIFT, st.R_CH_SEG, st.R_CTRL,
-    st.R_FIRED, st.R_LATE, st.R_READY, st.R_RING_ADDR, st.R_SEG_LV, st.R_SEG_N,
-    st.R_SEG_SEQ, st.R_SEG_WORDS, st.R_W, st.R_SM, st.S_LEVELS)
 
 
 def seg_words(batch_ticks):
@@ -402,7 +397,7 @@ class Feed:
         txf = _PIO0_TXF0 + 4 * self.sm_id
         shift = mem[st.R_CHAIN_SHIFT]
         # The first word goes into the FIFO by hand: a state machine made again
-        # after a stop with a full FIFO raised no DREQ on the emulated chip until its
+        # after a stop with a full FIFO raises no DREQ on the emulated chip until its
         # first pull.
         self.sm.put(self.ring[0])
         for i, dma in enumerate(self.dmas):

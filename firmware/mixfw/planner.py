@@ -13,11 +13,15 @@ from mixfw.mixer import MAX_DRIVES, normalize
 from mixfw.ramp import array_offsets
 from mixfw.stepper import schedule_counts
 
-# The step loop's words written for every block, as this module's constants: the
-# compiler folds them, where each st.X is a lookup at run time.
+# The other modules' words the planner reads and writes, as this module's constants:
+# viper and the compiler fold them, where each st.X is a lookup at run time. Each is a
+# copy of its owner's, which host_tests/test_layouts.py checks.
+# stepper.py's: the step loop's words and its records'.
 _S_HEAD = const(0)
 _S_TAIL = const(1)
 _S_ACTIVE = const(2)
+_S_QUEUE = const(26)
+_R_PENDING = const(93)
 _BLOCK_BASE = const(112)
 _B_WORDS = const(24)
 _B_N = const(0)
@@ -28,32 +32,49 @@ _B_FLAGS = const(7)
 _B_DWELL = const(14)
 _B_MIX = const(15)
 _F_NEG = const(4)
-_F_DWELL = const(1)
 _F_HOMING = const(2)
 _F_HOME_SHIFT = const(8)
-assert (_F_HOMING, _F_HOME_SHIFT) == (st.F_HOMING, st.F_HOME_SHIFT)
-_B_RATE_INIT = const(8)
-_B_RATE_NOM = const(9)
-_B_RATE_FINAL = const(10)
-_B_ACCEL = const(11)
-_B_ACCEL_UNTIL = const(12)
-_B_DECEL_AFTER = const(13)
-_B_RATE_DECEL = const(22)
-_MAX_DRIVES = const(6)
-_CAP = const(0x3FFFFFFF)
-_S_N_XYZ = const(4)  # words of Planner._abs_steps after X Y Z E: see _xyz_steps
-_S_DRIVES = const(5)
-_S_RATE_CAP = const(6)
-assert (_S_HEAD, _S_TAIL, _S_ACTIVE, _BLOCK_BASE, _B_WORDS, _B_N, _B_STEPS, _B_DIR_SET,
-        _B_DIR_CLR, _B_FLAGS, _B_DWELL, _B_MIX, _F_NEG, _F_DWELL, _B_RATE_INIT, _B_RATE_NOM,
-        _B_RATE_FINAL, _B_ACCEL, _B_ACCEL_UNTIL, _B_DECEL_AFTER, _B_RATE_DECEL) == (
-    st.S_HEAD, st.S_TAIL, st.S_ACTIVE, st.BLOCK_BASE, st.B_WORDS, st.B_N, st.B_STEPS,
-    st.B_DIR_SET, st.B_DIR_CLR, st.B_FLAGS, st.B_DWELL, st.B_MIX, st.F_NEG, st.F_DWELL,
-    st.B_RATE_INIT, st.B_RATE_NOM, st.B_RATE_FINAL, st.B_ACCEL, st.B_ACCEL_UNTIL,
-    st.B_DECEL_AFTER, st.B_RATE_DECEL)
-_S_QUEUE = const(26)
-_R_PENDING = const(93)
-assert (_S_QUEUE, _R_PENDING, _MAX_DRIVES) == (st.S_QUEUE, st.R_PENDING, MAX_DRIVES)
+# lookahead.py's: the floats, the slots, and the words of plan_words and recalculate
+# in the io array they share with ramp.py's helpers (_RAMP_IO), which _plan_move
+# stores.
+_F_MM = const(0)
+_F_ACCEL = const(1)
+_F_NOMINAL = const(2)
+_F_NOMINAL2 = const(3)
+_F_ACCEL_TICK = const(5)
+_L_WORDS = const(12)
+_L_NOMINAL = const(2)
+_W_AT_LK = const(30)
+_W_AT_F = const(31)
+_W_AT_MEM = const(32)
+_W_SLOT = const(33)
+_W_N = const(34)
+_W_ENTRY_V2 = const(35)
+_W_RATE_CAP = const(36)
+# geometry.py's: the move's words, and where its floats and the planner's are, then
+# the move's flags (_plan_move stores them).
+_G_D = const(16)
+_G_C = const(20)
+_G_DIST = const(25)
+_G_AT_GF = const(33)
+_G_FLAGS = const(35)
+_GF_ACCEL_JD = const(5)
+_FL_E_NM = const(16)
+_FL_JOIN = const(32)
+# ramp.py's: product()'s words in the limbs' scratch (_RAMP_IO), its mode P_LIMBS,
+# and array_offsets' bias.
+_IO_LO = const(9)
+_IO_REM = const(10)
+_IO_A = const(11)
+_IO_B = const(12)
+_IO_C = const(13)
+_IO_HOW = const(15)
+_P_LIMBS = const(0)
+_AT_BIAS = const(0x20000000)
+_MAX_DRIVES = const(6)  # mixer.MAX_DRIVES
+# compat.MASK30: the chips' largest small int, and the mask mix ids wrap at.
+_MASK30 = const(0x3FFFFFFF)
+
 _RING_IDLE = const(0x10000)  # see _ring_room
 # A drive's filament past its base (Planner._rebase), in nm: the base moves up once it
 # passes _NM_HIGH, leaving _NM_KEEP to _NM_KEEP + q, and back down below _NM_LOW. A
@@ -61,37 +82,9 @@ _RING_IDLE = const(0x10000)  # see _ring_room
 _NM_LOW = const(0x8000000)
 _NM_KEEP = const(0x10000000)
 _NM_HIGH = const(0x30000000)
-_F_MM = const(0)
-_F_ACCEL = const(1)
-_F_NOMINAL = const(2)
-_F_NOMINAL2 = const(3)
-_F_ACCEL_TICK = const(5)
-assert (_F_MM, _F_ACCEL, _F_NOMINAL, _F_NOMINAL2, _F_ACCEL_TICK) == (
-    lookahead.F_MM, lookahead.F_ACCEL, lookahead.F_NOMINAL, lookahead.F_NOMINAL2,
-    lookahead.F_ACCEL_TICK)
-assert _F_MM == 0  # where geometry.lengths writes a move's length
-_L_WORDS = const(12)
-_L_NOMINAL = const(2)
-assert (_L_WORDS, _L_NOMINAL) == (lookahead.L_WORDS, lookahead.L_NOMINAL)
-_G_D = const(16)
-_G_C = const(20)
-_G_DIST = const(25)
-_GF_ACCEL_JD = const(5)
-_FL_E_NM = const(16)
-_FL_JOIN = const(32)
-assert (_G_D, _G_C, _G_DIST, _GF_ACCEL_JD, _FL_E_NM, _FL_JOIN) == (
-    geometry.G_D, geometry.G_C, geometry.G_DIST, geometry.GF_ACCEL_JD, geometry.FL_E_NM,
-    geometry.FL_JOIN)
-# geometry's words for lengths and junction: where its floats and the planner's are,
-# then the move's flags (_plan_move stores them).
-_G_AT_GF = const(33)
-_G_FLAGS = const(35)
-assert _G_FLAGS == geometry.G_WORDS - 1 == _G_AT_GF + 2
 
 # Largest schedule period the step loop's mixer takes: its products stay below 2**30.
-MAX_PERIOD = 20000
-_MAX_PERIOD = const(20000)  # for viper, which folds only constants
-assert MAX_PERIOD == _MAX_PERIOD
+MAX_PERIOD = const(20000)
 
 # Filament is counted in integers, never summed in floats: a chip's 32-bit float
 # would drift by steps over a print. E in nanometres, and steps/mm in millionths, so a
@@ -158,7 +151,7 @@ def _ring_room(mem_buf) -> int:
     """The slot for the next block (S_HEAD), plus _RING_IDLE if the step path has run
     out of work (no block queued or running, no steps still in the DMA ring); -1 while
     the ring is full: one slot stays free, so a full ring is not taken for an empty one.
-    One viper call where the queue's methods took three calls and a dozen lookups."""
+    One viper call, where the queue's methods would be three calls and a dozen lookups."""
     m = ptr32(mem_buf)
     head = m[_S_HEAD]
     tail = m[_S_TAIL]
@@ -176,7 +169,7 @@ def _ring_room(mem_buf) -> int:
 def waiting_blocks(mem_buf) -> int:
     """Blocks queued that the step loop has not started. A function, not a method:
     add_move asks for every short move, and a bytecode method looked up on the planner
-    cost the chip about 30 us."""
+    costs the chip about 30 us."""
     m = ptr32(mem_buf)
     count = m[_S_HEAD] - m[_S_TAIL]
     if count < 0:
@@ -186,11 +179,17 @@ def waiting_blocks(mem_buf) -> int:
     return count
 
 
+# The planner's words (Planner._abs_steps): X Y Z E steps (_xyz_steps), then the
+# largest of X Y Z's, the drives (_plan_move: len() is a call), the fastest rate the
+# step loop may step at (see lookahead.plan_words), and _plan_move's words (below).
+_S_N_XYZ = const(4)
+_S_DRIVES = const(5)
+_S_RATE_CAP = const(6)
 # Where the arrays _plan_move, _drive_targets and _xyz_steps work on are, as byte offsets
-# from the planner's words (Planner._abs_steps) plus _AT_BIAS (each non-negative, as a
-# 64-bit port's ptr32 reads a word zero-extended): ptr32() of an array costs the chip
-# about 1.4 us, of an address nothing. MicroPython never moves an object, and the
-# planner holds them all. See array_offsets.
+# from the planner's words plus _AT_BIAS (each non-negative, as a 64-bit port's ptr32
+# reads a word zero-extended): ptr32() of an address costs nothing, of an array much
+# more (see ramp.array_offsets). MicroPython never moves an object, and the planner
+# holds them all.
 _AT_MEM = const(13)
 _AT_LK = const(14)
 _AT_COUNTS = const(15)
@@ -210,7 +209,6 @@ _AT_XYZ = const(94)  # and Planner.target_steps
 _S_JOINS = const(95)
 _S_MEMO_NEXT = const(96)  # where the memo's oldest entry starts (see _work_base_floats)
 _S_WORDS = const(97)
-_AT_BIAS = const(0x20000000)
 
 
 # _drive_targets' words, the planner's from _S_E on (Planner.resync writes them): per
@@ -236,24 +234,6 @@ _E_STRIDE = const(11)
 _E_TOTAL = const(66)
 _E_SYNCED = const(67)
 _E_FITS = const(68)
-assert _E_TOTAL == _E_STRIDE * _MAX_DRIVES and _S_E + _E_FITS + 1 == _AT_F
-# ramp.product's words in the limbs' scratch (_RAMP_IO), and its mode P_LIMBS.
-_IO_LO = const(9)
-_IO_REM = const(10)
-_IO_A = const(11)
-_P_LIMBS = const(0)
-assert (_IO_LO, _IO_REM, _IO_A, _P_LIMBS) == (ramp.IO_LO, ramp.IO_LO + 1,
-                                              ramp.IO_WORDS - 5, ramp.P_LIMBS)
-# lookahead's words for plan_words and recalculate in the same array, which
-# _plan_move stores.
-_W_AT_LK = const(30)
-_W_AT_F = const(31)
-_W_AT_MEM = const(32)
-_W_SLOT = const(33)
-_W_N = const(34)
-_W_ENTRY_V2 = const(35)
-_W_RATE_CAP = const(36)
-assert _W_RATE_CAP == lookahead.W_WORDS - 1
 
 
 @micropython.viper
@@ -266,8 +246,8 @@ def _drive_targets(words_buf, e_nm: int, drive_nm, drive_rem) -> int:
     Returns 1 if it did that, 0 if _plan_e must (nothing planned then). The planner's arrays from the
     places its words keep (Planner._abs_steps).
 
-    One viper call for a line that _plan_e took about 90 us for in native code on the
-    emulated Pico, at an attribute, a subscript or an operation on objects each."""
+    One viper call: native code, as _plan_e, pays a runtime call for every attribute,
+    subscript or operation on objects."""
     words = ptr32(words_buf)
     at = int(words) - _AT_BIAS
     t = ptr32(at + words[_AT_TARGETS])
@@ -299,11 +279,11 @@ def _drive_targets(words_buf, e_nm: int, drive_nm, drive_rem) -> int:
                 k = num // total
             else:
                 k = 0 - ((total - 1 - num) // total)
-            nm = d[_E_NM] - _CAP - 1 + k
+            nm = d[_E_NM] - _MASK30 - 1 + k
             if planning == 0:
                 lim = d[_E_LIM]
                 if (d[_E_HOW] == 0 or e_nm >= lim or e_nm <= 0 - lim
-                        or nm < d[_E_LOW] - _CAP - 1 or nm >= d[_E_HIGH]):
+                        or nm < d[_E_LOW] - _MASK30 - 1 or nm >= d[_E_HIGH]):
                     return 0  # beyond the words, or the base moves (_rebase)
                 continue
             rem = num - k * total
@@ -327,9 +307,9 @@ def _drive_targets(words_buf, e_nm: int, drive_nm, drive_rem) -> int:
                 r = (2 * low * p + qt) // (2 * qt)
             else:  # low p // qt and its remainder in limbs: qt below 2**28, p 2**29
                 io[_IO_A] = low
-                io[_IO_A + 1] = p
-                io[_IO_A + 2] = qt
-                io[_IO_A + 4] = _P_LIMBS
+                io[_IO_B] = p
+                io[_IO_C] = qt
+                io[_IO_HOW] = _P_LIMBS
                 product(int(io) >> 2)  # its address over 4
                 r = io[_IO_LO]
                 if 2 * io[_IO_REM] >= qt:
@@ -338,7 +318,7 @@ def _drive_targets(words_buf, e_nm: int, drive_nm, drive_rem) -> int:
             if nm < 0:
                 r = 0 - r
             target = d[_E_BASE] + r
-            d[_E_NM] = nm + _CAP + 1
+            d[_E_NM] = nm + _MASK30 + 1
             d[_E_REM] = rem
             drive_nm[i] = nm
             drive_rem[i] = rem
@@ -408,8 +388,8 @@ def block_weights(words4: int) -> int:
     total = 0
     for i in range(n):
         x = c[i]
-        if x < 0 or x > _CAP:  # negative: a 64-bit port's ptr32 reads it zero-extended
-            x = (0 - x) & _CAP
+        if x < 0 or x > _MASK30:  # negative: a 64-bit port's ptr32 reads it zero-extended
+            x = (0 - x) & _MASK30
         s[i] = x
         total += x
         a = x
@@ -417,7 +397,7 @@ def block_weights(words4: int) -> int:
             t = g % a
             g = a
             a = t
-    if g and total // g > _MAX_PERIOD:
+    if g and total // g > MAX_PERIOD:
         return 0
     for i in range(n):
         w[i] = s[i] // g if g else 0
@@ -432,15 +412,15 @@ def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
     nothing needs Python: else the answer says what add_move must do first (_FLOATS
     and the rest). how: _HOW_*, the homing axes << _HOW_HOMING_SHIFT and, with
     _HOW_SLOT, the ring's slot << _HOW_SLOT_SHIFT. pos: Planner.position_steps, whose
-    X Y Z become the target's (Planner.target_steps). One call for the lengths, the axes' limits, SLOWDOWN's check,
-    the junction, the block's weights and its words, where each was a call and the
-    glue between them native code on objects, at 1 to 2 us an attribute or an
-    operation on the chips.
+    X Y Z become the target's (Planner.target_steps). One call for the lengths, the
+    axes' limits, SLOWDOWN's check, the junction, the block's weights and its words:
+    as a call each, with native code on objects between them, they would cost 1 to 2
+    us an attribute or an operation on the chips.
 
     Its arrays are found from the planner's words (_AT_*), and the functions it calls
     take theirs as addresses over 4: a subscript of an object costs the chip about
     1.5 us from viper, as much as a dozen operations on words, and ptr32() of an array
-    1.4 us."""
+    is as dear (see ramp.array_offsets)."""
     mem_buf = io[_Q_MEM]
     words = ptr32(io[_Q_WORDS])
     at = int(words) - _AT_BIAS  # the arrays' offsets are from here (_AT_*)
@@ -450,8 +430,8 @@ def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
     e_steps = 0
     for i in range(drives):
         c = counts[i]
-        if c > _CAP:  # negative: a 64-bit port's ptr32 reads it zero-extended
-            c = 0 - ((0 - c) & _CAP)
+        if c > _MASK30:  # negative: a 64-bit port's ptr32 reads it zero-extended
+            c = 0 - ((0 - c) & _MASK30)
         e_steps += c
     moving = neg >> 4
     neg &= 7
@@ -527,7 +507,7 @@ def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
             g = given
             for i in range(drives):
                 g[i] = 0 - g[i]
-        mix_id = (words[_S_MIX_ID] + 1) & 0x3FFFFFF
+        mix_id = (words[_S_MIX_ID] + 1) & _MASK30
         words[_S_MIX_ID] = mix_id
     # The junction's speed, from the deviation model (a stop if the queue ran empty),
     # as the look-ahead's V2.
@@ -583,11 +563,11 @@ def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
         slot = 0
     mem[_S_HEAD] = slot
     words[_S_JOINS] = 0 if homing else 1
-    target = ptr32(at + words[_AT_XYZ])  # within +-_CAP (_xyz_steps)
+    target = ptr32(at + words[_AT_XYZ])  # within +-_MASK30 (_xyz_steps)
     for i in range(3):
         t = target[i]
-        if t > _CAP:  # negative: a 64-bit port's ptr32 reads it zero-extended
-            t = 0 - ((0 - t) & _CAP)
+        if t > _MASK30:  # negative: a 64-bit port's ptr32 reads it zero-extended
+            t = 0 - ((0 - t) & _MASK30)
         pos[i] = t
     pos[3] = int(pos[3]) + e_steps
     # given, an array 'i': a 64-bit port's ptr32 reads a negative count zero-extended,
@@ -607,8 +587,8 @@ def _xyz_steps(pos, steps_buf) -> int:
     X Y Z) and geometry's D words (from _AT_GEO), the largest into
     steps_buf[_S_N_XYZ]. Returns the bits of the axes that run backwards, and those of
     the axes that move shifted left 4; or -1 for a target or a move of 2**30 steps or
-    more, beyond the chips' small ints. One viper call where the same arithmetic in
-    native code cost the chip about 0.1 ms a line."""
+    more, beyond the chips' small ints. One viper call, where the same arithmetic in
+    native code would cost the chip about 0.1 ms a line."""
     steps = ptr32(steps_buf)
     at = int(steps) - _AT_BIAS
     geo = ptr32(at + steps[_AT_GEO])
@@ -621,7 +601,7 @@ def _xyz_steps(pos, steps_buf) -> int:
         t = target[i]
         top = (t >> 30) & 3
         if top == 3:
-            t = 0 - ((0 - t) & _CAP)
+            t = 0 - ((0 - t) & _MASK30)
             if t == 0:  # -2**30
                 return -1
         elif top:
@@ -635,7 +615,7 @@ def _xyz_steps(pos, steps_buf) -> int:
         if d < 0:
             neg |= 1 << i
             d = 0 - d
-        if d >= _CAP:
+        if d >= _MASK30:
             return -1
         if d:
             neg |= 16 << i
@@ -651,7 +631,7 @@ def _xyz_steps(pos, steps_buf) -> int:
 def _half_bits(f_buf) -> int:
     """A positive float32's bits halved (a small int), as geometry.lengths returns a
     length's: they order as the floats do."""
-    return (ptr32(f_buf)[0] >> 1) & 0x3FFFFFFF
+    return (ptr32(f_buf)[0] >> 1) & _MASK30
 
 
 def _gcd(a, b):
@@ -662,20 +642,9 @@ def _gcd(a, b):
 
 def ramp_ticks(n, r0, r_nom, r1, acc, out=None, at=0):
     """The step loop's schedule (B_ACCEL_UNTIL, B_DECEL_AFTER, B_RATE_DECEL) for the
-    trapezoid of a record: n lead steps from rate r0 up to r_nom (or the peak where
-    the ramps meet) and down to r1 at acc per tick, all in the step loop's fixed point.
-    Returned as a tuple, or written to out[at:at + 3] (no tuple to allocate).
-
-    Tick i (from 1) moves by the speed's mean over it. The step loop starts at
-    r0 + acc/2 and adds acc per tick until ACCEL_UNTIL, the tick holding the end of
-    acceleration, where r_nom clamps it; cruises; and at tick DECEL_AFTER, the one
-    holding the start of deceleration, sets the rate for the tick after, the first
-    wholly decelerating one, which then falls by acc per tick. Only the two corner
-    ticks then differ from the trapezoid, by less than acc each, so the position
-    stays on the plan to well under a step, however slow the end of the block.
-
-    Worked out in integers by ramp.ramp_into (viper): on the chips every float
-    operation allocates."""
+    trapezoid of a record (n lead steps, rates r0, r_nom, r1, acc per tick), by
+    ramp.ramp_into, which says what it is. Returned as a tuple, or written to
+    out[at:at + 3] (no tuple to allocate)."""
     io = _RAMP_IO
     io[ramp.IO_N] = n
     io[ramp.IO_R0] = r0
@@ -782,8 +751,8 @@ class Planner:
         # part of a share below a nanometre is carried, not dropped; drive_targets[i] is
         # its step there, where targets_known. _plan_e changes them in place, and only
         # for the drives with a share in the move (copying every drive's plan for each
-        # line was most of its time on the chips): a move is refused, if at all, before
-        # its filament is planned.
+        # line would be most of its time on the chips): a move is refused, if at all,
+        # before its filament is planned.
         self.drive_nm = [0] * self.drives
         self.drive_rem = [0] * self.drives
         self.rem_total = 1
@@ -885,7 +854,7 @@ class Planner:
     def set_mix(self, mix_id, weights, tool=-1):
         """The mix for E moves queued from now on (already normalised weights). The
         tool it belongs to matters only to Transitions in front of the planner."""
-        self.mix_id = mix_id & 0x3FFFFFFF
+        self.mix_id = mix_id & _MASK30  # a small int on the chips, as _plan_move's
         self.tool_mix = tuple(weights)
 
     def set_drive_steps(self, drive_steps_per_mm):
@@ -942,8 +911,8 @@ class Planner:
                 k = (x - _NM_KEEP) // q
         pq[2] += k * p
         pq[5] = base_nm = base_nm + k * q
-        pq[3] = _NM_LOW if base_nm else -_CAP - 1
-        pq[4] = _NM_HIGH if movable else _CAP
+        pq[3] = _NM_LOW if base_nm else -_MASK30 - 1
+        pq[4] = _NM_HIGH if movable else _MASK30
         return x - k * q
 
     def _plan_e(self, e_nm, weights=None):
@@ -1028,17 +997,17 @@ class Planner:
             how = 0
             if p < 0x20000000 and qt < 0x10000000:
                 how = 1 if 2 * qt * p < 0x40000000 else 2
-                e[d + _E_LIM] = (_CAP - total) // wi
+                e[d + _E_LIM] = (_MASK30 - total) // wi
                 e[d + _E_P] = p
                 e[d + _E_Q] = pq[1]
                 e[d + _E_QT] = qt
                 nm = self.drive_nm[i]
-                if -_CAP < nm < _CAP and pq[2] < _CAP:
-                    e[d + _E_NM] = nm + _CAP + 1  # see _drive_targets
+                if -_MASK30 < nm < _MASK30 and pq[2] < _MASK30:
+                    e[d + _E_NM] = nm + _MASK30 + 1  # see _drive_targets
                     e[d + _E_REM] = self.drive_rem[i]
                     e[d + _E_BASE] = pq[2]
-                    e[d + _E_LOW] = max(pq[3], -_CAP) + _CAP + 1
-                    e[d + _E_HIGH] = min(pq[4], _CAP)
+                    e[d + _E_LOW] = max(pq[3], -_MASK30) + _MASK30 + 1
+                    e[d + _E_HIGH] = min(pq[4], _MASK30)
                 else:
                     how = 0
             if not how:
@@ -1122,10 +1091,9 @@ class Planner:
             self.position_steps[i] = steps[i]
 
     # --- adding blocks ---
-    # The methods every G1 line runs with much to do are native code: 35 % more lines a
-    # second on the emulated Pico, with cmd_motion's, for about 9.5 kB of heap the
-    # machine code takes there (bench/chip_rows.py profile). Native code takes about
-    # four times the heap bytecode does: short ones such as this stay bytecode.
+    # The methods every G1 line runs with much to do are native code, as cmd_motion's:
+    # faster than bytecode (bench/chip_rows.py profile times them), but about four
+    # times its heap, so short ones such as this stay bytecode.
     def _new_slot(self, slot):
         """The slot for the next block, once the ring has room (one slot stays free, so
         a full ring is not taken for an empty one), from what _ring_room said."""
@@ -1187,7 +1155,7 @@ class Planner:
             # checked first, as viper would take a big int's low bits for its value.
             for i in range(3):
                 t = target_steps[i]
-                if not -_CAP <= t <= _CAP:
+                if not -_MASK30 <= t <= _MASK30:
                     raise PlanError("move too long: from %s to %s steps"
                                     % (pos[:3], list(target_steps[:3])))
                 target[i] = t
@@ -1246,7 +1214,7 @@ class Planner:
     # The bytecode functions below run on lines that change the feed rate or where a
     # limit binds. Each keeps its locals and stack within 11 words: MicroPython gives a
     # function with more its frame from the heap at each call, and on a fragmented heap
-    # that search for a hole of several blocks cost the emulated Pico hundreds of
+    # that search for a hole of several blocks can cost the chip hundreds of
     # microseconds a call (the line's floats take one block each: found at once).
     def _base_floats(self, speed, accel):
         """For add_move: what the move's speed and acceleration are within (the axes'

@@ -254,8 +254,8 @@ class Printer:
     def add_command(self, letter, number, handler, guarded=False):
         """G1 as ("G", 1); ("T", -1) takes every tool number. guarded: refused
         while the printer is halted (moves, heating). Each command's help is a comment
-        where it is registered: nothing prints it, and as strings the texts held about
-        3.5 KB of a chip's heap for good (a .mpy file's constants load into RAM)."""
+        where it is registered: nothing prints it, and as strings the texts would hold
+        about 3.5 KB of a chip's heap for good (a .mpy file's constants load into RAM)."""
         key = command_key(letter, number)
         self.commands[key] = handler
         if guarded:
@@ -558,7 +558,7 @@ class Printer:
             job = self.job
             printing = job is not None and not job.paused
             # While a file prints, the channels are read every few of its lines: a
-            # read that finds nothing cost the chip about 0.2 ms, a fifth of a line's
+            # read that finds nothing costs the chip about 0.2 ms, a fifth of a line's
             # time. Their lines wait that long (an emergency command's too: a few ms);
             # a line that waits for the planner reads them as it waits.
             if not printing or unpumped >= _FILE_LINES_PER_READ:

@@ -1,7 +1,6 @@
-# The step loop's schedule for a block's trapezoid (see planner.ramp_ticks), in viper on
-# integers. It runs for most G-code lines, and on the chips every float operation
-# allocates: the float version cost the RP2040 about 0.4 ms a call, and its garbage a
-# collection every few dozen lines.
+# The step loop's schedule for a block's trapezoid (ramp_into says what it is), in viper
+# on integers: the step loop works it out as each block starts, and on the chips every
+# float operation allocates.
 #
 # The squares of rates need about 56 bits, more than a chip's machine word, so they are
 # kept as two 30-bit limbs (hi, lo) in words of the io array. Every intermediate stays
@@ -10,8 +9,7 @@ from mixfw.compat import const, micropython, ptr32
 # Viper's cast (a pointer's address) here, and CPython's stand-in for it (see compat).
 from mixfw.compat import int  # noqa: A004
 
-_MAX_TICK = const(0x3FFFFFFF)
-_M30 = const(0x3FFFFFFF)
+_MASK30 = const(0x3FFFFFFF)  # compat.MASK30: also the most ticks a schedule counts
 # Fraction bits of the deceleration's start time, in ticks: enough that the rate the
 # first decelerating tick gets is exact to a rate unit for any acceleration the step
 # loop takes.
@@ -30,21 +28,19 @@ IO_DECEL_AFTER = const(6)
 IO_RATE_DECEL = const(7)
 IO_HI = const(8)  # (hi, lo): two 30-bit limbs, for the helpers below
 IO_LO = const(9)
-_HI = const(IO_HI)
-_LO = const(IO_LO)
-_REM = const(10)
+_IO_REM = const(10)
 # The last five: product()'s operands a, b, c, s and how (see there), which its callers
 # store (a viper call's int argument costs the chip about 1 us, a store a few cycles).
-# Private, as every name a module keeps is interned and costs the chips' heap:
-# the modules that store them check theirs against IO_WORDS.
-_A = const(11)
-_B = const(12)
-_C = const(13)
-_S = const(14)
-_HOW = const(15)
+# Private, as every name a module keeps is interned, and the chips hold interned names
+# for good, in pools of which one more costs kB of heap (printer.py, answer): the
+# modules that store them keep copies (host_tests/test_layouts.py checks them).
+_IO_A = const(11)
+_IO_B = const(12)
+_IO_C = const(13)
+_IO_S = const(14)
+_IO_HOW = const(15)
 IO_WORDS = const(16)
-assert _HOW == IO_WORDS - 1 and _A == IO_WORDS - 5
-_AT_BIAS = const(0x20000000)
+_AT_BIAS = const(0x20000000)  # see array_offsets
 
 
 def array_offsets(words, at, arrays):
@@ -61,9 +57,9 @@ def array_offsets(words, at, arrays):
 
 
 # The helpers below take their array as its address over 4 (w4: int(ptr32(w)) >> 2, a
-# small int on every port, 32-bit ones included): ptr32() of an array costs the chip
-# about 1.4 us a call, of an int nothing. Their callers keep the array, so its place
-# holds (MicroPython never moves an object).
+# small int on every port, 32-bit ones included): ptr32() of an int costs nothing, of an
+# array much more (see array_offsets). Their callers keep the array, so its place holds
+# (MicroPython never moves an object).
 
 
 @micropython.viper
@@ -73,11 +69,11 @@ def div_limbs(w4: int, c: int):
     quotient is estimated from c's top 15 bits, which is at most one below and two
     above it, and put right by the remainder. That remainder is below 2**31 either
     way, so a 32-bit chip's products may wrap on the way: it comes out exact. Digits
-    as wide as kept the partial remainder below 2**30 took up to 30 loop turns for a
-    large c, about 60 us on the chip."""
+    as wide as would keep the partial remainder below 2**30 would take up to 30 loop
+    turns for a large c."""
     w = ptr32(w4 << 2)
-    hi = w[_HI]
-    lo = w[_LO]
+    hi = w[IO_HI]
+    lo = w[IO_LO]
     qh = hi // c
     r = hi - qh * c
     # t = bits(c) - 15 (at least 0), found in five steps: ch = c >> t, c's top 15 bits
@@ -116,20 +112,20 @@ def div_limbs(w4: int, c: int):
             q += 1
             r -= c
         ql = (ql << 15) | q
-    w[_HI] = qh
-    w[_LO] = ql
-    w[_REM] = r
+    w[IO_HI] = qh
+    w[IO_LO] = ql
+    w[_IO_REM] = r
 
 
 @micropython.viper
 def isqrt_limbs(w4: int) -> int:
     """floor(sqrt((hi, lo))), for (hi, lo) below 2**56, by Zimmermann's Karatsuba
     square root on four 14-bit digits: the root of the top two digits by Newton's
-    method (28 bits, in machine words), the rest with one division. Bit by bit took
-    28 loop turns, about 25 us on the chip."""
+    method (28 bits, in machine words), the rest with one division, where bit by bit
+    would take 28 loop turns."""
     w = ptr32(w4 << 2)
-    hi = w[_HI]
-    lo = w[_LO]
+    hi = w[IO_HI]
+    lo = w[IO_LO]
     if not (hi or lo):
         return 0
     # Shifted left by an even 2 z bits, to have its top pair of bits at 54 and 55.
@@ -158,7 +154,7 @@ def isqrt_limbs(w4: int) -> int:
         lo = 0
     elif sh > 0:
         hi = (hi << sh) | (lo >> (30 - sh))
-        lo = (lo << sh) & _M30
+        lo = (lo << sh) & _MASK30
     a0 = lo & 0x3FFF
     a1 = (lo >> 14) & 0x3FFF
     top = (hi << 2) | (lo >> 28)  # the top two digits: below 2**28, at least 2**26
@@ -187,26 +183,30 @@ def isqrt_limbs(w4: int) -> int:
 
 # What product() does with a * b // c.
 P_LIMBS = const(0)  # leaves it in (hi, lo), and the division's remainder in REM
-P_TRUNC = const(1)  # returns int(x * 2**s), at most CAP
-P_ROUND = const(2)  # returns round(x * 2**s), at most CAP
+P_TRUNC = const(1)  # returns int(x * 2**s), at most 2**30 - 1 (_MASK30)
+P_ROUND = const(2)  # returns round(x * 2**s), at most 2**30 - 1
 P_TOP = const(3)  # leaves x to s bits in (hi, lo), truncated; returns t: x = (hi, lo) 2**t
-CAP = const(0x3FFFFFFF)
 
 
 @micropython.viper
 def product(w4: int) -> int:
     """x = a * b // c, for 0 <= a, b < 2**30 and 0 < c < 2**29, in two limbs, then as
-    `how` says (P_*), with a, b, c, s and how in w's last five words. One call
-    where a call each for the product, its scaling and its bit length cost the chip
-    about 6 us apiece."""
+    `how` says (P_*), with a, b, c, s and how in w's last five words. One call, not
+    one each for the product, its scaling and its bit length: a viper call costs the
+    chip several microseconds.
+
+    The product is the reference form of two 30-bit limbs from 15-bit digits, which
+    the hot loops elsewhere write out where a call would cost too much (ramp_into,
+    stepper.schedule, geometry, lookahead.plan_words); host_tests/test_layouts.py
+    checks that they keep this form."""
     w = ptr32(w4 << 2)
-    a = w[_A]
-    b = w[_B]
-    c = w[_C]
-    s = w[_S]
-    if s > CAP:  # negative: a 64-bit port's ptr32 reads it zero-extended
-        s = 0 - ((0 - s) & CAP)
-    how = w[_HOW]
+    a = w[_IO_A]
+    b = w[_IO_B]
+    c = w[_IO_C]
+    s = w[_IO_S]
+    if s > _MASK30:  # negative: a 64-bit port's ptr32 reads it zero-extended
+        s = 0 - ((0 - s) & _MASK30)
+    how = w[_IO_HOW]
     a1 = a >> 15
     a0 = a & 0x7FFF
     b1 = b >> 15
@@ -214,18 +214,18 @@ def product(w4: int) -> int:
     mid = a1 * b0 + a0 * b1
     lo = ((mid & 0x7FFF) << 15) + a0 * b0
     hi = a1 * b1 + (mid >> 15) + (lo >> 30)
-    lo = lo & _M30
+    lo = lo & _MASK30
     if c > 1:
-        w[_HI] = hi
-        w[_LO] = lo
+        w[IO_HI] = hi
+        w[IO_LO] = lo
         div_limbs(w4, c)
-        hi = w[_HI]
-        lo = w[_LO]
+        hi = w[IO_HI]
+        lo = w[IO_LO]
     else:
-        w[_REM] = 0
+        w[_IO_REM] = 0
     if how == P_LIMBS:
-        w[_HI] = hi
-        w[_LO] = lo
+        w[IO_HI] = hi
+        w[IO_LO] = lo
         return 0
     if how != P_TOP:
         # x * 2**s, truncated (rounded: to s + 1 bits, then halved), is capped where
@@ -235,17 +235,17 @@ def product(w4: int) -> int:
         if s >= 0:
             if hi:
                 if s or hi > 1:
-                    return CAP
+                    return _MASK30
                 x = (hi << 30) | lo
             elif lo:
                 if s >= 31 or lo >> (31 - s):
-                    return CAP
+                    return _MASK30
                 x = lo << s
             else:
                 return 0
         elif s > -30:
             if hi >> (1 - s):
-                return CAP
+                return _MASK30
             x = (hi << (30 + s)) | (lo >> (0 - s))
         elif s > -60:
             x = hi >> (-30 - s)
@@ -253,8 +253,8 @@ def product(w4: int) -> int:
             return 0
         if how == P_ROUND:
             x = (x >> 1) + (x & 1)
-        if x > CAP:
-            return CAP
+        if x > _MASK30:
+            return _MASK30
         return x
     # P_TOP: n, the bit length, by halving the bits searched
     x = hi
@@ -286,7 +286,7 @@ def product(w4: int) -> int:
         lo = 0
     elif u > 0:
         hi = (hi << u) | (lo >> (30 - u))
-        lo = (lo << u) & _M30
+        lo = (lo << u) & _MASK30
     elif u <= -60:
         hi = 0
         lo = 0
@@ -297,8 +297,8 @@ def product(w4: int) -> int:
         r = 0 - u
         lo = ((hi & ((1 << r) - 1)) << (30 - r)) | (lo >> r)
         hi = hi >> r
-    w[_HI] = hi
-    w[_LO] = lo
+    w[IO_HI] = hi
+    w[IO_LO] = lo
     return 0 - u
 
 
@@ -309,9 +309,22 @@ _CRUISE_ONE_DIV = const(0x4000)
 
 @micropython.viper
 def ramp_into(io_buf):
-    """The schedule (ACCEL_UNTIL, DECEL_AFTER, RATE_DECEL) of io's record (N, R0, RNOM,
-    R1, ACC): planner.ramp_ticks says what it means. Distances are in steps << 28 (the
-    step loop's ONE), so n up to 2**30 steps fits the two limbs."""
+    """The step loop's schedule (ACCEL_UNTIL, DECEL_AFTER, RATE_DECEL) for the
+    trapezoid of io's record (N, R0, RNOM, R1, ACC): n lead steps from rate r0 up to
+    rnom (or the peak where the ramps meet) and down to r1 at acc per tick, all in the
+    step loop's fixed point (stepper.ONE a step a tick).
+
+    Tick i (from 1) moves by the speed's mean over it. The step loop starts at
+    r0 + acc/2 and adds acc per tick until ACCEL_UNTIL, the tick holding the end of
+    acceleration, where rnom clamps it; cruises; and at tick DECEL_AFTER, the one
+    holding the start of deceleration, sets the rate for the tick after, the first
+    wholly decelerating one (RATE_DECEL), which then falls by acc per tick. Only the
+    two corner ticks then differ from the trapezoid, by less than acc each, so the
+    position stays on the plan to well under a step, however slow the end of the
+    block.
+
+    Distances are in steps << 28 (the step loop's ONE), so n up to 2**30 steps fits
+    the two limbs. In integers: on the chips every float operation allocates."""
     io = ptr32(io_buf)
     io4 = int(io) >> 2  # for the helpers above
     n = io[IO_N]
@@ -326,8 +339,7 @@ def ramp_into(io_buf):
     # (vn^2 - r0^2 + vn^2 - r1^2) / 2acc, each (vn - r)(vn + r) (below 2**28 and 2**29)
     # in two 30-bit limbs as product() makes them, and one division; and r0^2, r1^2,
     # for where the ramps meet. Written out: a call costs the chip several
-    # microseconds, and the look-ahead runs this for most lines, on curves a dozen
-    # times a line.
+    # microseconds, and the step loop runs this as each block starts.
     s_hi = 0
     s_lo = 0
     h0 = 0
@@ -351,12 +363,12 @@ def ramp_into(io_buf):
         mid = a1 * b0 + a0 * b1
         lo = ((mid & 0x7FFF) << 15) + a0 * b0
         hi = a1 * b1 + (mid >> 15) + (lo >> 30)
-        lo &= _M30
+        lo = lo & _MASK30
         if k < 2:
             s_hi += hi
             s_lo += lo
             s_hi += s_lo >> 30
-            s_lo &= _M30
+            s_lo &= _MASK30
         elif k == 2:
             h0 = hi
             l0 = lo
@@ -369,21 +381,21 @@ def ramp_into(io_buf):
     # blocks never reach their nominal rate, and the quotient is needed only for a
     # cruise. (The chip divides machine words in hardware.)
     peak = 0
-    if acc < 0x10000000 and n <= _M30 // acc:
+    if acc < 0x10000000 and n <= _MASK30 // acc:
         nacc = n * acc
         t_lo = ((nacc & 1) << 29) + 2 * acc
         t_hi = (nacc >> 1) + (t_lo >> 30)
-        t_lo &= _M30
+        t_lo &= _MASK30
         if s_hi > t_hi or (s_hi == t_hi and s_lo >= t_lo):
             peak = 1
     c_hi = 0
     c_lo = 0
     if not peak and (s_hi or s_lo):
-        io[_HI] = s_hi
-        io[_LO] = s_lo
+        io[IO_HI] = s_hi
+        io[IO_LO] = s_lo
         div_limbs(io4, 2 * acc)
-        s_hi = io[_HI]
-        s_lo = io[_LO]
+        s_hi = io[IO_HI]
+        s_lo = io[IO_LO]
     if peak:
         # The ramps meet below vn: peak^2 = acc n ONE + (r0^2 + r1^2) / 2, with no
         # cruise. Then peak < vn < 2**28, so acc * n < 2**26 here.
@@ -392,9 +404,9 @@ def ramp_into(io_buf):
         # 2**31, a 32-bit chip's sign bit.
         lo = l0 + l1
         hi = h0 + h1 + (p >> 1) + (lo >> 30)
-        lo = (lo & _M30) + ((p & 1) << 29)
+        lo = (lo & _MASK30) + ((p & 1) << 29)
         hi += lo >> 30
-        lo &= _M30
+        lo &= _MASK30
         lo = (lo >> 1) | ((hi & 1) << 29)
         hi = hi >> 1
         if hi < h0 or (hi == h0 and lo < l0):
@@ -403,15 +415,15 @@ def ramp_into(io_buf):
         if hi < h1 or (hi == h1 and lo < l1):
             hi = h1
             lo = l1
-        io[_HI] = hi
-        io[_LO] = lo
+        io[IO_HI] = hi
+        io[IO_LO] = lo
         vn = int(isqrt_limbs(io4))
     else:
         # Cruise: what the ramps leave.
         c_lo = all_lo - s_lo
         c_hi = all_hi - s_hi
         if c_lo < 0:
-            c_lo = c_lo + _M30 + 1
+            c_lo = c_lo + _MASK30 + 1
             c_hi -= 1
     # Acceleration time in ticks: (vn - r0) / acc; cruise time: its steps / vn. Each
     # with FRAC fraction bits: (rem << FRAC) // c, in four digits of 4 bits in machine
@@ -426,23 +438,23 @@ def ramp_into(io_buf):
         if c_hi < _CRUISE_ONE_DIV:
             # (cruise << FRAC) // vn in one division: its whole ticks and fraction
             # (a cruise below 65,536 steps, most of them).
-            io[_HI] = (c_hi << _FRAC) | (c_lo >> (30 - _FRAC))
-            io[_LO] = (c_lo << _FRAC) & _M30
+            io[IO_HI] = (c_hi << _FRAC) | (c_lo >> (30 - _FRAC))
+            io[IO_LO] = (c_lo << _FRAC) & _MASK30
             div_limbs(io4, vn)
-            if io[_HI] >> (30 - _FRAC):  # 2**30 ticks or more: as below, no fraction
-                c_int = _MAX_TICK
+            if io[IO_HI] >> (30 - _FRAC):  # 2**30 ticks or more: as below, no fraction
+                c_int = _MASK30
             else:
-                c_int = (io[_HI] << (30 - _FRAC)) | (io[_LO] >> _FRAC)
-                frac = io[_LO] & (_ONE_FRAC - 1)
+                c_int = (io[IO_HI] << (30 - _FRAC)) | (io[IO_LO] >> _FRAC)
+                frac = io[IO_LO] & (_ONE_FRAC - 1)
         else:
-            io[_HI] = c_hi
-            io[_LO] = c_lo
+            io[IO_HI] = c_hi
+            io[IO_LO] = c_lo
             div_limbs(io4, vn)
-            if io[_HI]:
-                c_int = _MAX_TICK
+            if io[IO_HI]:
+                c_int = _MASK30
             else:
-                c_int = io[_LO]
-                c_rem = io[_REM]
+                c_int = io[IO_LO]
+                c_rem = io[_IO_REM]
     for k in range(2):
         x = a_rem
         c = acc
@@ -461,20 +473,20 @@ def ramp_into(io_buf):
                 x -= d * c
                 q = (q << 4) | d
         else:
-            io[_A] = x
-            io[_B] = _ONE_FRAC
-            io[_C] = c
-            io[_S] = 0
-            io[_HOW] = P_LIMBS
+            io[_IO_A] = x
+            io[_IO_B] = _ONE_FRAC
+            io[_IO_C] = c
+            io[_IO_S] = 0
+            io[_IO_HOW] = P_LIMBS
             product(io4)
-            q = io[_LO]
+            q = io[IO_LO]
         frac += q
     decel = a_int + c_int
     if frac >= _ONE_FRAC:
         frac -= _ONE_FRAC
         decel += 1
-    if decel > _MAX_TICK or decel < 0:
-        decel = _MAX_TICK
+    if decel > _MASK30 or decel < 0:
+        decel = _MASK30
     accel_until = a_int + (1 if a_rem else 0)
     decel_after = decel + (1 if frac else 0)
     if decel_after < 1:
@@ -483,27 +495,27 @@ def ramp_into(io_buf):
     # its start), rounded.
     late = (decel_after - decel) * _ONE_FRAC - frac + _HALF
     r_decel = r1
-    if decel_after < _MAX_TICK:
+    if decel_after < _MASK30:
         # acc * late (late below 2**18) in two digits of late in machine words, as
         # the fractions above divide.
         if acc < 0x100000:
             fall = (acc * (late >> 8) + ((acc * (late & 0xFF) + _HALF) >> 8)) >> 8
         else:
-            io[_A] = acc
-            io[_B] = late
-            io[_C] = 1
-            io[_S] = 0
-            io[_HOW] = P_LIMBS
+            io[_IO_A] = acc
+            io[_IO_B] = late
+            io[_IO_C] = 1
+            io[_IO_S] = 0
+            io[_IO_HOW] = P_LIMBS
             product(io4)
-            lo = io[_LO] + _HALF
-            fall = (io[_HI] << 14) + (lo >> _FRAC)
+            lo = io[IO_LO] + _HALF
+            fall = (io[IO_HI] << 14) + (lo >> _FRAC)
         r_decel = vn - fall
         if r_decel < r1:
             r_decel = r1
-    if accel_until > _MAX_TICK:
-        accel_until = _MAX_TICK
-    if decel_after > _MAX_TICK:
-        decel_after = _MAX_TICK
+    if accel_until > _MASK30:
+        accel_until = _MASK30
+    if decel_after > _MASK30:
+        decel_after = _MASK30
     io[IO_ACCEL_UNTIL] = accel_until
     io[IO_DECEL_AFTER] = decel_after
     io[IO_RATE_DECEL] = r_decel

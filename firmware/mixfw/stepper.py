@@ -9,8 +9,10 @@
 # Every word the loop compares is kept non-negative: ptr32 loads zero-extend on the
 # 64-bit unix port, so a stored -1 would read back as 4294967295 there.
 #
-# Rules (see DESIGN.md): no allocation, no floats, nothing that can raise. All state
-# lives in one preallocated array('i') whose layout is defined here; the planner
+# Rules, as it runs in an interrupt (docs/Step_Timing.md: which, on each chip): no
+# allocation, no floats, nothing that can raise. All state lives in one preallocated
+# array('i') whose layout is defined here (the modules that read it in viper keep
+# copies of the words they use, which host_tests/test_layouts.py checks); the planner
 # writes only block records and S_HEAD, the step loop writes everything else, and a
 # record's ramp schedule as it starts the block (F_SCHEDULE).
 from mixfw.compat import micropython, const, ptr32
@@ -79,8 +81,8 @@ _S_RAMP_TICKS = const(47)  # ticks of velocity ramp run in the block
 _S_WORDS = const(48)
 
 MIX_BASE = const(48)  # mixer section, mixer.M_WORDS long
-# The mixer words the step loop reads, at MIX_BASE + mixer.M_W, M_N, M_SUM, M_Q, M_C
-# (viper folds only this module's constants).
+# The mixer words the step loop reads: copies of mixer.py's M_W, M_N, M_SUM, M_Q, M_C
+# plus MIX_BASE (viper folds only this module's constants).
 _MIX_W = const(49)
 _MIX_N = const(55)
 _MIX_SUM = const(56)
@@ -131,7 +133,8 @@ B_ACCEL = const(11)  # rate change per tick
 # planner knows the times of the trapezoid's corners, while the step at which a corner
 # falls depends on the phase the block inherits. Accelerating ends at tick ACCEL_UNTIL;
 # at tick DECEL_AFTER the rate is set to RATE_DECEL, the planned decelerating line at
-# the next tick (the corner falls between ticks), and falls by ACCEL per tick after.
+# the next tick (the corner falls between ticks), and falls by ACCEL per tick after
+# (ramp.ramp_into works them out).
 B_ACCEL_UNTIL = const(12)
 B_DECEL_AFTER = const(13)
 B_DWELL = const(14)  # ticks, for dwell blocks
@@ -163,27 +166,30 @@ F_HOME_SHIFT = const(8)  # homing axis mask (X=1, Y=2, Z=4) << F_HOME_SHIFT
 # The record's ramp schedule (ACCEL_UNTIL, DECEL_AFTER, RATE_DECEL) is still to be
 # worked out from its rates: the look-ahead changes a waiting block's entry and exit
 # as more blocks come (on curves a dozen times a line), and a schedule worked out at
-# each change was most of its time. The step loop works it out once, as the block
-# starts (schedule).
+# each change would be most of its time. The step loop works it out once, as the
+# block starts (schedule).
 F_SCHEDULE = const(2048)
 # And its rates too (with F_SCHEDULE): RATE_INIT and RATE_FINAL hold the entry's and
 # the exit's V2 (lookahead.py; V2_AT_NOMINAL: the nominal rate's), and the schedule's
 # words ACCEL_UNTIL, DECEL_AFTER and RATE_DECEL what a rate comes from: K2, K_SHIFT
 # plus SHIFT_BIAS, and FLOOR. The look-ahead rewrites a waiting block's entry and exit
-# a dozen times a line on curves, and a root or two for each cost the chip most of a
-# rewrite.
+# a dozen times a line on curves, and a root or two for each would cost the chip most
+# of a rewrite.
 F_RATES = const(4096)
 V2_AT_NOMINAL = const(0x20000000)  # above any V2 the look-ahead keeps
 SHIFT_BIAS = const(64)
+# ramp.py's io words, which schedule() stores and reads (copies).
+_IO_N = const(0)
+_IO_R0 = const(1)
+_IO_RNOM = const(2)
+_IO_R1 = const(3)
+_IO_ACC = const(4)
+_IO_ACCEL_UNTIL = const(5)
+_IO_DECEL_AFTER = const(6)
+_IO_RATE_DECEL = const(7)
 _IO_HI = const(8)
 _IO_LO = const(9)
-_M30 = const(0x3FFFFFFF)
-
-
-assert mixer.M_ID == 0  # the step loop reads the loaded mix id at MIX_BASE
-assert mixer.MAX_DRIVES == 6  # its forward pick is written out for six drives
-assert (_MIX_W, _MIX_N, _MIX_SUM, _MIX_Q, _MIX_C) == tuple(
-    MIX_BASE + m for m in (mixer.M_W, mixer.M_N, mixer.M_SUM, mixer.M_Q, mixer.M_C))
+_MASK30 = const(0x3FFFFFFF)  # compat.MASK30: the tick and block counters wrap at 2**30
 
 
 CAP_WORDS = const(3)  # per capture record
@@ -203,7 +209,7 @@ def init_capture(mem, queue_blocks, capture_records):
 @micropython.viper
 def _pio_ahead(mem: ptr32) -> int:
     """Ticks of words the state machine still holds."""
-    ahead = (mem[_S_PIO_DRAIN] - mem[S_TICKS]) & 0x3FFFFFFF
+    ahead = (mem[_S_PIO_DRAIN] - mem[S_TICKS]) & _MASK30
     return 0 if ahead > 0x1FFFFFFF else ahead
 
 
@@ -212,7 +218,7 @@ def _pio_put(mem_buf, out, count: int):
     """Hand the state machine count words of the current levels, one tick each."""
     mem = ptr32(mem_buf)
     word = mem[S_LEVELS] >> mem[S_PIO_SHIFT]
-    mem[_S_PIO_DRAIN] = (mem[S_TICKS] + int(_pio_ahead(mem_buf)) + count) & 0x3FFFFFFF
+    mem[_S_PIO_DRAIN] = (mem[S_TICKS] + int(_pio_ahead(mem_buf)) + count) & _MASK30
     while count > 0:
         out(word)
         count -= 1
@@ -225,7 +231,7 @@ def _finish(mem: ptr32):
     if tail >= mem[S_QUEUE]:
         tail = 0
     mem[S_TAIL] = tail
-    mem[S_BLOCKS_DONE] = (mem[S_BLOCKS_DONE] + 1) & 0x3FFFFFFF
+    mem[S_BLOCKS_DONE] = (mem[S_BLOCKS_DONE] + 1) & _MASK30
 
 
 @micropython.viper
@@ -243,7 +249,8 @@ def schedule(mem_buf, b: int, io_buf):
         r_nom = blk[B_RATE_NOM]
         if flags & F_RATES:
             # rate = isqrt(V2 * K2) scaled by 2**K_SHIFT, within FLOOR and the nominal
-            # rate. The top rate is the nominal one: where the ramps meet below it (on
+            # rate: k sqrt(V2 / 64), k the speed's scale lookahead.plan_words works out.
+            # The top rate is the nominal one: where the ramps meet below it (on
             # curves, most blocks), ramp_into finds their peak in the rates themselves.
             k2 = blk[B_ACCEL_UNTIL]
             shift = blk[B_DECEL_AFTER] - SHIFT_BIAS
@@ -256,10 +263,8 @@ def schedule(mem_buf, b: int, io_buf):
                 elif x <= 0:
                     r = floor  # a stop: the root below would take 30 turns to say 0
                 else:
-                    # x * K2 (below 2**29 and 2**26) in two 30-bit limbs, as
-                    # ramp.product() gives them, written out as in lengths(): a call
-                    # to product() here cost the planner rows 0.7 % and the circles
-                    # 1.5 % on the emulated Pico (two a block).
+                    # x * K2 (below 2**29 and 2**26) in two 30-bit limbs, in
+                    # ramp.product's form, written out: this runs twice a block.
                     a1 = x >> 15
                     a0 = x & 0x7FFF
                     b1 = k2 >> 15
@@ -267,7 +272,7 @@ def schedule(mem_buf, b: int, io_buf):
                     mid = a1 * b0 + a0 * b1
                     lo = ((mid & 0x7FFF) << 15) + a0 * b0
                     io[_IO_HI] = a1 * b1 + (mid >> 15) + (lo >> 30)
-                    io[_IO_LO] = lo & _M30
+                    io[_IO_LO] = lo & _MASK30
                     r = int(isqrt_limbs(int(io) >> 2))  # its address over 4
                     if shift >= 0:
                         r = r << shift
@@ -279,21 +284,16 @@ def schedule(mem_buf, b: int, io_buf):
                         r = floor
                 blk[w] = r
                 w = B_RATE_FINAL
-        io[0] = blk[B_N]  # ramp.IO_N .. IO_RATE_DECEL: checked below
-        io[1] = blk[B_RATE_INIT]
-        io[2] = r_nom
-        io[3] = blk[B_RATE_FINAL]
-        io[4] = blk[B_ACCEL]
+        io[_IO_N] = blk[B_N]
+        io[_IO_R0] = blk[B_RATE_INIT]
+        io[_IO_RNOM] = r_nom
+        io[_IO_R1] = blk[B_RATE_FINAL]
+        io[_IO_ACC] = blk[B_ACCEL]
         ramp_into(io_buf)
-        blk[B_ACCEL_UNTIL] = io[5]
-        blk[B_DECEL_AFTER] = io[6]
-        blk[B_RATE_DECEL] = io[7]
+        blk[B_ACCEL_UNTIL] = io[_IO_ACCEL_UNTIL]
+        blk[B_DECEL_AFTER] = io[_IO_DECEL_AFTER]
+        blk[B_RATE_DECEL] = io[_IO_RATE_DECEL]
         blk[B_FLAGS] = flags & (0 - 1 - (F_SCHEDULE | F_RATES))
-
-
-assert (ramp.IO_N, ramp.IO_R0, ramp.IO_RNOM, ramp.IO_R1, ramp.IO_ACC, ramp.IO_ACCEL_UNTIL,
-        ramp.IO_DECEL_AFTER, ramp.IO_RATE_DECEL, ramp.IO_HI, ramp.IO_LO, ramp.CAP) == tuple(
-    range(10)) + (_M30,)
 
 
 def ramp_scratch():
@@ -354,9 +354,8 @@ def tick(io) -> int:
 
     On ARMv6-M viper keeps a function's first locals (its arguments first) in
     registers, and the rest on the stack: one argument, so that mem, the most used,
-    is in a register (the step path's share of the emulated Pico's CPU at 20,000
-    steps/s: 0.196 -> 0.179). The disassembly of the emulated Pico's heap shows two:
-    io and mem; every other local costs a load or a store at each use.
+    is in a register. The disassembly shows two there, io and mem; every other local
+    costs a load or a store at each use.
 
     The helpers it calls get the array object (io[0]), never the ptr32: viper boxes
     a pointer it passes on as an int, and an address above 2**30 (any RAM of a 32-bit
@@ -406,7 +405,7 @@ def tick(io) -> int:
                     if skip > 0:
                         mem[S_PHASE] = phase + skip * rate
                         mem[_S_RAMP_TICKS] = ramp + skip
-                        mem[S_TICKS] = (mem[S_TICKS] + skip) & 0x3FFFFFFF
+                        mem[S_TICKS] = (mem[S_TICKS] + skip) & _MASK30
                         ticks_left -= skip
                         t0 += skip * tc
                         left = mem[S_PULSE_LEFT]
@@ -416,7 +415,7 @@ def tick(io) -> int:
                 break
             ticks_left -= 1
             t0 += tc
-        mem[S_TICKS] = (mem[S_TICKS] + 1) & 0x3FFFFFFF
+        mem[S_TICKS] = (mem[S_TICKS] + 1) & _MASK30
         if ring == 0 and mem[S_PIO] == 1:
             # The levels the last tick left, for the state machine; the burst goes on
             # while there is work.
@@ -450,7 +449,7 @@ def tick(io) -> int:
                     if ring == 0:
                         return 0  # idle
                     if left == 0:  # nothing to do until the batch's end
-                        mem[S_TICKS] = (mem[S_TICKS] + ticks_left) & 0x3FFFFFFF
+                        mem[S_TICKS] = (mem[S_TICKS] + ticks_left) & _MASK30
                         ticks_left = 0
                     continue
                 run = 0
@@ -522,7 +521,7 @@ def tick(io) -> int:
                 # start or end before a step), so it comes round here, past the
                 # ticks that surely end below a step at once (_RAMP_SKIP_MAX at
                 # most, so that every product below stays in a machine word): a
-                # tick each cost the chip about 1.7 us, a sixth of its time at 10 us
+                # tick each costs the chip about 1.7 us, a sixth of its time at 10 us
                 # ticks on curves, which never stop ramping.
                 gap = ONE - 1 - phase
                 acc = blk[B_ACCEL]
@@ -566,13 +565,13 @@ def tick(io) -> int:
                     mem[_S_RAMP_TICKS] = ramp
                     ticks_left -= skip
                     t0 += skip * tc
-                    mem[S_TICKS] = (mem[S_TICKS] + skip) & 0x3FFFFFFF
+                    mem[S_TICKS] = (mem[S_TICKS] + skip) & _MASK30
                     if left > 0:
                         left = left - skip if left > skip else 0
                         mem[S_PULSE_LEFT] = left
                 ticks_left -= 1
                 t0 += tc
-                mem[S_TICKS] = (mem[S_TICKS] + 1) & 0x3FFFFFFF
+                mem[S_TICKS] = (mem[S_TICKS] + 1) & _MASK30
                 if left > 0:
                     left -= 1
                     mem[S_PULSE_LEFT] = left
@@ -717,7 +716,9 @@ def tick(io) -> int:
             if ring == 0:
                 return stepped
             continue
-        # The writes: set_mask pins high, clr_mask pins low.
+        # The writes: set_mask pins high, clr_mask pins low, by one of three outputs
+        # (S_PIO, then S_REG_SET, says which), recorded first while tracing.
+        # --- output: the trace (M7300) ---
         if mem[S_CAP_ON]:
             # One record of the writes; with the ring, a step's second: its fall, a
             # pulse later (the ring has no fall tick).
@@ -735,13 +736,15 @@ def tick(io) -> int:
                     mem[S_CAP_LOST] += 1
                 else:
                     r = mem[S_CAP_BASE] + head * CAP_WORDS
-                    mem[r] = (cap_t - mem[S_CAP_T0]) & 0x3FFFFFFF
+                    mem[r] = (cap_t - mem[S_CAP_T0]) & _MASK30
                     mem[r + 1] = cap_set
                     mem[r + 2] = cap_clr
                     mem[S_CAP_HEAD] = nxt
                 cap_clr = cap_set
                 cap_set = 0
                 cap_t += mem[S_PULSE_TICKS]
+        # --- output: PIO/DMA words (pio_dma's ring here, and the batch's end below
+        # the loop; pio's state machine) ---
         if mem[S_PIO]:
             if ring:
                 # A step at the time the phase crossed ONE inside the tick (the rate
@@ -782,10 +785,12 @@ def tick(io) -> int:
             mem[S_LEVELS] = (mem[S_LEVELS] | set_mask) & ~clr_mask
             mem[_S_PIO_LEFT] = mem[S_PIO_LATENCY] + 2
             return stepped
+        # --- output: pin writes (pin_writer "pin", S_REG_SET 0): out(set, clear) ---
         at = mem[S_REG_SET]
         if at == 0:
             io[1](set_mask, clr_mask)
             return stepped
+        # --- output: register writes (pin_writer "registers") ---
         regs = ptr32(io[1])
         hi = mem[_S_REG_HI_SET]
         if hi:
@@ -801,6 +806,7 @@ def tick(io) -> int:
             regs[mem[S_REG_CLR]] = clr_mask
         return stepped
 
+    # --- output: PIO/DMA words, the batch's end (pio_dma) ---
     # The levels since the last edge hold to the batch's last cycle, in as many
     # pieces as make up BATCH_MIN_WORDS, and the next batch counts from there.
     end = mem[R_BATCH_TICKS] * tc
@@ -823,7 +829,7 @@ def tick(io) -> int:
     mem[R_LAST] = t - end
     if edges or mem[S_ACTIVE] or mem[S_TAIL] != mem[S_HEAD] or mem[S_PULSE_LEFT]:
         mem[R_PENDING] = _PENDING_BATCHES
-    mem[R_BATCHES] = (mem[R_BATCHES] + 1) & 0x3FFFFFFF
+    mem[R_BATCHES] = (mem[R_BATCHES] + 1) & _MASK30
     return at
 
 

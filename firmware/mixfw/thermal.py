@@ -335,8 +335,8 @@ class Thermal:
     def check_extrusion(self):
         """An extrusion guard: refuses E moves while the hot end is too cold. It reads
         the sensor only where the last reading is a control period old: Marlin's guard
-        reads its temperature interrupt's too, and a reading took every line four ADC
-        reads and the thermistor's float arithmetic."""
+        reads its temperature interrupt's too, and a reading would take every line four
+        ADC reads and the thermistor's float arithmetic."""
         h = self.hotend
         if h is None:
             return
