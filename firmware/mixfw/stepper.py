@@ -626,7 +626,7 @@ def tick(io) -> int:
                 # weight: a drive without one never beats a drive with one (its count
                 # stays 0, its product against a weight is 0 forward, -best_w < 0
                 # backward), and one that beats the sentinels loses to the next with a
-                # weight. The test cost the six-drive scan 11 % on the emulated Pico.
+                # weight. A test per drive would slow the six-drive scan.
                 best_num = 1
                 best_w = 0
                 i = 0
