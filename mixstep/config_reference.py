@@ -32,7 +32,7 @@ GROUPS = (
      "`M205` set these options and apply them at once, as in Marlin."),
     ("mixing", "Mixing drives and virtual tools",
      "The filament drives that feed the one nozzle, the virtual tools' mixes, and colour "
-     "changes moved ahead of time (see [G-Codes](G-Codes.md))."),
+     "changes moved ahead of time (see [Mixing](Mixing.md))."),
     ("retraction", "Retraction", "Firmware retraction (`G10`/`G11`) and how a "
      "retraction is shared among the drives."),
     ("step_path", "Step path and pins",
