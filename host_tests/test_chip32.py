@@ -7,11 +7,8 @@ ends on the exact step counts, as on the 64-bit port; and the planner gives the 
 steps on both builds for the slicer files in testdata/ and for a long synthetic print
 (over 5 m of filament, tool changes, gradients, retractions under every policy).
 """
-import json
 import os
 import random
-import subprocess
-import textwrap
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -36,54 +33,19 @@ SLICER_FILES = ("part_3tool_prusaslicer_rel.gcode", "part_3tool_prusaslicer_abs.
                 "cura_part_3tool.gcode")
 STEP_NAMES = ["x", "y", "z"] + ["e%d" % d for d in range(6)]
 
-# Every line through the firmware's parser and command table into the planner, with
-# no stepping: the planner's wait retires one block at a time (boards/sim/plan_only.py).
-# Prints the steps the planner handed the step loop for every axis and drive.
-PLAN = """
-import sys, json
-import simmachine
-sys.modules["machine"] = simmachine
-import board
-from mixfw import assemble
-from plan_only import retire_one
-names = ["x", "y", "z"] + ["e%%d" %% i for i in range(board.SETTINGS["drives"])]
-simmachine.attach_world(board.PINS, names)
-printer = assemble.build(files_root=None)
-printer.planner.idle = retire_one(printer.mem, printer.planner.queue)
-replies = []
-printer.reply = replies.append
-errors = []
-printer.run_line(printer.parser.parse(b"M302 P1", 7))
-n = 0
-for raw in open(%r, "rb"):
-    n += 1
-    data = raw.split(b";")[0].strip()
-    if not data or data[:4] in (b"M109", b"M190", b"M116"):
-        continue
-    try:
-        printer.run_line(printer.parser.parse(data, len(data)))
-    except Exception as e:
-        errors.append("line %%d: %%r" %% (n, e))
-printer.planner.synchronize()
-p = printer.planner
-print(json.dumps({"steps": list(p.position_steps[:3]) + list(p.drive_steps),
-                  "errors": errors[:10] + [r for r in replies if r.startswith("Error")][:10]}))
-"""
-
-
-def plan_steps(binary, gcode_path):
-    proc = subprocess.run([str(binary), "-X", "heapsize=8M", "-c", PLAN % str(gcode_path)],
-                          capture_output=True, env=paths.micropython_env("sim"), timeout=300)
-    assert proc.returncode == 0, proc.stdout.decode() + proc.stderr.decode()
-    out = json.loads(proc.stdout.decode().strip().splitlines()[-1])
+def plan_steps(mp, gcode_path):
+    """Every line through the firmware's parser and command table into the planner,
+    with no stepping (upy/chip32_plan.py): the steps it handed the step loop for
+    every axis and drive."""
+    out = mp.script_json("chip32_plan", gcode_path)
     assert not out["errors"], out["errors"]
     return dict(zip(STEP_NAMES, out["steps"]))
 
 
-def both_builds(gcode_path):
+def both_builds(mp, gcode_path):
     with ThreadPoolExecutor(2) as pool:
-        runs = [pool.submit(plan_steps, b, gcode_path)
-                for b in (CHIP32, paths.micropython())]
+        runs = [pool.submit(plan_steps, on, gcode_path)
+                for on in (mp.using(CHIP32), mp.using(paths.micropython()))]
         return [r.result() for r in runs]
 
 
@@ -156,16 +118,16 @@ def test_example_prints_heap_locked_on_chip32_with_the_exact_steps(monkeypatch):
 
 
 @pytest.mark.parametrize("name", SLICER_FILES)
-def test_slicer_files_plan_the_same_steps_on_both_builds(name):
+def test_slicer_files_plan_the_same_steps_on_both_builds(mp, name):
     path = TESTDATA / name
-    chip32, wide = both_builds(path)
+    chip32, wide = both_builds(mp, path)
     assert chip32 == wide
     assert chip32 == expected_steps(path, paths.load_board("sim")["SETTINGS"]["steps_per_mm"])
 
 
-def test_long_synthetic_print_plans_the_same_steps_on_both_builds(tmp_path):
+def test_long_synthetic_print_plans_the_same_steps_on_both_builds(mp, tmp_path):
     path = tmp_path / "long.gcode"
     fed_mm = synthetic_print(path)
     assert fed_mm > 5000
-    chip32, wide = both_builds(path)
+    chip32, wide = both_builds(mp, path)
     assert chip32 == wide

@@ -3,17 +3,15 @@ import numpy as np
 import pytest
 
 from mixstep import trace
-from mixstep.simprinter import SimPrinter
 
 E_SPM = 415
 
 
 class Session:
-    def __init__(self, tmp_path):
+    def __init__(self, sim_printer, tmp_path):
         self.edges = tmp_path / "run.edges"
-        self.printer = SimPrinter(edges_path=self.edges, heap_lock=True)
         # These tests are about motion and mixing, not heating: allow cold extrusion.
-        self.printer.send("M302 P1")
+        self.printer = sim_printer(edges_path=self.edges, heap_lock=True, cold_extrusion=True)
         self.replies = []
 
     def send(self, *lines):
@@ -31,8 +29,8 @@ class Session:
 
 
 @pytest.fixture
-def session(tmp_path):
-    return Session(tmp_path)
+def session(sim_printer, tmp_path):
+    return Session(sim_printer, tmp_path)
 
 
 def test_every_line_gets_one_ok_and_bad_lines_an_error_first(session):
@@ -110,13 +108,13 @@ def test_all_zero_mix_is_refused_and_printing_goes_on_with_the_old_mix(session):
     assert steps["e0"] == 2 * E_SPM
 
 
-def test_retract_and_unretract_leave_every_drive_where_it_was(tmp_path):
+def test_retract_and_unretract_leave_every_drive_where_it_was(sim_printer, tmp_path):
     mix = ["M163 S0 P1", "M163 S1 P2", "M163 S2 P4", "M163 S3 P0.5", "M164", "M83"]
     (tmp_path / "a").mkdir()
     (tmp_path / "b").mkdir()
-    plain = Session(tmp_path / "a")
+    plain = Session(sim_printer, tmp_path / "a")
     plain.send(*mix, "G1 E3.1 F1200")
-    retracted = Session(tmp_path / "b")
+    retracted = Session(sim_printer, tmp_path / "b")
     retracted.send(*mix, "G1 E2.5 F1200", "G1 E-0.8 F2400", "G1 E0.8", "G1 E-2", "G1 E2.6")
     assert plain.finish() == retracted.finish()
 

@@ -10,37 +10,9 @@ from hypothesis import given, settings, strategies as st, HealthCheck
 
 from mixstep import paths
 
-# The whole simulated printer, assembled by mixfw.assemble, with the configuration loaded at
-# boot from CFG_PATH. A counting applier shows when settings are applied.
-MACHINE = r"""
-import sys, json, simmachine, simtime
-sys.modules["machine"] = simmachine
-sys.modules["time"] = simtime
-import board
-simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(6)])
-from mixfw import assemble as firmware
-from mixfw.console import StreamConsole
-
-console = StreamConsole(sys.stdin.buffer, sys.stdout.buffer, blocking=True)
-warnings = []
-config = firmware.Config(board.SETTINGS, CFG_PATH, warn=warnings.append)
-config.boot()
-printer = firmware.build(config)
-applied = [0]
-
-def count_applies(settings):
-    applied[0] += 1
-
-config.appliers.append(count_applies)
-firmware.run([console], printer=printer, warnings=warnings)
-pos = simmachine.positions
-print("//end " + json.dumps({"applied": applied[0],
-      "steps": {n: pos[i] for i, n in enumerate(simmachine.step_names)}}))
-"""
-
-
 class Session:
-    """One boot of the simulated printer: the warnings it printed right after `start`,
+    """One boot of the whole simulated printer (upy/config_machine.py) with its
+    configuration file at cfg_path: the warnings it printed right after `start`,
     the replies to each command (the `ok` dropped), and what it reported at the end."""
 
     # Sent first, replies dropped: these tests extrude without heating.
@@ -48,8 +20,8 @@ class Session:
 
     def __init__(self, mp, cfg_path, commands):
         commands = self.PRELUDE + list(commands)
-        code = MACHINE.replace("CFG_PATH", repr(str(cfg_path)))
-        out = mp.run(code, stdin=("\n".join(commands) + "\n").encode()).splitlines()
+        out = mp.script("config_machine", cfg_path,
+                        stdin=("\n".join(commands) + "\n").encode()).splitlines()
         start = out.index("start") + 1
         self.boot = []
         while out[start].startswith("echo:config"):
@@ -81,118 +53,26 @@ def value_of(line):
 
 
 # --- configuration inside one MicroPython process: a test double for the printer
-# that dispatches through the real parser, and a flash that can lose power. ---
-UNIT = r"""
-import sys, json, board
+# that dispatches through the real parser, and a flash that can lose power
+# (upy/config_unit.py). Short snippets run with these names. ---
+UNIT_NAMES = """import json, sys, board
 from mixfw.config import Config, ConfigError, crc32
-from mixfw.gcode import Parser
-from mixfw import cmd_config
-
-class Commands:
-    def __init__(self, config):
-        self.handlers = {}
-        self.lines = []
-        self.parser = Parser(cmd_config.RAW_COMMANDS)
-        cmd_config.register(self, config)
-
-    def add_command(self, letter, number, fn):
-        self.handlers[letter + str(number)] = fn
-
-    def reply(self, text):
-        self.lines.append(text)
-
-    def send(self, text):
-        b = text.encode()
-        line = self.parser.parse(b, len(b))
-        self.handlers["%s%d" % (line.letter, line.number)](line)
-
-
-class PowerLoss(Exception):
-    pass
-
-
-class Flash:
-    # Loses power before step number `budget`: each open-for-write, close, rename,
-    # remove and each byte written is one step, and what reached flash stays there.
-    # fat=True renames as MicroPython's FAT driver does: remove the target, then rename.
-    def __init__(self, files=None, fat=False):
-        self.files = dict(files or {})
-        self.fat = fat
-        self.budget = -1
-        self.steps = 0
-
-    def step(self, n=1):
-        room = n if self.budget < 0 else min(n, self.budget - self.steps)
-        self.steps += room
-        return room
-
-    def lose_power_unless(self, n=1):
-        if self.step(n) < n:
-            raise PowerLoss()
-
-    def stat(self, path):
-        if path not in self.files:
-            raise OSError(2)
-        return (0x8000, 0, 0, 0, 0, 0, len(self.files[path]), 0, 0, 0)
-
-    def open(self, path, mode):
-        if "w" in mode:
-            self.lose_power_unless()
-            self.files[path] = b""
-            return Writer(self, path)
-        if path not in self.files:
-            raise OSError(2)
-        return Reader(self.files[path])
-
-    def rename(self, old, new):
-        if self.fat and new in self.files:
-            self.remove(new)
-        self.lose_power_unless()
-        self.files[new] = self.files.pop(old)
-
-    def remove(self, path):
-        self.lose_power_unless()
-        del self.files[path]
-
-
-class Writer:
-    def __init__(self, fs, path):
-        self.fs = fs
-        self.path = path
-
-    def write(self, data):
-        room = self.fs.step(len(data))
-        self.fs.files[self.path] += bytes(data[:room])
-        if room < len(data):
-            raise PowerLoss()
-        return room
-
-    def close(self):
-        self.fs.lose_power_unless()
-
-
-class Reader:
-    def __init__(self, data):
-        self.data = data
-
-    def read(self):
-        return self.data
-
-    def close(self):
-        pass
-
-
-PATH = "/mixstep.cfg"
+from config_unit import Commands, Flash, PATH, PowerLoss, boot_each, sweep
 """
 
 
 def run_unit(mp, body, data=None, heap="32M", lines=False):
-    """Run body after UNIT; data, if given, arrives as DATA (JSON on stdin). Returns
+    """Run body with UNIT_NAMES; data, if given, arrives as DATA (JSON on stdin). Returns
     its last output line decoded from JSON, or with lines=True every line."""
     if data is not None:
         body = "DATA = json.loads(sys.stdin.read())\n" + body
-    out = mp.run(UNIT + body, stdin=json.dumps(data).encode(), heap=heap).splitlines()
+    out = mp.run(UNIT_NAMES + body, stdin=json.dumps(data).encode(), heap=heap).splitlines()
     return [json.loads(line) for line in out] if lines else json.loads(out[-1])
+
+
+def run_unit_script(mp, name, data=None):
+    """Run upy/<name>.py, data (if given) as JSON on its stdin; its last line decoded."""
+    return mp.script_json(name, stdin=json.dumps(data).encode(), heap="32M")
 
 
 def test_crc32_is_zlibs(mp):
@@ -203,20 +83,7 @@ def test_crc32_is_zlibs(mp):
 
 
 def test_options_are_the_boards_settings_one_per_axis(mp, board):
-    got = run_unit(mp, """
-c = Config(board.SETTINGS, PATH, Flash())
-no_bed = {k: v for k, v in board.SETTINGS.items() if not k.startswith("bed_")}
-d = Config(no_bed, PATH, Flash())
-try:
-    Config(dict(board.SETTINGS, drives=9), PATH, Flash())
-    bad = None
-except ConfigError as e:
-    bad = str(e)
-print(json.dumps({"names": [o.name for o in c.options],
-                  "restart": [o.name for o in c.options if o.restart],
-                  "no_bed": [o.name for o in d.options],
-                  "soft_limits": c.settings["soft_limits"], "bad": bad}))
-""")
+    got = run_unit_script(mp, "config_options")
     names = got["names"]
     axes = {"steps_per_mm": "xyze", "max_feed_mm_s": "xyze", "max_accel_mm_s2": "xyze",
             "travel_mm": "xyz", "homing_feed_mm_s": "xyz"}
@@ -313,20 +180,7 @@ def test_random_configurations_round_trip_through_m926_and_m503(mp):
               suppress_health_check=[HealthCheck.function_scoped_fixture])
     @given(st.lists(configurations(options), min_size=20, max_size=20))
     def check(batch):
-        got = run_unit(mp, """
-out = []
-for pairs in DATA:
-    a = Commands(Config(board.SETTINGS, PATH, Flash()))
-    for name, text in pairs:
-        a.send("M926 I%s V%s" % (name, text))
-    a.send("M503")
-    b = Commands(Config(board.SETTINGS, PATH, Flash()))
-    for line in a.lines:
-        b.send(line[len("echo:"):])
-    b.send("M503")
-    out.append((a.lines, b.lines))
-print(json.dumps(out))
-""", batch)
+        got = run_unit_script(mp, "config_round_trip", batch)
         for pairs, (printed, printed_again) in zip(batch, got):
             assert printed == printed_again
             shown = {line.split()[1][1:]: value_of(line) for line in printed}
@@ -515,16 +369,6 @@ def test_a_value_this_firmware_no_longer_takes_keeps_its_default_alone(mp, tmp_p
     assert s.of(2) == ["echo:config " + note]
 
 
-BOOT_EACH = """
-defaults = Config(board.SETTINGS, PATH, Flash()).settings
-for data in files:
-    warnings = []
-    c = Config(board.SETTINGS, PATH, Flash({PATH: data}), warnings.append)
-    c.boot()
-    print(json.dumps((c.settings == defaults, warnings)))
-"""
-
-
 def assert_defaults_and_one_warning(results, count):
     assert len(results) == count
     for i, (is_default, warnings) in enumerate(results):
@@ -534,16 +378,7 @@ def assert_defaults_and_one_warning(results, count):
 
 
 def test_corrupt_file_with_a_complete_tmp_from_an_interrupted_save_takes_the_tmp(mp):
-    got = run_unit(mp, """
-new = Config(board.SETTINGS, PATH, Flash())
-new.update((("steps_per_mm_x", 90.0), ("drives", 2)))
-flash = Flash({PATH: b"garbage\\n", PATH + ".tmp": new.text()})
-warnings = []
-c = Config(board.SETTINGS, PATH, flash, warnings.append)
-c.boot()
-print(json.dumps({"same": c.settings == new.settings, "warnings": warnings,
-                  "files": sorted(flash.files), "moved": flash.files[PATH] == new.text()}))
-""")
+    got = run_unit_script(mp, "config_interrupted_tmp")
     assert got["same"]
     assert got["warnings"] == ["echo:config /mixstep.cfg: truncated (no checksum line); "
                                "took the complete /mixstep.cfg.tmp"]
@@ -567,8 +402,8 @@ def test_every_truncation_is_detected(mp):
     good = good_file(mp)
     got = run_unit(mp, """
 good = bytes.fromhex(DATA)
-files = (good[:n] for n in range(len(good)))
-""" + BOOT_EACH, good.hex(), lines=True)
+boot_each(good[:n] for n in range(len(good)))
+""", good.hex(), lines=True)
     assert_defaults_and_one_warning(got, len(good))
 
 
@@ -592,85 +427,12 @@ def test_random_damage_is_detected(mp):
                 del d[at]
             damaged.append(bytes(d).hex())
         got = run_unit(mp, """
-files = (bytes.fromhex(h) for h in DATA)
-""" + BOOT_EACH, damaged, lines=True)
+boot_each(bytes.fromhex(h) for h in DATA)
+""", damaged, lines=True)
         assert_defaults_and_one_warning(got, len(edits))
 
     check()
 
-
-# A save interrupted after every step: each file-system operation and each byte.
-SWEEP = r"""
-def sweep(old_pairs, new_pairs, fat, start, every_byte=True):
-    # every_byte=False: only around the file-system operations (open, first byte, last
-    # bytes, close, remove, rename), where a stale .tmp can make a difference.
-    old = Config(board.SETTINGS, PATH, Flash())
-    old.update(old_pairs)
-    new = Config(board.SETTINGS, PATH, Flash())
-    new.update(new_pairs)
-    files = {}
-    if start == "no file":
-        old = Config(board.SETTINGS, PATH, Flash())  # nothing saved: the defaults
-    else:
-        files[PATH] = old.text()
-    if start == "stale partial tmp":
-        files[PATH + ".tmp"] = new.text()[:100]
-    if start == "stale complete tmp":
-        files[PATH + ".tmp"] = Config(board.SETTINGS, PATH, Flash()).text()
-    # A complete save, to count its steps.
-    flash = Flash(files, fat)
-    new.storage = flash
-    new.save()
-    total = flash.steps
-    tried = 0
-    got = {"old": 0, "new": 0}
-    budgets = range(total + 1) if every_byte else sorted(set(
-        b for b in (0, 1, 2, total - 3, total - 2, total - 1, total) if b >= 0))
-    for budget in budgets:
-        flash = Flash(files, fat)
-        flash.budget = budget
-        new.storage = flash
-        try:
-            new.save()
-            assert budget == total
-        except PowerLoss:
-            pass
-        after_loss = flash.files
-        # The boot after the loss may itself lose power (it finishes an interrupted
-        # FAT save by a rename): try that at each of its steps, then boot for good.
-        boot_budget = 0
-        while True:
-            flash = Flash(after_loss, fat)
-            flash.budget = boot_budget
-            c = Config(board.SETTINGS, PATH, flash)
-            try:
-                c.boot()
-                break
-            except PowerLoss:
-                boot_budget += 1
-                flash.budget = -1
-                c = Config(board.SETTINGS, PATH, flash)
-                c.boot()
-            tried += 1
-            assert c.settings == new.settings or c.settings == old.settings
-        tried += 1
-        if c.settings == new.settings:
-            got["new"] += 1
-        elif c.settings == old.settings:
-            got["old"] += 1
-        else:
-            raise AssertionError("power lost at step %d: neither old nor new" % budget)
-        # The next save after the interrupted one completes and loads.
-        flash.budget = -1
-        c.update(new_pairs)
-        c.update((("steps_per_mm_z", 123.0),))
-        c.save()
-        d = Config(board.SETTINGS, PATH, flash)
-        d.boot()
-        assert d.settings == c.settings, "save after one interrupted at step %d" % budget
-    return {"save_steps": total, "file_bytes": len(new.text()), "tried": tried,
-            "old": got["old"], "new": got["new"]}
-"""
 
 # (fat, start, every byte): each start from both kinds of rename at every byte; a stale
 # .tmp left by an earlier interrupted save only matters around the operations.
@@ -689,7 +451,7 @@ def test_a_save_interrupted_around_its_file_operations_loads_old_or_new(mp):
     on a FAT-like file system (rename removes the old file first, the case with most
     steps to lose), cut at the seven points around open, the last bytes, close, remove
     and rename, each boot after it cut too; then a save completes."""
-    r = run_unit(mp, SWEEP + """
+    r = run_unit(mp, """
 print(json.dumps(sweep(%r, %r, True, "old file", every_byte=False)))
 """ % (OLD, NEW))
     # open + every byte + close + remove + rename
@@ -702,7 +464,7 @@ print(json.dumps(sweep(%r, %r, True, "old file", every_byte=False)))
 
 @pytest.mark.slow
 def test_save_interrupted_at_every_point_loads_old_or_new(mp):
-    got = run_unit(mp, SWEEP + """
+    got = run_unit(mp, """
 print(json.dumps([sweep(%r, %r, fat, start, every) for fat, start, every in %r]))
 """ % (OLD, NEW, SWEEPS))
     total = 0
@@ -727,7 +489,7 @@ def test_random_configurations_survive_interrupted_saves(mp):
               suppress_health_check=[HealthCheck.function_scoped_fixture])
     @given(configurations(options), configurations(options), st.booleans())
     def check(old, new, fat):
-        got = run_unit(mp, SWEEP + """
+        got = run_unit(mp, """
 print(json.dumps(sweep(%r, %r, %r, "old file")))
 """ % (old, new, fat))
         assert got["tried"] >= got["save_steps"] + 1

@@ -10,51 +10,9 @@ from mixstep import emu, paths, tracecheck
 
 EXCERPT = paths.ROOT / "testdata" / "part_3tool_emu_excerpt.gcode"
 
-UNDERRUNS = """
-import sys
-import simmachine
-sys.modules["machine"] = simmachine
-import board
-from mixfw import assemble
-from mixfw import stepper as st
-
-simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(6)])
-printer = assemble.build(files_root=None)
-pl = printer.planner
-mem = printer.mem
-said = []
-
-class Console:
-    def write(self, text):
-        said.append(text)
-
-printer.current = printer.add_channel(Console())
-
-def run(text):
-    printer.run_line(printer.parser.parse(text, len(text)))
-
-def step_loop_runs_dry():
-    mem[st.S_TAIL] = mem[st.S_HEAD]
-    mem[st.S_ACTIVE] = 0
-
-run(b"G1 X10 F3000")
-run(b"G1 X20")           # queued behind the first: no underrun
-step_loop_runs_dry()
-run(b"G1 X30")           # the queue ran dry between two moves: one
-counts = [pl.underruns]
-pl.idle = step_loop_runs_dry  # waits end at once
-run(b"G4 P10")           # a dwell is a wait: the queue may run dry before and after it
-run(b"G1 X40")
-run(b"M400")
-run(b"G1 X50")
-counts.append(pl.underruns)
-run(b"M122")
-print(json.dumps({"counts": counts, "said": said}))
-"""
-
 
 def test_underruns_counted_between_moves_and_reported_by_m122(mp):
-    out = mp.json("import json\n" + UNDERRUNS)
+    out = mp.script_json("emu_underruns")
     assert out["counts"] == [1, 1]
     line = "".join(out["said"]).strip()
     assert line.startswith("echo:underruns:1 mem_free:")

@@ -1,7 +1,6 @@
 """Printing from flash (M20-M32) and uploading (M28/M29), on the unix port."""
 
 import pytest
-from mixstep.simprinter import SimPrinter
 from mixstep import paths
 from gcode_model import expected_steps
 
@@ -10,10 +9,10 @@ def send_all(printer, lines):
     return [printer.send(l) for l in lines]
 
 
-def test_upload_list_select_print_and_delete(tmp_path, board):
+def test_upload_list_select_print_and_delete(sim_printer, tmp_path, board):
     files = tmp_path / "flash"
     files.mkdir()
-    p = SimPrinter(files_dir=files)
+    p = sim_printer(files_dir=files)
     body = ["G28", "G1 X10 Y10 F3000 ; go", "M109 S200", "M83", "G1 E2 F600", "T1", "G1 X20 E1"]
     assert p.send("M28 job.gcode")[0] == "Writing to file: job.gcode"
     for text in body:
@@ -43,12 +42,12 @@ def test_upload_list_select_print_and_delete(tmp_path, board):
 
 
 @pytest.mark.slow
-def test_a_real_slicer_file_prints_from_flash_with_pause_and_resume(tmp_path, board):
+def test_a_real_slicer_file_prints_from_flash_with_pause_and_resume(sim_printer, tmp_path, board):
     files = tmp_path / "flash"
     files.mkdir()
     gcode = paths.ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
     (files / "part.gcode").write_bytes(gcode.read_bytes())
-    p = SimPrinter(files_dir=files)
+    p = sim_printer(files_dir=files)
     p.send("M23 part.gcode")
     p.send("M24")
     p.send("M25")
@@ -72,7 +71,7 @@ def test_a_real_slicer_file_prints_from_flash_with_pause_and_resume(tmp_path, bo
     assert steps == expected_steps(gcode, board["SETTINGS"]["steps_per_mm"])
 
 
-def test_an_upload_whose_write_fails_runs_none_of_its_lines(tmp_path):
+def test_an_upload_whose_write_fails_runs_none_of_its_lines(sim_printer, tmp_path):
     """An upload is written a flash sector (4 KB) at a time: when a write fails, the
     host hears why at that line, the rest of the upload is still taken as text and
     never run, and M29 says the file was not saved."""
@@ -81,7 +80,7 @@ def test_an_upload_whose_write_fails_runs_none_of_its_lines(tmp_path):
     (files / "up.gcode.part").mkdir()  # where the upload is written: no file can be
     gcode = paths.ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
     lines = [c for c in (l.split(";")[0].strip() for l in open(gcode)) if c][:400]
-    p = SimPrinter(files_dir=files)
+    p = sim_printer(files_dir=files)
     assert p.send("M28 up.gcode") == ["Writing to file: up.gcode", "ok"]
     said = [p.send(line) for line in lines]
     failed = [reply for reply in said if reply != ["ok"]]
@@ -93,10 +92,10 @@ def test_an_upload_whose_write_fails_runs_none_of_its_lines(tmp_path):
     p.finish()
 
 
-def test_bad_file_commands_get_errors(tmp_path):
+def test_bad_file_commands_get_errors(sim_printer, tmp_path):
     files = tmp_path / "flash"
     files.mkdir()
-    p = SimPrinter(files_dir=files)
+    p = sim_printer(files_dir=files)
     assert p.send("M24")[0] == "Error:no file selected (M23 <name>)"
     assert p.send("M23 ../etc/passwd")[0].startswith("Error:bad file name")
     assert p.send("M29")[0].startswith("Error:not writing a file")
@@ -104,7 +103,7 @@ def test_bad_file_commands_get_errors(tmp_path):
     p.finish()
 
 
-def test_a_file_without_a_last_newline_prints_whole_and_m26_prints_it_again(tmp_path):
+def test_a_file_without_a_last_newline_prints_whole_and_m26_prints_it_again(sim_printer, tmp_path):
     """The file is read in chunks through the console's intake: a last line with no
     newline still runs, a line whose words pass the line buffer is refused by name
     and pauses the print, and M26 S0 rewinds for a second print."""
@@ -113,7 +112,7 @@ def test_a_file_without_a_last_newline_prints_whole_and_m26_prints_it_again(tmp_
     long_words = "G1 X1 " + " ".join("Y%d" % i for i in range(40))
     (files / "job.gcode").write_text("M83\nG91\n; a comment " + "x" * 300 + "\n"
                                      + long_words + "\nG1 X10 F3000\nG1 X5")
-    p = SimPrinter(files_dir=files)
+    p = sim_printer(files_dir=files)
 
     def print_it():
         p.send("M24")
@@ -148,40 +147,8 @@ def test_a_hosts_line_waits_at_most_four_lines_of_a_file_print(mp, tmp_path):
     commands = [l.split(";")[0].split() for l in gcode.read_text().splitlines()[:60]]
     commands = [w[0] for w in commands if w]
     names = sorted(set(c if c[0] != "T" else "T" for c in commands))
-    got = mp.json("""
-        import json
-        from mixfw.printer import Printer
-        from mixfw.files import Job
-
-        class Host:  # one line, there from the start, then the end of its stream
-            def __init__(self):
-                self.data = b"M115\\n"
-            def readinto(self, mv, block=False):
-                if not self.data:
-                    return -1
-                n = len(self.data)
-                mv[:n] = self.data
-                self.data = b""
-                return n
-            def write(self, text):
-                pass
-
-        ran = []
-        p = Printer(96, lambda: None, ())
-        job = Job(%r, "part.gcode", lambda text: None, 96)
-
-        def record(line):
-            ran.append(["%%s%%d" %% (line.letter, line.number), job.line])
-
-        for name in %r:
-            p.register(name, record)
-        p.register("M115", lambda line: ran.append(["host", job.line]))
-        p.add_channel(Host())
-        p.job = job
-        job.paused = False
-        p.serve()
-        print(json.dumps(ran))
-    """ % (str(tmp_path / "part.gcode"), names + ["G92"]))
+    got = mp.script_json("files_host_during_print", tmp_path / "part.gcode",
+                         *names, "G92")
     assert ["host", 4] in got
     file_lines = [(c, n) for c, n in got if c != "host"]
     assert [c for c, _ in file_lines] == commands

@@ -3,29 +3,10 @@ import json
 
 import pytest
 
-PARSE = """
-import json
-from mixfw.gcode import Parser, GcodeError
-p = Parser()
-out = []
-for s in json.loads(%r):
-    b = s.encode()
-    try:
-        l = p.parse(b, len(b))
-        words = {}
-        for i in range(26):
-            ch = chr(65 + i)
-            if l.has(ch):
-                words[ch] = l.float(ch) if l.has_value(ch) else None
-        out.append([l.letter, l.number, words])
-    except GcodeError as e:
-        out.append("Error:" + str(e))
-print(json.dumps(out))
-"""
-
 
 def parse(mp, *lines):
-    return mp.json(PARSE % json.dumps(list(lines)))
+    """The lines through the parser (upy/gcode_parse.py)."""
+    return mp.script_json("gcode_parse", stdin=json.dumps(list(lines)).encode())
 
 
 def test_words_case_spacing_and_comments(mp):
@@ -59,20 +40,7 @@ def test_bad_lines_name_the_problem(mp, line, reason):
 
 
 def test_parsing_a_line_allocates_nothing(mp):
-    out = mp.run("""
-import micropython
-from mixfw.gcode import Parser
-p = Parser()
-b = bytearray(b"G1 X76.923 Y79.437 Z0.2 E.06669 F1800 ; comment")
-n = len(b)
-i = 0
-micropython.heap_lock()
-while i < 100:
-    p.parse(b, n)
-    i += 1
-micropython.heap_unlock()
-print("done")
-""")
+    out = mp.script("gcode_parse_heap_locked")
     assert out.strip() == "done"
 
 
@@ -83,18 +51,7 @@ def test_each_line_keeps_nothing_of_the_line_before(mp):
     number (G70000 and M10000)."""
     lines = ["N5 G1 X1", "G1 X2", "M23 part.gcode", "G1 X3", "N6 M23 b.gcode", "M23 c",
              "G1 E1", "G70000", "M10000", "T1", "", "G1 X4"]
-    got = mp.json("""
-import json
-from mixfw.gcode import Parser
-p = Parser((("M", 23),))
-out = []
-for s in json.loads(%r):
-    b = s.encode()
-    l = p.parse(b, len(b))
-    out.append([l.letter, l.number, l.has_line_number, l.line_number, l.args_text,
-                l.present])
-print(json.dumps(out))
-""" % json.dumps(lines))
+    got = mp.script_json("gcode_line_state", stdin=json.dumps(lines).encode())
     x, e = 1 << 23, 1 << 4
     assert got == [
         ["G", 1, True, 5, "", x],

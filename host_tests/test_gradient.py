@@ -2,20 +2,18 @@
 filament extruded, on the firmware running on the unix port."""
 import pytest
 
-from mixstep.simprinter import SimPrinter
-
 E_SPM = 415
 
 
-def printer():
-    p = SimPrinter()
-    p.send("M302 P1")
-    p.send("M83")
-    return p
+@pytest.fixture
+def relative_printer(printer):
+    """conftest's printer (cold extrusion allowed) with E relative (M83)."""
+    printer.send("M83")
+    return printer
 
 
-def test_m166_blends_two_tools_along_z_finer_than_one_percent():
-    p = printer()
+def test_m166_blends_two_tools_along_z_finer_than_one_percent(relative_printer):
+    p = relative_printer
     assert p.send("M166 A0 Z2 I0 J1 S1")[0].startswith("echo:gradient along Z on")
     ideal = [0.0, 0.0]
     for layer in range(1, 8):  # Z 0.3 .. 2.1: the last layer is past the end stop
@@ -32,10 +30,10 @@ def test_m166_blends_two_tools_along_z_finer_than_one_percent():
     assert steps["e0"] + steps["e1"] == 49 * E_SPM  # E neither loses nor gains a step
 
 
-def test_gradient_resolution_is_a_hundredth_of_a_percent():
+def test_gradient_resolution_is_a_hundredth_of_a_percent(relative_printer):
     """At Z 0.1 of a 0..3 mm gradient the mix is 1/30 = 3.33 % drive 1: Marlin's 1 %
     steps would give 3 %, 138 steps short over these 100 mm; 0.01 % is within 2."""
-    p = printer()
+    p = relative_printer
     p.send("M166 A0 Z3 I0 J1 S1")
     p.send("G1 Z0.1 F600")
     for i in range(10):
@@ -45,8 +43,8 @@ def test_gradient_resolution_is_a_hundredth_of_a_percent():
     assert steps["e0"] + steps["e1"] == 100 * E_SPM
 
 
-def test_m169_four_stops_along_z():
-    p = printer()
+def test_m169_four_stops_along_z(relative_printer):
+    p = relative_printer
     p.send("M169 Z0:0,1:1,2:2,3:0")
     ideal = [0.0] * 3
     stops = [(0.0, 0), (1.0, 1), (2.0, 2), (3.0, 0)]
@@ -64,8 +62,8 @@ def test_m169_four_stops_along_z():
     assert sum(steps["e%d" % d] for d in range(6)) == 60 * E_SPM
 
 
-def test_m166_alias_tool_and_s0():
-    p = printer()
+def test_m166_alias_tool_and_s0(relative_printer):
+    p = relative_printer
     p.send("M166 A0 Z1 I0 J1 S1 T7")
     assert p.send("M166")[0] == ("echo:gradient along Z on for T7: "
                                  "0:1.0000:0.0000:0.0000:0.0000:0.0000:0.0000, "
@@ -83,8 +81,8 @@ def test_m166_alias_tool_and_s0():
     assert steps["e2"] == 4 * E_SPM + E_SPM
 
 
-def test_m169_four_stops_along_the_extruded_length():
-    p = printer()
+def test_m169_four_stops_along_the_extruded_length(relative_printer):
+    p = relative_printer
     p.send("M169 E0:0,10:1,20:2,30:0")
     for _ in range(60):
         p.send("G1 E0.5 F1200")
@@ -95,8 +93,8 @@ def test_m169_four_stops_along_the_extruded_length():
     assert sum(steps["e%d" % d] for d in range(6)) == 30 * E_SPM
 
 
-def test_gradient_alias_tool_and_switching_off():
-    p = printer()
+def test_gradient_alias_tool_and_switching_off(relative_printer):
+    p = relative_printer
     p.send("M169 T7 Z0:0,1:1")
     p.send("G1 Z0.5 F600")
     p.send("T2")
@@ -118,8 +116,8 @@ def test_gradient_alias_tool_and_switching_off():
     ("M166 A0 Z2 I0", "missing parameter J"),
     ("M166 S1", "no gradient set"),
 ])
-def test_bad_gradients_are_refused(line, reason):
-    p = printer()
+def test_bad_gradients_are_refused(relative_printer, line, reason):
+    p = relative_printer
     reply = p.send(line)
     assert reply[0].startswith("Error:") and reason in reply[0], reply
     p.finish()

@@ -13,7 +13,6 @@ import time
 import pytest
 
 from mixstep import paths, serve
-from mixstep.simprinter import SimPrinter
 from net import free_port
 from test_protocol import TcpHost, group
 
@@ -33,8 +32,8 @@ def console_log(path):
     return rows
 
 
-def test_text_commands_are_text():
-    p = SimPrinter()
+def test_text_commands_are_text(sim_printer):
+    p = sim_printer()
     # Letters that would be parameter words elsewhere are the message here.
     assert ask(p, "M117 Printing...") == ["ok"]
     assert ask(p, "M117 I I E E X") == ["ok"]
@@ -60,15 +59,15 @@ def _checksum(text):
     return cs
 
 
-def test_m115_promises_only_what_is_there(tmp_path):
-    bare = SimPrinter()
+def test_m115_promises_only_what_is_there(sim_printer, tmp_path):
+    bare = sim_printer()
     caps = [l for l in ask(bare, "M115") if l.startswith("Cap:")]
     assert "Cap:EEPROM:0" in caps and "Cap:SDCARD:0" in caps
     assert "Cap:AUTOREPORT_TEMP:1" in caps and "Cap:EMERGENCY_PARSER:1" in caps
     assert ask(bare, "M501") == ["Error:this printer has no configuration storage", "ok"]
     bare.finish()
     (tmp_path / "files").mkdir()
-    full = SimPrinter(config_path=tmp_path / "mixstep.cfg", files_dir=tmp_path / "files")
+    full = sim_printer(config_path=tmp_path / "mixstep.cfg", files_dir=tmp_path / "files")
     caps = [l for l in ask(full, "M115") if l.startswith("Cap:")]
     assert "Cap:EEPROM:1" in caps and "Cap:SDCARD:1" in caps
     assert ask(full, "M21") == ["echo:SD card ok", "ok"]
@@ -79,8 +78,8 @@ def test_m115_promises_only_what_is_there(tmp_path):
     full.finish()
 
 
-def test_m113_sets_the_busy_interval():
-    p = SimPrinter()
+def test_m113_sets_the_busy_interval(sim_printer):
+    p = sim_printer()
     assert ask(p, "M113") == ["echo:M113 S2", "ok"]
     assert ask(p, "M113 S1") == ["ok"]
     assert ask(p, "G4 P3500") == ["busy: processing"] * 3 + ["ok"]  # at 1, 2 and 3 s
@@ -90,9 +89,9 @@ def test_m113_sets_the_busy_interval():
     p.finish()
 
 
-def test_heating_wait_reports_temperatures_every_second_and_m108_ends_it(tmp_path):
+def test_heating_wait_reports_temperatures_every_second_and_m108_ends_it(sim_printer, tmp_path):
     log = tmp_path / "console.log"
-    p = SimPrinter(settings=None, console_log=log)
+    p = sim_printer(settings=None, console_log=log)
     replies = ask(p, "M109 S60")
     temps = [l for l in replies[:-1] if l.startswith("T:")]
     assert replies[:-1] == temps, "nothing but temperatures during the wait: %r" % replies
@@ -122,8 +121,8 @@ def _flood(p, lines):
     return group(out)
 
 
-def test_m155_reports_temperatures_to_the_host_that_asked():
-    p = SimPrinter()
+def test_m155_reports_temperatures_to_the_host_that_asked(sim_printer):
+    p = sim_printer()
     assert ask(p, "M155") == ["Error:missing parameter S", "ok"]
     assert ask(p, "M155 S1") == ["ok"]
     replies = ask(p, "G4 S3")

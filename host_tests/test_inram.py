@@ -6,6 +6,7 @@ the board's RAM folder."""
 import ast
 import shutil
 import subprocess
+from pathlib import Path
 
 import pytest
 
@@ -13,30 +14,13 @@ from mixfw import inram
 from mixstep import cli, deploy, paths
 
 MIXFW = paths.FIRMWARE / "mixfw"
-
-# Builds the pio_dma board's printer (its step backend imports piodma) with the package
-# taken for a frozen one, then prints where each step-path module came from.
-_BUILD = """
-import sys, simmachine, simtime
-sys.modules["machine"] = simmachine
-sys.modules["time"] = simtime
-import mixfw
-from mixfw import inram
-mixfw.FROZEN_PREFIX = %r
-inram.RAM_DIR = %r
-try:
-    from mixfw import assemble
-    printer = assemble.build()
-except ImportError as e:
-    print("ImportError:", e)
-    raise SystemExit(1)
-for name in inram.STEP_PATH:
-    print(name, sys.modules["mixfw." + name].__file__)
-print("irq", printer.feed is not None)
-"""
-
+# Builds the printer from a frozen package and prints where each step-path module came
+# from; exits with status 1 on an ImportError.
+FROZEN_BUILD = Path(__file__).parent / "upy" / "inram_frozen_build.py"
 
 def _run_frozen(tmp_path, in_ram):
+    """A frozen image laid out in tmp_path, with the step-path modules in_ram copied to
+    its RAM folder: the pio_dma board's printer built from it (FROZEN_BUILD)."""
     frozen = tmp_path / "frozen"
     shutil.copytree(MIXFW, frozen / "mixfw")
     ram = tmp_path / "ram"
@@ -45,8 +29,8 @@ def _run_frozen(tmp_path, in_ram):
         shutil.copy(MIXFW / (name + ".py"), ram / (name + ".py"))
     env = paths.micropython_env("pico_6drives")
     env["MICROPYPATH"] = env["MICROPYPATH"].replace(str(paths.FIRMWARE), str(frozen))
-    code = _BUILD % (str(frozen), str(ram))
-    return subprocess.run([paths.micropython(), "-X", "heapsize=4M", "-c", code],
+    return subprocess.run([paths.micropython(), "-X", "heapsize=4M", str(FROZEN_BUILD),
+                           str(frozen), str(ram)],
                           capture_output=True, text=True, env=env, timeout=120)
 
 

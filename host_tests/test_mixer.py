@@ -3,18 +3,10 @@ import json
 
 from hypothesis import given, settings, strategies as st
 
-# The schedule is run by the step loop itself (stepper.run_mix), on E-only blocks.
+# Each E step's drive as the step loop's own mixer schedule picks it: upy/mixer_picks.py.
 MIXER = """
 from mixfw import mixer, stepper
-def picks(weights, moves):
-    seq = []
-    def out(set_mask, clr_mask):
-        d = 0
-        while set_mask >> d != 1:
-            d += 1
-        seq.append(d)
-    stepper.run_mix(mixer.normalize(weights, len(weights)), moves, out)
-    return seq
+from mixer_picks import picks
 """
 
 
@@ -35,17 +27,7 @@ print(json.dumps([mixer.normalize([0.2, 0.3, 0.5], 3), mixer.normalize([20, 30, 
 
 
 def test_all_zero_and_negative_mixes_are_refused(mp):
-    out = mp.json(MIXER + """
-import json
-res = []
-for w in ([0, 0, 0], [1, -1, 0], []):
-    try:
-        mixer.normalize(w, 3)
-        res.append("accepted")
-    except mixer.MixError as e:
-        res.append(str(e))
-print(json.dumps(res))
-""")
+    out = mp.script_json("mixer_refusals")
     assert out[0].startswith("all-zero mix refused")
     assert "must be >= 0" in out[1]
     assert out[2].startswith("all-zero mix refused")
@@ -64,33 +46,5 @@ print(list(stepper.run_mix(mixer.normalize([1, 2, 3, 4, 5, 985], 6), [1000 * 7])
 def test_retract_then_unretract_restores_every_drive(mp, weights, moves):
     """Any walk forward and back returns each drive to where it was at the same E
     position, and reverse steps undo forward steps exactly, one by one."""
-    result = mp.json(MIXER + """
-import json
-weights, moves = json.loads(%r)
-seq = picks(weights, moves)
-pos = [0] * len(weights)
-at = {0: list(pos)}
-e = 0
-history = []
-ok = len(seq) == sum(abs(m) for m in moves)
-k = 0
-for m in moves:
-    for _ in range(abs(m)):
-        d = seq[k]
-        k += 1
-        if m > 0:
-            pos[d] += 1
-            e += 1
-            history.append(d)
-        else:
-            pos[d] -= 1
-            e -= 1
-            if history:
-                ok = ok and history.pop() == d
-        if e in at:
-            ok = ok and at[e] == pos
-        else:
-            at[e] = list(pos)
-print(json.dumps(ok))
-""" % json.dumps([weights, moves]))
+    result = mp.script_json("mixer_walk", stdin=json.dumps([weights, moves]).encode())
     assert result is True

@@ -147,21 +147,7 @@ def test_a_state_machine_restart_moves_no_dir_pin(tmp_path, invert_dir):
 
 
 def test_pio_dma_refuses_what_its_chip_constants_would_be_wrong_on(mp):
-    out = mp.json("""
-import json
-from mixfw import piodma
-res = []
-for chip, cpu, lsb in (("rp2040", "Raspberry Pi Pico with RP2040", 11),
-                       ("rp2350", "Raspberry Pi Pico2 with RP2350", 13),
-                       ("rp2350", "Raspberry Pi Pico2 with RP2350-RISCV", 13),
-                       ("rp2040", "Raspberry Pi Pico2 with RP2350", 13)):
-    try:
-        piodma.check_chip(chip, cpu, lsb)
-        res.append("ok")
-    except ValueError as e:
-        res.append(str(e))
-print(json.dumps(res))
-""")
+    out = mp.script_json("piodma_check_chip")
     assert out[:2] == ["ok", "ok"]
     assert out[2] == ("step_backend pio_dma needs the RP2350's Arm cores; this MicroPython "
                       "runs on its RISC-V cores (Raspberry Pi Pico2 with RP2350-RISCV): "

@@ -7,7 +7,6 @@ as missing steps and a line run twice as extra steps."""
 import fnmatch
 import json
 import socket
-import subprocess
 import sys
 import threading
 import time
@@ -428,35 +427,17 @@ def test_tcp_hostile_client_and_two_flooding_connections(tcp_printer):
 # 4. M112 while the planner queue is full
 # ---------------------------------------------------------------------------------
 
-# The real firmware and simulated chip, with one probe: when the receive path calls
-# emergency_stop(), the virtual time is printed. That is the moment M112 was seen; the
-# trace says when the last STEP edge came.
-HARNESS = """
-import sys
-import simmachine, simtime
-sys.modules['machine'] = simmachine
-sys.modules['time'] = simtime
-from mixfw import printer as P
-_stop = P.Printer.emergency_stop
-def _probe(self):
-    sys.stdout.write('//m112 seen_us=%%d\\n' %% simmachine.now_us)
-    _stop(self)
-P.Printer.emergency_stop = _probe
-sys.argv[:] = ['sim_main.py', '--edges', %r]
-exec(open(%r).read())
-"""
-
 PAD = 16  # every line 16 bytes: the 256-byte receive ring holds exactly 16 of them
 
 
-def run_m112_stream(edges, lines):
+def run_m112_stream(mp, edges, lines):
+    """The lines, padded, through the real firmware and simulated chip with a probe
+    that prints when M112 was seen (upy/protocol_m112_probe.py): those moments, the
+    answers, and the times of every STEP edge and of X's."""
     data = "".join(l.ljust(PAD - 1) + "\n" for l in lines).encode()
     COUNTS["hostile"] += len(lines)
-    proc = subprocess.run(
-        [paths.micropython(), "-X", "heapsize=2M", "-c", HARNESS % (str(edges), str(SIM_MAIN))],
-        input=data, capture_output=True, env=paths.micropython_env("sim"), timeout=120)
-    assert proc.returncode == 0, proc.stderr.decode()
-    out = proc.stdout.decode().splitlines()
+    out = mp.script("protocol_m112_probe", edges, SIM_MAIN, stdin=data,
+                    heap="2M").splitlines()
     assert out[0] == "start"
     seen = [int(l.split("=")[1]) for l in out if l.startswith("//m112 ")]
     answers, rest = group([l for l in out[1:] if not l.startswith("//")])
@@ -467,7 +448,7 @@ def run_m112_stream(edges, lines):
 
 
 @pytest.mark.parametrize("k", [4, 12])
-def test_m112_stops_motion_at_once_with_a_full_queue(tmp_path, k):
+def test_m112_stops_motion_at_once_with_a_full_queue(mp, tmp_path, k):
     # 5 mm moves at 100 mm/s in one direction: collinear, so the axis cruises through
     # the junctions (8000 steps/s). With every line 16 bytes the firmware takes M112
     # into its ring as the move k lines ahead of it in the queue starts, with 16 moves
@@ -477,7 +458,7 @@ def test_m112_stops_motion_at_once_with_a_full_queue(tmp_path, k):
     before = 32 + k
     lines = ["G91"] + [move] * before + ["M112"] + [move] * 5 + ["M114", "G1 X1", "M999",
                                                                    "G1 X1", "M400", "M114"]
-    seen, answers, step_t, x_t = run_m112_stream(tmp_path / "m112.edges", lines)
+    seen, answers, step_t, x_t = run_m112_stream(mp, tmp_path / "m112.edges", lines)
     assert len(answers) == len(lines)
     assert len(seen) >= 1
     seen_us = seen[0]
@@ -519,20 +500,20 @@ def test_m112_stops_motion_at_once_with_a_full_queue(tmp_path, k):
 
 
 @pytest.mark.parametrize("m112", ["M112", "m112", numbered(7, "M112"), "M112 ;stop", "N7 M112"])
-def test_m112_spellings_jump_the_queue(tmp_path, m112):
-    halt_steps = _steps_after_m112_at_full_queue(tmp_path, m112)
+def test_m112_spellings_jump_the_queue(mp, tmp_path, m112):
+    halt_steps = _steps_after_m112_at_full_queue(mp, tmp_path, m112)
     assert halt_steps < 10 * 5 * X_SPM
 
 
 @pytest.mark.parametrize("m112", ["M 112", "\tM112"])
-def test_m112_spellings_the_parser_accepts_also_jump_the_queue(tmp_path, m112):
-    halt_steps = _steps_after_m112_at_full_queue(tmp_path, m112)
+def test_m112_spellings_the_parser_accepts_also_jump_the_queue(mp, tmp_path, m112):
+    halt_steps = _steps_after_m112_at_full_queue(mp, tmp_path, m112)
     assert halt_steps < 10 * 5 * X_SPM
 
 
-def _steps_after_m112_at_full_queue(tmp_path, m112):
+def _steps_after_m112_at_full_queue(mp, tmp_path, m112):
     lines = ["G91"] + ["G1 X5 F6000"] * 36 + [m112] + ["G1 X5 F6000"] * 4
-    seen, answers, step_t, x_t = run_m112_stream(tmp_path / "m112.edges", lines)
+    seen, answers, step_t, x_t = run_m112_stream(mp, tmp_path / "m112.edges", lines)
     assert len(answers) == len(lines)
     # Whenever it is seen, the halt must have happened (here or in order).
     assert any(HALT_BROADCAST in a for a in answers)
@@ -589,55 +570,9 @@ def test_busy_processing_during_waits():
 # 6. Hypothesis: intake + parser + protocol, and the whole firmware
 # ---------------------------------------------------------------------------------
 
-# One micropython run per generated stream: the real Printer (channel ring, M112
-# scanner, intake, parser, N/checksum checks, answer) fed from an in-memory console in
-# odd-sized chunks, with stand-in handlers that read every word through the typed
-# getters. Its replies go to stdout.
-FUZZ_CORE = """
-import sys
-from mixfw.printer import Printer
+# One micropython run per generated stream: the real Printer fed from an in-memory
+# console in odd-sized chunks, with stand-in handlers (upy/protocol_fuzz_core.py).
 
-class Feed:
-    blocking = True
-    def __init__(self, data):
-        self.data = data
-        self.pos = 0
-        self.size = 1
-    def readinto(self, mv, block=False):
-        if self.pos >= len(self.data):
-            return -1
-        self.size = self.size % 11 + 1
-        n = min(len(mv), self.size, len(self.data) - self.pos)
-        for i in range(n):
-            mv[i] = self.data[self.pos + i]
-        self.pos += n
-        return n
-    def write(self, text):
-        sys.stdout.write(text)
-
-def words(line):
-    for c in "ABCDEFGHIJKLOPQRSUVWXYZ":
-        if line.has(c):
-            line.float(c, 0.0)
-            if line.has_value(c):
-                try:
-                    line.int(c, lo=-1000, hi=1000)
-                except ValueError:
-                    pass
-    line.require("S") if line.number == 163 else None
-
-def text(line):
-    line.args_text.encode()
-
-p = Printer(96, lambda: None, (("M", 117), ("M", 118)))
-for name in ("G0", "G1", "G4", "G28", "G90", "G91", "G92", "M104", "M106", "M114", "M163", "T"):
-    p.register(name, words, guarded=True)
-p.register("M117", text)
-p.register("M118", text)
-p.add_channel(Feed(sys.stdin.buffer.read()))
-p.serve()
-sys.stdout.write("//done\\n")
-"""
 
 _letters = st.sampled_from(list("GMTNXYZEFSPIV gmxyz*;()\t\r:.-+"))
 _number = st.one_of(
@@ -745,7 +680,7 @@ def test_fuzz_intake_parser_and_protocol(mp):
                     max_size=per_stream))
     def run(lines):
         data = b"\n".join(lines) + b"\n"
-        out = mp.run(FUZZ_CORE, stdin=data).splitlines()
+        out = mp.script("protocol_fuzz_core", stdin=data).splitlines()
         assert out[-1] == "//done"  # serve() returned: nothing escaped it
         check_answers(lines, out)
         COUNTS["fuzz"] += len(lines)

@@ -17,27 +17,7 @@ def test_pwm_range_is_what_the_simulated_chip_takes(mp):
     """mixfw.pwm.range_hz, the firmware's closed form, against the simulated chips'
     PWM, which follows MicroPython's divider arithmetic: the ends are taken and one
     Hz beyond each is refused, at the clocks boards boot with and overclocked."""
-    got = mp.json("""
-        import json, simmachine, simanalog
-        from mixfw.pwm import range_hz
-        def takes(hz):
-            try:
-                simanalog.PWM(simmachine.Pin(16), freq=hz).deinit()
-                return True
-            except ValueError:
-                return False
-        out = []
-        for chip, clocks in (("rp2040", (48, 125, 133, 200, 250)),
-                             ("rp2350", (150, 300)), ("sim", (125, 200)),
-                             ("esp32", (20, 80, 160, 240))):
-            simmachine.set_chip(chip)
-            for mhz in clocks:
-                simmachine.freq(mhz * 1000000)
-                lo, hi = range_hz(chip, simmachine.freq())
-                out.append([chip, mhz, lo, hi, takes(lo), takes(hi),
-                            takes(lo - 1), takes(hi + 1)])
-        print(json.dumps(out))
-    """)
+    got = mp.script_json("pwm_range")
     for chip, mhz, lo, hi, lo_ok, hi_ok, below_ok, above_ok in got:
         assert (lo_ok, hi_ok, below_ok, above_ok) == (True, True, False, False), (chip, mhz)
     lowest = {(chip, mhz): lo for chip, mhz, lo, *_ in got}

@@ -144,19 +144,7 @@ def test_inverted_dir_pins_drive_the_motor_the_same_way(tmp_path, board):
 
 
 def test_rp2_needs_micropython_1_26_for_a_hard_timer(mp):
-    out = mp.json("""
-import json
-from mixfw import assemble
-res = []
-for chip, version in (("rp2040", (1, 25, 0)), ("rp2350", (1, 24, 1)), ("rp2040", (1, 26, 0)),
-                      ("esp32", (1, 20, 0)), ("sim", (1, 0, 0))):
-    try:
-        assemble.check_timer_support(chip, version)
-        res.append("ok")
-    except RuntimeError as e:
-        res.append(str(e))
-print(json.dumps(res))
-""")
+    out = mp.script_json("registers_timer_support")
     assert out[0] == ("mixstep needs MicroPython 1.26 or newer on rp2040 for a hard "
                       "machine.Timer; this is 1.25.0: flash a newer MicroPython")
     assert out[1].startswith("mixstep needs MicroPython 1.26 or newer on rp2350")
@@ -237,18 +225,7 @@ def test_pio_keeps_interrupt_jitter_off_the_pins_within_a_burst(tmp_path, board)
 
 
 def test_pio_needs_the_step_pins_in_one_run_of_gpios(mp):
-    out = mp.json("""
-import json
-from mixfw import pio
-names = ["x", "y"]
-ok = pio.out_range({"x_step": 4, "x_dir": 5, "y_step": 6, "y_dir": 7}, names)
-try:
-    pio.out_range({"x_step": 4, "x_dir": 5, "y_step": 6, "y_dir": 9}, names)
-    err = None
-except ValueError as e:
-    err = str(e)
-print(json.dumps([ok, err]))
-""")
+    out = mp.script_json("registers_pio_pins")
     assert out == [[4, 4], "step_backend pio needs the STEP/DIR pins on one run of GPIOs; "
                            "they are on [4, 5, 6, 9]"]
 

@@ -10,13 +10,13 @@ import zlib
 import pytest
 
 from mixstep import paths
-from mixstep.simprinter import SIM_MAIN, SimPrinter, set_args
+from mixstep.simprinter import SIM_MAIN, set_args
 
 STALL = "Error:step timer stopped (no tick for 250 ms); restart the board"
 
 
-def test_a_dead_step_timer_halts_with_the_heaters_off():
-    p = SimPrinter()
+def test_a_dead_step_timer_halts_with_the_heaters_off(sim_printer):
+    p = sim_printer()
     assert p.send("M104 S200") == ["ok"]
     assert p.send("G91") == ["ok"]
     assert p.send("G1 X10 F3000") == ["ok"]
@@ -37,9 +37,9 @@ def test_a_dead_step_timer_halts_with_the_heaters_off():
     assert report["steps"]["x"] < 20 * 80
 
 
-def test_a_running_step_timer_never_trips_the_check():
+def test_a_running_step_timer_never_trips_the_check(sim_printer):
     # A long print with waits, dwell and idle stretches: no false alarm.
-    p = SimPrinter()
+    p = sim_printer()
     for line in ("G91", "G1 X100 F600", "G4 S3", "M400", "G1 X-100 F6000", "M400"):
         replies = p.send(line)
         assert not [r for r in replies if r.startswith("Error")], (line, replies)
@@ -73,10 +73,10 @@ def test_the_watchdog_resets_a_main_loop_that_hangs():
     assert [l for l in out if l.startswith("ok")] == ["ok", "ok", "ok T:%s" % out[3][5:]]
 
 
-def test_the_watchdog_cant_be_turned_off(tmp_path):
+def test_the_watchdog_cant_be_turned_off(sim_printer, tmp_path):
     # Every board drives heaters: 1000 ms at least, and the RP2040's 8388 ms at most.
     cfg = tmp_path / "mixstep.cfg"
-    p = SimPrinter(config_path=cfg)
+    p = sim_printer(config_path=cfg)
     assert p.send("M926 Iwatchdog_ms V0") == [
         "Error:watchdog_ms = 0 is below the minimum 1000", "ok"]
     assert p.send("M926 Iwatchdog_ms V8389") == [
@@ -89,7 +89,7 @@ def test_the_watchdog_cant_be_turned_off(tmp_path):
     lines[at] = "watchdog_ms = 0\n"
     body = "".join(lines[:-1]).encode()
     cfg.write_bytes(body + b"crc32 = %08x\n" % zlib.crc32(body))
-    p = SimPrinter(config_path=cfg)
+    p = sim_printer(config_path=cfg)
     assert p.send("M925 Iwatchdog_ms")[:2] == [
         "echo:config %s: line %d: watchdog_ms = 0 is below the minimum 1000; kept the "
         "default" % (cfg, at + 1),
@@ -105,8 +105,8 @@ def test_back_to_back_lines_feed_the_watchdog():
     assert code == 0, out[-3:]
 
 
-def test_the_main_loop_leaves_heaters_and_drivers_off():
-    p = SimPrinter()
+def test_the_main_loop_leaves_heaters_and_drivers_off(sim_printer):
+    p = sim_printer()
     for line in ("M104 S200", "M140 S60", "M106 S255", "G1 X10 F3000", "G4 S2"):
         p.send(line)
     report = p.finish()  # the host went away: the main loop ends
@@ -114,8 +114,8 @@ def test_the_main_loop_leaves_heaters_and_drivers_off():
     assert report["drivers_enabled_at_exit"] is False
 
 
-def test_a_halt_turns_the_heaters_off_though_stopping_motion_raises():
-    p = SimPrinter()
+def test_a_halt_turns_the_heaters_off_though_stopping_motion_raises(sim_printer):
+    p = sim_printer()
     assert p.send("M7104") == ["ok"]  # from now on, stopping the step path raises
     for line in ("M104 S200", "M140 S60", "G4 S1"):
         assert p.send(line) == ["ok"]
@@ -180,36 +180,13 @@ def test_deploy_asks_a_running_firmware_to_step_aside():
         bridge.close()
 
 
-BOOT_CODE = """
-import sys, json, simmachine
-sys.modules["machine"] = simmachine
-import board
-board.SETTINGS["enable_active_low"] = %(active_low)r
-simmachine.set_chip(board.SETTINGS["chip"])
-enable = [g for name, g in sorted(board.PINS.items()) if name.endswith("_enable")]
-for g in enable:
-    # After a reset: pads pulled low, which enables an active-low driver; an
-    # active-high one is enabled by a pin left high.
-    simmachine._levels[g] = 0 if %(active_low)r else 1
-import boot
-levels = [simmachine._levels[g] for g in enable]
-# M997's reset into the REPL: boot.py, then main.py starts nothing.
-from mixfw import assemble
-started = not assemble.repl_boot(%(flag)r)
-print(json.dumps([levels, [simmachine._levels[g] for g in enable], started]))
-"""
-
-
 @pytest.mark.parametrize("board,active_low", [("sim", True), ("sim", False),
                                               ("pico", True), ("esp32_devkit", True)])
-def test_boot_turns_every_driver_off_first(tmp_path, board, active_low):
+def test_boot_turns_every_driver_off_first(mp, tmp_path, board, active_low):
     flag = tmp_path / "mixstep.repl"
     flag.write_text("M997\n")
-    proc = subprocess.run(
-        [paths.micropython(), "-c", BOOT_CODE % dict(active_low=active_low, flag=str(flag))],
-        capture_output=True, env=paths.micropython_env(board), timeout=60)
-    assert proc.returncode == 0, proc.stderr.decode()
-    at_boot, in_repl, started = json.loads(proc.stdout.decode().splitlines()[-1])
+    at_boot, in_repl, started = mp.script_json(
+        "safety_boot", int(active_low), flag, env=paths.micropython_env(board))
     off = 1 if active_low else 0
     count = len([n for n in paths.load_board(board)["PINS"] if n.endswith("_enable")])
     assert at_boot == in_repl == [off] * count

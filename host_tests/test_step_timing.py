@@ -32,56 +32,6 @@ def test_steps_of_a_real_print_fall_within_a_tick_of_the_plan(tmp_path, gcode, l
     assert res["step_time_error_earliest_us"] >= -1
 
 
-# One block run by the step loop with the schedule the planner gives its record; the
-# ticks (from 1, the first ramp tick) at which the lead axis (X) stepped.
-# A step loop's array holding one block of n lead-axis (X) steps with the record's
-# rates, queued, and the phase it inherits (a MicroPython function, for the scripts
-# below).
-X_BLOCK = """
-import sys, json
-from array import array
-from mixfw import stepper as st
-
-n, r0, r_nom, r1, acc, phase = json.loads(sys.stdin.read())
-
-def x_block():
-    mem = array("i", bytes(4 * st.mem_words(2)))
-    mem[st.S_QUEUE] = 2
-    mem[st.S_PULSE_TICKS] = 1  # as on the simulated board: high one tick, low one tick
-    mem[st.MASK_BASE + st.X] = 1
-    b = st.BLOCK_BASE
-    mem[b + st.B_N] = mem[b + st.B_STEPS + st.X] = n
-    mem[b + st.B_RATE_INIT] = r0
-    mem[b + st.B_RATE_NOM] = r_nom
-    mem[b + st.B_RATE_FINAL] = r1
-    mem[b + st.B_ACCEL] = acc
-    mem[st.S_PHASE] = phase
-    mem[st.S_HEAD] = 1
-    return mem
-"""
-
-# One block run by the step loop with the schedule the planner gives its record; the
-# ticks (from 1, the first ramp tick) at which the lead axis (X) stepped.
-ONE_BLOCK = X_BLOCK + """
-from mixfw.planner import ramp_ticks
-
-mem = x_block()
-regs = array("i", bytes(12))  # scratch set/clear registers at words 1, 2
-mem[st.S_REG_SET] = 1
-mem[st.S_REG_CLR] = 2
-b = st.BLOCK_BASE
-mem[b + st.B_ACCEL_UNTIL], mem[b + st.B_DECEL_AFTER], mem[b + st.B_RATE_DECEL] = \\
-    ramp_ticks(n, r0, r_nom, r1, acc)
-ticks = []
-t = 0
-io = (mem, regs, None)
-while mem[st.S_BLOCKS_DONE] == 0:
-    t += 1
-    if st.tick(io):
-        ticks.append(t)
-print(json.dumps(ticks))
-"""
-
 ONE = 1 << 28
 
 
@@ -110,8 +60,11 @@ def _record(draw, acc, most_steps):
 @settings(max_examples=40, deadline=None)
 @given(trapezoids())
 def test_any_planned_trapezoid_is_stepped_within_a_tick_of_its_ideal_times(mp, record):
+    """One block run by the step loop with the schedule the planner gives its record
+    (upy/step_timing_one_block.py): each tick at which the lead axis (X) stepped."""
     n, r0, r_nom, r1, acc, phase = record
-    ticks = np.array(mp.json(ONE_BLOCK, stdin=json.dumps(record).encode()))
+    ticks = np.array(mp.script_json("step_timing_one_block",
+                                     stdin=json.dumps(record).encode()))
     assert len(ticks) == n
     ideal = steptiming.ideal_times_us(np.arange(1, n + 1), phase / ONE, n, r0 / ONE,
                                       r_nom / ONE, r1 / ONE, acc / ONE)  # one "us" a tick
@@ -120,49 +73,6 @@ def test_any_planned_trapezoid_is_stepped_within_a_tick_of_its_ideal_times(mp, r
     # even at the slowest rate.
     assert late.min() >= -0.02
     assert late.max() <= 1.02
-
-
-# One block run through the DMA ring's batches twice: by the step loop, and by a copy
-# of it compiled with no ramp tick passed over at once (_RAMP_SKIP_MAX 0). The record
-# leaves its schedule to the step loop (F_SCHEDULE), as the look-ahead's do.
-RING_TWICE = X_BLOCK + """
-src = open(st.__file__).read()
-cut = src.replace("_RAMP_SKIP_MAX = const(1024)", "_RAMP_SKIP_MAX = const(0)")
-assert cut != src
-tick_by_tick = {"__name__": "tick_by_tick"}
-exec(cut, tick_by_tick)
-
-def printer():
-    mem = x_block()
-    mem[st.S_DIR_TICKS] = 1
-    mem[st.S_PIO] = 2
-    mem[st.R_TC] = 80  # 10 us ticks of the PIO's 8 MHz
-    mem[st.R_BATCH_TICKS] = 200
-    mem[st.R_PULSE_CYC] = 16
-    mem[st.R_LEVEL_BITS] = 9
-    mem[st.BLOCK_BASE + st.B_FLAGS] = st.F_SCHEDULE
-    return mem, array("i", bytes(4 * 400))
-
-# In lockstep, batch by batch: a slow block is millions of ticks.
-skipping = printer()
-stepping = printer()
-same = True
-batches = words = 0
-while skipping[0][st.S_BLOCKS_DONE] == 0 or batches < 2:
-    got = []
-    for (mem, ring), tick in ((skipping, st.tick), (stepping, tick_by_tick["tick"])):
-        mem[st.R_W] = 0
-        w = tick((mem, ring, None))
-        got.append(ring[:w])
-    words += len(got[0])
-    batches += 1
-    if got[0] != got[1] or batches > 100000:
-        same = False
-        break
-mem = skipping[0]
-print(json.dumps({"same": same, "steps": mem[st.S_POS + st.X], "ticks": mem[st.S_TICKS],
-                  "words": words, "batches": batches}))
-"""
 
 
 @st.composite
@@ -179,7 +89,10 @@ def long_ramps(draw):
 @settings(max_examples=40, deadline=None)
 @given(long_ramps())
 def test_a_ramps_ticks_passed_over_at_once_make_the_words_tick_by_tick_makes(mp, record):
-    got = mp.json(RING_TWICE, stdin=json.dumps(record).encode())
+    """One block run through the DMA ring's batches by the step loop and by a copy of
+    it that passes over no ramp tick at once (upy/step_timing_ring_twice.py): the same
+    words in every batch."""
+    got = mp.script_json("step_timing_ring_twice", stdin=json.dumps(record).encode())
     assert got["steps"] == record[0]
     assert got["same"], (record, got)
 

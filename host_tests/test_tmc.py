@@ -7,7 +7,6 @@ import re
 import pytest
 
 from mixstep import boards, paths
-from mixstep.simprinter import SimPrinter
 from mixfw import tmc
 
 TMC_BOARDS = ("skr_pico", "fysetc_e4")
@@ -93,8 +92,8 @@ def check_driver(regs, microsteps, irun, spreadcycle=False):
 
 
 @pytest.mark.parametrize("board", TMC_BOARDS)
-def test_every_driver_is_set_up_at_start(board):
-    p = SimPrinter(board=board)
+def test_every_driver_is_set_up_at_start(sim_printer, board):
+    p = sim_printer(board=board)
     regs = registers(p)
     assert sorted(regs) == ["e0", "x", "y", "z"]
     for name in "xyz":  # 580 mA: CS round(19.06) - 1
@@ -104,8 +103,8 @@ def test_every_driver_is_set_up_at_start(board):
     p.finish()
 
 
-def test_m906_and_m569_set_the_drivers_and_report_them():
-    p = SimPrinter(board="skr_pico")
+def test_m906_and_m569_set_the_drivers_and_report_them(sim_printer):
+    p = sim_printer(board="skr_pico")
     assert p.send("M906 X800 E1200") == ["ok"]
     assert p.send("M569 S1 X Y") == ["ok"]
     regs = registers(p)
@@ -125,8 +124,8 @@ def test_m906_and_m569_set_the_drivers_and_report_them():
     p.finish()
 
 
-def test_a_change_of_microsteps_waits_for_the_queued_moves():
-    p = SimPrinter(board="skr_pico")
+def test_a_change_of_microsteps_waits_for_the_queued_moves(sim_printer):
+    p = sim_printer(board="skr_pico")
     for line in ("G28", "G1 X50 F600", "M926 Idriver_microsteps_x V32", "M930"):
         assert p.send(line)[-1] == "ok"  # M930 sends busy: lines while it waits
     # Written mid-move, it would have shifted every step after it.
@@ -135,8 +134,8 @@ def test_a_change_of_microsteps_waits_for_the_queued_moves():
     p.finish()
 
 
-def test_bad_driver_values_get_an_error_and_change_nothing():
-    p = SimPrinter(board="skr_pico")
+def test_bad_driver_values_get_an_error_and_change_nothing(sim_printer):
+    p = sim_printer(board="skr_pico")
     before = registers(p)
     assert p.send("M906 X1700")[0] == "Error:driver_current_ma_x = 1700 is above the maximum 1600"
     assert p.send("M906 Y20")[0] == "Error:driver_current_ma_y = 20 is below the minimum 50"
@@ -149,9 +148,9 @@ def test_bad_driver_values_get_an_error_and_change_nothing():
 
 
 def test_a_driver_without_motor_power_warns_at_start_and_the_printer_still_prints(
-        monkeypatch):
+        sim_printer, monkeypatch):
     monkeypatch.setenv("MIXSTEP_SIM_TMC_OFF", "y")
-    p = SimPrinter(board="skr_pico")
+    p = sim_printer(board="skr_pico")
     assert p.send("M906") == [
         "echo:Warning: y driver (TMC2209 address 2) does not answer on the UART (is the "
         "motor power on?); it steps on its MS1/MS2 straps until M122 sets it up",
@@ -177,8 +176,8 @@ def test_a_driver_without_motor_power_warns_at_start_and_the_printer_still_print
     assert report["steps"]["x"] == 800 and report["steps"]["y"] == 800
 
 
-def test_a_driver_whose_motor_power_was_cycled_is_set_up_again_by_m122():
-    p = SimPrinter(board="skr_pico")
+def test_a_driver_whose_motor_power_was_cycled_is_set_up_again_by_m122(sim_printer):
+    p = sim_printer(board="skr_pico")
     assert p.send("M7106 P1 S0") == ["ok"]
     assert p.send("M7106 P1 S1") == ["ok"]
     assert registers(p)["z"]["GSTAT"] == 1  # back at its reset values

@@ -7,9 +7,9 @@ from mixstep.simprinter import SimPrinter
 E_SPM = 415
 
 
-def test_tools_survive_a_reboot_and_report_in_a_pasteable_form(tmp_path):
+def test_tools_survive_a_reboot_and_report_in_a_pasteable_form(sim_printer, tmp_path):
     cfg = tmp_path / "mixstep.cfg"
-    p = SimPrinter(config_path=cfg)
+    p = sim_printer(config_path=cfg)
     assert p.send("M567 P3 E1:2:3")[0] == "echo:T3 mix set; M500 keeps it after a restart"
     p.send("T5")
     p.send("M165 A1 B3")  # the active tool, T5
@@ -19,7 +19,7 @@ def test_tools_survive_a_reboot_and_report_in_a_pasteable_form(tmp_path):
     report = [l for l in p.send("M165 R") if l.startswith("M567")]
     p.finish()
 
-    again = SimPrinter(config_path=cfg)
+    again = sim_printer(config_path=cfg)
     assert [l for l in again.send("M165 R") if l.startswith("M567")] == report
     assert report[3] == "M567 P3 E1:2:3:0:0:0"
     assert report[5] == "M567 P5 E1:3:0:0:0:0"
@@ -33,21 +33,21 @@ def test_tools_survive_a_reboot_and_report_in_a_pasteable_form(tmp_path):
     assert (steps["e0"], steps["e1"], steps["e2"]) == (E_SPM, 2 * E_SPM, 3 * E_SPM)
 
 
-def test_pasting_the_report_back_restores_the_tools(tmp_path):
-    p = SimPrinter()
+def test_pasting_the_report_back_restores_the_tools(sim_printer):
+    p = sim_printer()
     p.send("M567 P2 E5:0:1")
     p.send("M567 P11 E0:0:0:0:2:7")
     report = [l for l in p.send("M165 R") if l.startswith("M567")]
     p.finish()
-    q = SimPrinter()
+    q = sim_printer()
     for line in report:
         assert q.send(line)[-1] == "ok"
     assert [l for l in q.send("M165 R") if l.startswith("M567")] == report
     q.finish()
 
 
-def test_bad_mixes_are_refused_and_change_nothing():
-    p = SimPrinter()
+def test_bad_mixes_are_refused_and_change_nothing(sim_printer):
+    p = sim_printer()
     before = p.send("M165 R")
     assert p.send("M567 P2 E0:0:0")[0].startswith("Error:all-zero mix refused")
     assert p.send("M567 P16 E1")[0] == "Error:tool T16 out of range T0..T15"
@@ -59,11 +59,10 @@ def test_bad_mixes_are_refused_and_change_nothing():
     p.finish()
 
 
-def test_drives_with_different_steps_per_mm_each_get_their_share_of_filament():
+def test_drives_with_different_steps_per_mm_each_get_their_share_of_filament(printer):
     """Drive 1 geared 2:1, drive 2 at 100 steps/mm: a 1:1:2 mix over 12 mm of E gives
     3, 3 and 6 mm of filament, each within one step, with E still in millimetres."""
-    p = SimPrinter()
-    p.send("M302 P1")
+    p = printer
     p.send("M926 Idrive_steps_per_mm_1 V830")
     p.send("M926 Idrive_steps_per_mm_2 V100")
     p.send("M930")
@@ -80,9 +79,10 @@ def test_drives_with_different_steps_per_mm_each_get_their_share_of_filament():
     assert abs(steps["e2"] - 6 * 100) <= 1
 
 
-def retract_run(policy, lines):
-    p = SimPrinter()
-    p.send("M302 P1")
+def retract_run(sim_printer, policy, lines):
+    """The lines on a printer with cold extrusion allowed under retract_policy: the
+    steps at the end."""
+    p = sim_printer(cold_extrusion=True)
     p.send("M926 Iretract_policy V%d" % policy)
     p.send("M930")
     for line in lines:
@@ -90,19 +90,19 @@ def retract_run(policy, lines):
     return p.finish()["steps"]
 
 
-def test_retraction_policy_follow_the_mix_or_all_drives_equal():
+def test_retraction_policy_follow_the_mix_or_all_drives_equal(sim_printer):
     # Slicer-style: retract on T0, change tool, unretract on T1.
     lines = ["M83", "G1 E5 F600", "G1 E-2 F2400", "T1", "G1 E2 F2400", "G1 E1 F600"]
-    follow = retract_run(0, lines)
+    follow = retract_run(sim_printer, 0, lines)
     assert (follow["e0"], follow["e1"]) == (3 * E_SPM, 3 * E_SPM)
-    equal = retract_run(1, lines)
+    equal = retract_run(sim_printer, 1, lines)
     # Every drive pulled back equally and pushed back equally: each ends where it was.
     assert [equal["e%d" % d] for d in range(6)] == [5 * E_SPM, E_SPM, 0, 0, 0, 0]
 
 
-def test_g10_g11_firmware_retraction_is_exact_and_keeps_the_logical_e():
+def test_g10_g11_firmware_retraction_is_exact_and_keeps_the_logical_e(sim_printer):
     for policy in (0, 1):
-        steps = retract_run(policy, [
+        steps = retract_run(sim_printer, policy, [
             "M567 P0 E1:2:3", "M83", "G1 E6 F600", "G10", "G1 X10 F3000", "G11", "G10", "G10",
             "G11", "M114"])
         assert [steps["e%d" % d] for d in range(3)] == [E_SPM, 2 * E_SPM, 3 * E_SPM], policy
@@ -115,10 +115,9 @@ def counters(reply):
     return [float(w.split(":")[1]) for w in reply.split()[3:]]
 
 
-def test_filament_counters_per_drive_are_reported_and_kept_across_a_reboot(tmp_path):
+def test_filament_counters_per_drive_are_reported_and_kept_across_a_reboot(sim_printer, tmp_path):
     cfg = tmp_path / "mixstep.cfg"
-    p = SimPrinter(config_path=cfg)
-    p.send("M302 P1")
+    p = sim_printer(config_path=cfg, cold_extrusion=True)
     p.send("M567 P0 E1:3")
     p.send("M83")
     p.send("G1 E8 F600")
@@ -129,8 +128,7 @@ def test_filament_counters_per_drive_are_reported_and_kept_across_a_reboot(tmp_p
     assert used[0] + used[1] == pytest.approx(7.0, abs=1e-9) and used[2:] == [0.0] * 4
     p.send("M500")
     p.finish()
-    q = SimPrinter(config_path=cfg)
-    q.send("M302 P1")
+    q = sim_printer(config_path=cfg, cold_extrusion=True)
     q.send("T2")
     q.send("G1 E2 F600")
     assert counters(q.send("M167")[0]) == used[:2] + [2.0] + [0.0] * 3
@@ -151,6 +149,7 @@ def test_any_sequence_of_mixes_and_moves_gives_each_drive_its_exact_share(moves)
     """A mix change before every move (a gradient at its finest), with retractions:
     each drive ends within half a step of its exact filament, so nothing drifts, and
     E never loses or gains a step."""
+    # Its own printer: hypothesis runs the test many times, and a fixture once.
     p = SimPrinter()
     p.send("M302 P1")
     p.send("M83")
@@ -166,11 +165,10 @@ def test_any_sequence_of_mixes_and_moves_gives_each_drive_its_exact_share(moves)
         assert abs(steps["e%d" % i] - ideal_mm[i] * E_SPM) <= 0.5 + 1e-6, (i, steps, ideal_mm)
 
 
-def test_a_long_purge_gives_each_drive_its_exact_share():
+def test_a_long_purge_gives_each_drive_its_exact_share(printer):
     """60 mm in one move is 24,900 E steps, more than one block of the mixer's integer
     range: it goes in pieces, and each drive still ends within half a step."""
-    p = SimPrinter()
-    p.send("M302 P1")
+    p = printer
     p.send("M83")
     weights = [266, 565, 240, 197]
     assert p.send("M567 P0 E" + ":".join(map(str, weights)))[-1] == "ok"
@@ -181,10 +179,9 @@ def test_a_long_purge_gives_each_drive_its_exact_share():
     assert steps["x"] == 20 * 80
 
 
-def test_palette_mixtures_of_mixtures():
+def test_palette_mixtures_of_mixtures(printer):
     """Ovenbird's mixing matrix: tools as amounts of the palette's mixtures (u . P)."""
-    p = SimPrinter()
-    p.send("M302 P1")
+    p = printer
     assert p.send("M168")[0] == "echo:palette 0: 1.0000:0.0000:0.0000:0.0000:0.0000:0.0000"
     replies = p.send("M168 1:1,0:0:1,2:0:2")  # rows normalised
     assert replies[:3] == ["echo:palette 0: 0.5000:0.5000:0.0000:0.0000:0.0000:0.0000",
@@ -202,24 +199,24 @@ def test_palette_mixtures_of_mixtures():
     assert (steps["e0"], steps["e1"], steps["e2"]) == (4 * E_SPM, 2 * E_SPM, 2 * E_SPM)
 
 
-def test_replay_policy_takes_back_exactly_the_latest_steps_of_each_drive():
+def test_replay_policy_takes_back_exactly_the_latest_steps_of_each_drive(sim_printer):
     """Retract 2 mm after 1 mm of T0 then 1.5 mm of T1: the replay policy pulls back
     1.5 mm on drive 1 and 0.5 mm on drive 0, and the unretraction after a change to T2
     pushes exactly those back, where following the mix would pull T2's drive."""
     lines = ["M83", "G1 E1 F600", "T1", "G1 E1.5 F600", "G1 E-2 F2400", "T2",
              "G1 E2 F2400", "G1 E1 F600"]
-    steps = retract_run(2, lines)
+    steps = retract_run(sim_printer, 2, lines)
     assert [steps["e%d" % d] for d in range(3)] == [E_SPM, 623, E_SPM]  # 622.5 rounds up
     # Mid-way, after the retraction: drive 1 gave back all its steps, drive 0 the rest.
-    mid = retract_run(2, lines[:5] + ["M114"])
+    mid = retract_run(sim_printer, 2, lines[:5] + ["M114"])
     assert abs(mid["e0"] - 0.5 * E_SPM) <= 1 and (mid["e1"], mid["e2"]) == (0, 0)
-    follow = retract_run(0, lines[:5] + ["M114"])
+    follow = retract_run(sim_printer, 0, lines[:5] + ["M114"])
     assert follow["e0"] == E_SPM and follow["e1"] < 0  # the mix pulls T1's drive only
 
 
-def test_replay_policy_covers_mixes_wipes_and_firmware_retraction():
+def test_replay_policy_covers_mixes_wipes_and_firmware_retraction(sim_printer):
     # A 1:2:3 mix, then a wipe (retraction while moving) and G10/G11 across a tool change.
-    steps = retract_run(2, [
+    steps = retract_run(sim_printer, 2, [
         "M567 P0 E1:2:3", "M83", "G1 X5 E6 F600", "G1 X8 E-0.5 F3000", "G10", "T1",
         "G1 X20 F3000", "G11", "G1 E0.5 F600", "G1 X25 E1 F600"])
     # Everything taken back was pushed back to the same drives; then T1 extruded 1 mm.

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from mixstep import cli, paths, serve, sim, trace, tracecheck, tracemodel, tracepull
-from mixstep.simprinter import SimPrinter
 from sigrok import need_sigrok
 
 SAMPLES = paths.ROOT / "testdata"
@@ -321,7 +320,7 @@ _PAIR_SETTINGS = {"retract_policy": 2, "transition_l1_mm": 1.0, "transition_l2_m
                   "transition_pairs": _PAIRS}
 
 
-def test_a_print_with_per_pair_transitions_passes(tmp_path):
+def test_a_print_with_per_pair_transitions_passes(sim_printer, tmp_path):
     """transition_pairs given to the firmware the way docs/G-Codes.md says (M926, M500, a
     restart) and to the check as a setting: the trace passes, and the same trace
     checked without any one of the pairs (that change at the default lengths) fails,
@@ -330,7 +329,7 @@ def test_a_print_with_per_pair_transitions_passes(tmp_path):
     spell a tuple of from:to:l1_mm:l2_mm tuples, and the firmware will not start on
     any spelling of it."""
     cfg = tmp_path / "mixstep.cfg"
-    printer = SimPrinter(config_path=cfg)
+    printer = sim_printer(config_path=cfg)
     for key in ("retract_policy", "transition_l1_mm", "transition_l2_mm"):
         assert printer.send("M926 I%s V%s" % (key, _PAIR_SETTINGS[key]))[-1] == "ok"
     for k, pair in enumerate(_PAIRS):

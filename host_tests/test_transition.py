@@ -5,15 +5,15 @@ import pytest
 import numpy as np
 
 from mixstep import advance, paths, trace, tracecheck
-from mixstep.simprinter import SimPrinter
 
 E_SPM = 415
 X_SPM = 80
 
 
-def configured(tmp_path, l1_mm, l2_mm):
+def configured(sim_printer, tmp_path, l1_mm, l2_mm):
+    """A configuration file with these L1 and L2 saved in it."""
     cfg = tmp_path / "mixstep.cfg"
-    p = SimPrinter(config_path=cfg)
+    p = sim_printer(config_path=cfg)
     p.send("M926 Itransition_l1_mm V%s" % l1_mm)
     p.send("M926 Itransition_l2_mm V%s" % l2_mm)
     p.send("M500")
@@ -21,11 +21,11 @@ def configured(tmp_path, l1_mm, l2_mm):
     return cfg
 
 
-def test_tool_change_applies_l0_early_and_the_trace_shows_it(tmp_path, board):
-    cfg = configured(tmp_path, 1.0, 3.0)  # L0 = 2.5 mm
+def test_tool_change_applies_l0_early_and_the_trace_shows_it(sim_printer, tmp_path, board):
+    cfg = configured(sim_printer, tmp_path, 1.0, 3.0)  # L0 = 2.5 mm
     edges = tmp_path / "run.edges"
-    p = SimPrinter(config_path=cfg, edges_path=edges)
-    for line in ("M302 P1", "M83", "G1 X10 E5 F1200", "T1", "G1 X20 E5", "M400"):
+    p = sim_printer(config_path=cfg, edges_path=edges, cold_extrusion=True)
+    for line in ("M83", "G1 X10 E5 F1200", "T1", "G1 X20 E5", "M400"):
         assert p.send(line)[-1] == "ok"
     steps = p.finish()["steps"]
     # Each drive at its exact filament, rounded half away from zero: 1037.5 -> 1038.
@@ -41,9 +41,9 @@ def test_tool_change_applies_l0_early_and_the_trace_shows_it(tmp_path, board):
     assert last_e0 < first_e1
 
 
-def test_a_tool_pair_uses_its_own_l1_and_l2(tmp_path, board):
-    cfg = configured(tmp_path, 1.0, 3.0)  # L0 = 2.5 mm for any change without a pair
-    p = SimPrinter(config_path=cfg)
+def test_a_tool_pair_uses_its_own_l1_and_l2(sim_printer, tmp_path, board):
+    cfg = configured(sim_printer, tmp_path, 1.0, 3.0)  # L0 = 2.5 mm for any change without a pair
+    p = sim_printer(config_path=cfg)
     assert p.send("M926 Itransition_pairs_0 V0:1:0.5:1.0")[-1] == "ok"  # T0 -> T1: 1 mm
     assert p.send("M926 Itransition_pairs_1 V0:99:1:1")[0].startswith(
         "Error:transition_pairs_1: tools (0, 99) must be T0..T15")
@@ -53,9 +53,8 @@ def test_a_tool_pair_uses_its_own_l1_and_l2(tmp_path, board):
     p.send("M500")
     p.finish()
     edges = tmp_path / "run.edges"
-    p = SimPrinter(config_path=cfg, edges_path=edges)
-    for line in ("M302 P1", "M83", "G1 X10 E5 F1200", "T1", "G1 X20 E5", "T0", "G1 X30 E5",
-                 "M400"):
+    p = sim_printer(config_path=cfg, edges_path=edges, cold_extrusion=True)
+    for line in ("M83", "G1 X10 E5 F1200", "T1", "G1 X20 E5", "T0", "G1 X30 E5", "M400"):
         assert p.send(line)[-1] == "ok"
     p.finish()
     t, g, v = trace.read_edges(edges)
@@ -71,10 +70,9 @@ def test_a_tool_pair_uses_its_own_l1_and_l2(tmp_path, board):
     assert abs(x_at(e0[e0 > e1[0]][0]) - 15.0) <= 1.5 / X_SPM
 
 
-def test_too_little_extrusion_before_a_change_is_reported(tmp_path):
-    cfg = configured(tmp_path, 1.0, 3.0)
-    p = SimPrinter(config_path=cfg)
-    p.send("M302 P1")
+def test_too_little_extrusion_before_a_change_is_reported(sim_printer, tmp_path):
+    cfg = configured(sim_printer, tmp_path, 1.0, 3.0)
+    p = sim_printer(config_path=cfg, cold_extrusion=True)
     p.send("M83")
     p.send("G1 X1 E1 F1200")
     reply = p.send("T1")
@@ -86,10 +84,11 @@ def test_too_little_extrusion_before_a_change_is_reported(tmp_path):
 
 
 @pytest.mark.slow
-def test_the_example_print_with_firmware_transitions_keeps_every_step(tmp_path, board):
-    cfg = configured(tmp_path, 1.0, 3.0)
+def test_the_example_print_with_firmware_transitions_keeps_every_step(sim_printer, tmp_path,
+                                                                      board):
+    cfg = configured(sim_printer, tmp_path, 1.0, 3.0)
     gcode = paths.ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
-    p = SimPrinter(config_path=cfg)
+    p = sim_printer(config_path=cfg)
     errors = []
     for line in open(gcode):
         errors += [r for r in p.send(line.rstrip("\n")) if r.startswith("Error")]
@@ -104,16 +103,16 @@ def test_the_example_print_with_firmware_transitions_keeps_every_step(tmp_path, 
 
 
 @pytest.mark.slow
-def test_firmware_transitions_put_every_boundary_where_advance_does(tmp_path, board):
+def test_firmware_transitions_put_every_boundary_where_advance_does(sim_printer, tmp_path, board):
     """The plain example printed with L1 = 1, L2 = 2.5 in firmware switches drives at
     the same steps as the G-code `mixstep advance --l1-mm 1 --l2-mm 2.5` writes: its
     trace passes trace check's move walk against the advanced file, where every drive
     step must fall in the E move that plans it. (L0 = 2.25 mm is 933.75 steps; an L0 of
     2.5 mm would be 1037.5, a tie that the file's 5 decimals can round the other way.)"""
-    cfg = configured(tmp_path, 1.0, 2.5)
+    cfg = configured(sim_printer, tmp_path, 1.0, 2.5)
     gcode = paths.ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
     edges = tmp_path / "run.edges"
-    p = SimPrinter(config_path=cfg, edges_path=edges)
+    p = sim_printer(config_path=cfg, edges_path=edges)
     for line in open(gcode):
         p.send(line.rstrip("\n"))
     p.finish()

@@ -1,0 +1,21 @@
+# For each configuration on stdin (JSON: lists of [option, value text]): the M503 lines
+# after setting it with M926, and those of a fresh configuration given those lines.
+import json
+import sys
+
+import board
+from config_unit import Commands, Flash, PATH
+from mixfw.config import Config
+
+out = []
+for pairs in json.loads(sys.stdin.read()):
+    a = Commands(Config(board.SETTINGS, PATH, Flash()))
+    for name, text in pairs:
+        a.send("M926 I%s V%s" % (name, text))
+    a.send("M503")
+    b = Commands(Config(board.SETTINGS, PATH, Flash()))
+    for line in a.lines:
+        b.send(line[len("echo:"):])
+    b.send("M503")
+    out.append((a.lines, b.lines))
+print(json.dumps(out))

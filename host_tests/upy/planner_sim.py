@@ -1,0 +1,22 @@
+"""The simulated board's printer for the planner scripts, with its planner (pl) and
+two stand-ins for planner._drive_targets, the viper call that plans each drive's
+filament: viper calls it and counts the lines it planned (fast[0]); python plans none
+(returns 0 after its counts), so that every plan is _plan_e's in Python. whole is
+the real one."""
+import simbuild
+from mixfw import planner
+
+printer = simbuild.printer()
+pl = printer.planner
+whole = planner._drive_targets
+fast = [0]
+
+
+def python(words, e_nm, nm, rem):
+    return whole(words, 0, nm, rem) and 0  # counts only
+
+
+def viper(words, e_nm, nm, rem):
+    done = whole(words, e_nm, nm, rem)
+    fast[0] += done
+    return done
