@@ -24,6 +24,8 @@ def expected_steps(path, steps_per_mm, drives=6):
             continue
         words = [(l.upper(), v) for l, v in WORD.findall(code)]
         cmd = words[0][0] + words[0][1]
+        if cmd in ("M117", "M118"):
+            continue  # free text: its letters and digits are no parameters
         params = {l: (float(v) if v else None) for l, v in words[1:]}
         if cmd in ("G0", "G1"):
             target = list(pos)

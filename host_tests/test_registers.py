@@ -43,9 +43,12 @@ def test_register_writes_give_the_same_trace_as_pin_writes(tmp_path, board):
     timer = {"step_backend": "timer"}
     if board == "pico":
         timer["tick_us"] = 50
-    p, pin_edges = run(tmp_path, "pin", dict(timer, pin_writer="pin"), board=board)
+    # The first tool change and the perimeters after it.
+    lines = LINES[:500]
+    p, pin_edges = run(tmp_path, "pin", dict(timer, pin_writer="pin"), lines, board=board)
     pin_steps = p.finish()["steps"]
-    p, reg_edges = run(tmp_path, "reg", dict(timer, pin_writer="registers"), board=board)
+    p, reg_edges = run(tmp_path, "reg", dict(timer, pin_writer="registers"), lines,
+                       board=board)
     steps = p.finish()["steps"]
     assert steps == pin_steps
     assert steps["e0"] > 0 and steps["x"] != 0

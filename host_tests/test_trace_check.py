@@ -14,6 +14,9 @@ from sigrok import need_sigrok
 
 SAMPLES = paths.ROOT / "testdata"
 PRINT = SAMPLES / "part_3tool_prusaslicer_rel.gcode"
+# The print whose trace the corruption tests read: the shortest real slicer file (make
+# test-all checks the whole example part too, with every other file, below).
+PRINTED = SAMPLES / "short_3tool_m117_prusaslicer.gcode"
 # Every committed slicer file; the 100,000-line planner benchmark by its first 1000
 # lines (the rest is the same part again, and would take minutes to simulate).
 BENCH_FILE = SAMPLES / "slic3r_part_x4_100k.gcode"
@@ -45,8 +48,8 @@ def traces(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def printed(traces):
-    """The whole example print, simulated once (about 30 s)."""
-    return traces(PRINT.name)[1]
+    """PRINTED's trace, simulated once."""
+    return traces(PRINTED.name)[1]
 
 
 @pytest.fixture(scope="module")
@@ -101,10 +104,10 @@ def _by_name(report):
 # --- the true trace -------------------------------------------------------------------
 
 def test_the_simulated_print_passes_every_check(printed, capsys):
-    assert _run_cli(printed, "--gcode", PRINT) == 0
+    assert _run_cli(printed, "--gcode", PRINTED) == 0
     out = capsys.readouterr().out
     assert "FAIL" not in out and "OK:" in out
-    assert _run_cli(printed, "--gcode", PRINT, "--json", "-") == 0
+    assert _run_cli(printed, "--gcode", PRINTED, "--json", "-") == 0
     report = json.loads(capsys.readouterr().out)
     by_name = {c["name"]: c for c in report["checks"]}
     assert by_name["steps_e2"]["measured"] == by_name["steps_e2"]["expected"] > 0
@@ -674,9 +677,9 @@ def test_a_dropped_step_pulse_fails(printed, tmp_path):
     fall = text.index(b"\n0" + e1 + b"\n", rise)
     bad = tmp_path / "dropped.vcd"
     bad.write_bytes(text[:rise] + text[rise + len(e1) + 2:fall] + text[fall + len(e1) + 2:])
-    report = tracecheck.check(bad, PRINT)
+    report = tracecheck.check(bad, PRINTED)
     assert "steps_e1" in _failed(report) and "moves" in _failed(report)
-    assert _run_cli(bad, "--gcode", PRINT) == 1
+    assert _run_cli(bad, "--gcode", PRINTED) == 1
 
 
 def test_one_dir_flipped_fails(snippet, tmp_path, capsys):
@@ -728,9 +731,9 @@ def test_a_too_short_pulse_fails(printed, tmp_path):
     early = b"\n#%d\n0" % (t_rise + 1) + e1
     bad = tmp_path / "short.vcd"
     bad.write_bytes(text[:next_stamp] + early + text[next_stamp:fall] + text[fall + len(e1) + 2:])
-    report = tracecheck.check(bad, PRINT)
+    report = tracecheck.check(bad, PRINTED)
     assert _failed(report) == ["pulse_high_us"]
-    assert _run_cli(bad, "--gcode", PRINT) == 1
+    assert _run_cli(bad, "--gcode", PRINTED) == 1
 
 
 def test_a_dir_change_too_close_to_step_fails(printed, tmp_path):
@@ -750,9 +753,9 @@ def test_a_dir_change_too_close_to_step_fails(printed, tmp_path):
     bad = tmp_path / "dir.vcd"
     bad.write_bytes(text[:change.start()] + text[change.end() - 1:rise + 1] + line
                     + text[rise + 1:])
-    report = tracecheck.check(bad, PRINT)
+    report = tracecheck.check(bad, PRINTED)
     assert _failed(report) == ["dir_setup_us"]
-    assert _run_cli(bad, "--gcode", PRINT) == 1
+    assert _run_cli(bad, "--gcode", PRINTED) == 1
 
 
 def test_the_trace_of_another_file_fails(printed):
