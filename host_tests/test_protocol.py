@@ -670,10 +670,17 @@ def check_answers(lines, out, reports=False):
                         and "halted" not in t and "refused" not in t], (line, a)
 
 
-def test_fuzz_intake_parser_and_protocol(mp):
-    per_stream = 120
+# make test fuzzes a third of the streams make test-all does.
+FUZZ_SCALES = [1, pytest.param(3, marks=pytest.mark.slow)]
 
-    @settings(max_examples=90, deadline=None, database=None,
+
+@pytest.mark.parametrize("scale", FUZZ_SCALES)
+def test_fuzz_intake_parser_and_protocol(mp, scale):
+    per_stream = 120
+    streams = 30 * scale
+    before = COUNTS["fuzz"]
+
+    @settings(max_examples=streams, deadline=None, database=None,
               suppress_health_check=list(HealthCheck))
     # M997 ends serving by design (test_safety.py), so no line after it is answered.
     @given(st.lists(_line.filter(lambda b: b"997" not in b), min_size=per_stream,
@@ -686,8 +693,9 @@ def test_fuzz_intake_parser_and_protocol(mp):
         COUNTS["fuzz"] += len(lines)
 
     run()
-    assert COUNTS["fuzz"] >= 10000
-    COUNTS["fuzz_core_ran"] = 1
+    least = streams * per_stream * 9 // 10  # hypothesis may stop a few streams short
+    assert COUNTS["fuzz"] - before >= least
+    COUNTS["fuzz_core_least"] = COUNTS.get("fuzz_core_least", 0) + least
 
 
 # The whole firmware: only commands whose virtual time is bounded (no dwell, homing,
@@ -740,10 +748,12 @@ _full_line = st.one_of(
 ).filter(_safe_for_full_firmware)
 
 
-def test_fuzz_whole_firmware_stream():
+@pytest.mark.parametrize("scale", FUZZ_SCALES)
+def test_fuzz_whole_firmware_stream(scale):
     total = 0
+    streams = 13 * scale
 
-    @settings(max_examples=40, deadline=None, database=None,
+    @settings(max_examples=streams, deadline=None, database=None,
               suppress_health_check=list(HealthCheck))
     @given(st.lists(_full_line, min_size=150, max_size=150))
     def run(lines):
@@ -756,14 +766,14 @@ def test_fuzz_whole_firmware_stream():
         total += len(lines)
 
     run()
-    assert total >= 40 * 150
+    assert total >= streams * 150
 
 
 def test_zz_counts():
-    # Runs last (file order): the numbers asked for in the closing note.
+    # Runs last (file order): how much hostile input the suite sent.
     print("hostile lines sent: %d, fuzz lines: %d, M112 stop times (us): %s"
           % (COUNTS["hostile"], COUNTS["fuzz"], COUNTS.get("m112_stop_us")))
     # Only in the worker that ran the core's fuzzing (pytest-xdist spreads the tests):
     # the whole firmware's fuzzing counts its lines too.
-    if COUNTS.get("fuzz_core_ran"):
-        assert COUNTS["fuzz"] >= 10000
+    if COUNTS.get("fuzz_core_least"):
+        assert COUNTS["fuzz"] >= COUNTS["fuzz_core_least"]
