@@ -87,7 +87,7 @@ def test_a_late_refill_stalls_the_pins_but_makes_no_wrong_step(tmp_path, timer_s
 
 # Stops at every point of a 2 ms batch: at 301 ms the channel that read a segment has
 # ended and the segment was refilled while the FIFO still held its last 8 words (4
-# steps), which the ring no longer had to take back (the count was 4 over the pins).
+# steps), which the ring must still take back (else the count is 4 over the pins).
 # On the RP2350 a channel aborted with EN set can start again (RP2350-E5) and feed the
 # FIFO words of the stopped ring after the restart: the count would be off.
 @pytest.mark.parametrize("board", ["pico", "pico2"])

@@ -239,8 +239,8 @@ def test_the_trace_of_every_real_slicer_file_passes(traces, name):
 
 
 def mixing_gcode():
-    """A short print that uses everything the trace check models: M92 first (as the
-    issue's six-drive file did), a palette and mixtures of it, M163/M164, M165, M567,
+    """A short print that uses everything the trace check models: M92 first (as a
+    six-drive machine's start G-code does), a palette and mixtures of it, M163/M164, M165, M567,
     G10/G11, retractions and a wipe, a gradient along Z and one along the filament, a
     purge longer than one block, and lines the firmware refuses."""
     lines = [
