@@ -17,7 +17,7 @@ from mixfw import cmd_motion, planner as planner_mod, lookahead
 import plan_only
 
 # (label, owner, attribute, parameters): owner is a name looked up in `targets`
-# below. The methods the firmware calls from their class (Planner._plan_e(self, ...))
+# below. The methods the firmware calls from their class (Planner._new_slot(self, ...))
 # are wrapped there. parameters: the function's, as its callers pass them.
 TIMED = (
     ("parse", "parser", "parse", "buf, n"),
@@ -28,13 +28,14 @@ TIMED = (
     ("planner.add_move", "planner", "add_move",
      "target_steps, feed_mm_s, dir_masks=None, e_nm=0, mix=None, replay=False, "
      "homing_axes=0"),
-    ("planner._drive_targets", "planner_mod", "_drive_targets", "a, b, c, d"),
-    ("planner._plan_e", "planner_class", "_plan_e", "self, e_nm, weights=None"),
+    ("filament.plan_e_words", "planner_mod", "plan_e_words", "a, b, c, d"),
+    ("filament.plan_e", "planner_mod", "plan_e", "pl, e_nm, weights=None"),
     ("block_weights", "planner_mod", "block_weights", "a"),
     ("planner._xyz_steps", "planner_mod", "_xyz_steps", "a, b"),
     ("planner._new_slot", "planner_class", "_new_slot", "self, slot"),
     ("planner._plan_move", "planner_mod", "_plan_move", "a, b, c, d, e"),
-    ("planner._remember_extrusion", "planner", "_remember_extrusion", "weights, counts"),
+    ("filament.remember_extrusion", "planner_mod", "remember_extrusion",
+     "pl, weights, counts"),
     ("geometry.lengths", "planner_mod", "_lengths", "a"),
     ("geometry.junction", "planner_mod", "_junction", "a"),
     ("lookahead.plan_words", "planner_mod", "_plan_words", "a"),

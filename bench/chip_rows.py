@@ -262,7 +262,8 @@ def _planner_chip(work, requests, gcode=None, profile=None):
                 raise RuntimeError("chip_main.py answered %s" % answer)
             r = json.loads(found[0][len("bench:"):])
             if r.get("failed") or r["errors"] or r.get("timed", {}).get("errors"):
-                raise RuntimeError("planning on the chip: %s" % r)
+                said = " | ".join(t for t in answer if not t.startswith("bench:"))
+                raise RuntimeError("planning on the chip: %s (it said: %s)" % (r, said))
             got.append(r)
         if profile:  # after the plans: it makes garbage the printers' heap has no room for
             got[-1]["functions"] = [t for t in chip.command("functions")

@@ -119,11 +119,11 @@ def test_alloc_profile_counts_what_each_planner_function_allocates():
     got = json.loads(proc.stdout.strip().splitlines()[-1])
     fns = got["functions"]
     assert got["move_lines"] > 90 and got["bytes_per_line"] > 0
-    for name in ("g1", "planner.add_move", "planner._drive_targets",
+    for name in ("g1", "planner.add_move", "filament.plan_e_words",
                  "lookahead.recalculate"):
         assert 0.9 <= fns[name]["calls_per_line"] <= 1.1, name
-    for inner, outer in (("planner._drive_targets", "planner.add_move"),
-                         ("planner._plan_e", "planner.add_move"),
+    for inner, outer in (("filament.plan_e_words", "planner.add_move"),
+                         ("filament.plan_e", "planner.add_move"),
                          ("lookahead.recalculate", "planner.add_move"),
                          ("planner.add_move", "g1")):
         assert fns[inner]["bytes_per_line"] <= fns[outer]["bytes_per_line"]

@@ -346,7 +346,7 @@ def test_the_program_counters_profile_adds_up_to_the_planners_time(tmp_path):
     line_us = 1e6 / got["move_lines_per_s"]
     assert abs(sum(thread.values()) + sum(irq.values()) - line_us) < 0.01 * line_us
     for name in ("mixfw.cmd_motion.Motion.g1", "mixfw.planner._plan_move",
-                 "mixfw.planner._drive_targets", "mixfw.gcode._scan"):
+                 "mixfw.filament.plan_e_words", "mixfw.gcode._scan"):
         assert thread[name] > 1, name
     assert "stepper.tick" in max(irq, key=irq.get)
     assert 0.05 * line_us < sum(irq.values()) < 0.3 * line_us

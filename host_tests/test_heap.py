@@ -41,7 +41,7 @@ def numbered(lines):
 def test_a_g1_line_takes_nothing_from_the_heap_not_even_a_frame(mp, tmp_path, way):
     """The example's perimeter and infill moves, sent by a host or printed from a file,
     also after 1.2 m of filament on each of the three tools' drives (long: beyond the
-    chips' small ints in nm, see Planner._rebase),
+    chips' small ints in nm, see filament.rebase),
     planned against a full queue: the parse of every line, and every G1 line that
     changes neither the feed rate nor has filament over an eighth of its path (those
     work out new float limits), from its bytes' arrival to its `ok`, take nothing from

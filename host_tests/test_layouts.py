@@ -64,6 +64,13 @@ COPIES = {
         "mixer": ["_MAX_DRIVES"],
         "compat": ["_MASK30"],
     },
+    "filament": {
+        "planner": ["_S_DRIVES", "_AT_COUNTS", "_AT_DRIVE_STEPS", "_AT_TARGETS", "_AT_IO",
+                    "_S_E", "_MAX_PERIOD"],
+        "ramp": ["_IO_LO", "_IO_REM", "_IO_A", "_IO_B", "_IO_C", "_IO_HOW", "_P_LIMBS",
+                 "_AT_BIAS"],
+        "compat": ["_MASK30"],
+    },
     "piodma": {
         "stepper": ["_R_BATCHES", "_R_BUSY_BIT", "_R_CH", "_R_CHAIN_SHIFT", "_R_CH_SEG",
                     "_R_CTRL", "_R_FIRED", "_R_LATE", "_R_READY", "_R_RING_ADDR",
@@ -160,6 +167,7 @@ def test_each_layout_keeps_its_rules():
     st, mixer, ramp = consts("stepper"), consts("mixer"), consts("ramp")
     la, geo, pl, motion = consts("lookahead"), consts("geometry"), consts("planner"), \
         consts("cmd_motion")
+    fil = consts("filament")
     # ramp's io words: the record's, the limbs and the remainder, then product()'s five
     # operands last, every word once.
     io = sorted(v for n, v in ramp.items() if n.lstrip("_").startswith("IO_")
@@ -198,19 +206,19 @@ def test_each_layout_keeps_its_rules():
     # geometry.lengths writes a move's length to the planner's first float.
     assert la["F_MM"] == 0
     # The planner's words: the places of the arrays array_offsets writes in one call
-    # each, _drive_targets' words between them.
+    # each, filament.plan_e_words' words between them.
     places = ["_AT_MEM", "_AT_LK", "_AT_COUNTS", "_AT_GEO", "_AT_DIR_SET", "_AT_DIR_CLR",
               "_AT_WEIGHTS", "_AT_DRIVE_STEPS", "_AT_GIVEN", "_AT_TARGETS", "_AT_IO"]
     assert _words("planner", places) == list(range(pl["_AT_MEM"], pl["_AT_MEM"] + 11))
     assert pl["_S_E"] == pl["_AT_IO"] + 1
-    assert pl["_E_TOTAL"] == pl["_E_STRIDE"] * mixer["MAX_DRIVES"]
-    assert pl["_S_E"] + pl["_E_FITS"] + 1 == pl["_AT_F"] and pl["_AT_XYZ"] == pl["_AT_F"] + 1
+    assert fil["_E_TOTAL"] == fil["_E_STRIDE"] * mixer["MAX_DRIVES"]
+    assert pl["_S_E"] + fil["_E_FITS"] + 1 == pl["_AT_F"] and pl["_AT_XYZ"] == pl["_AT_F"] + 1
     assert pl["_AT_XYZ"] < pl["_S_JOINS"] < pl["_S_MEMO_NEXT"] < pl["_S_WORDS"]
     # cmd_motion's steps/mm words: the places of its five arrays last; 10**12 in limbs.
     assert _words("cmd_motion", ["_SPM_MANT", "_SPM_DEC", "_SPM_OFF", "_SPM_STEPS",
                                  "_SPM_TRAVEL"]) == list(range(motion["SPM_WORDS"] - 5,
                                                                motion["SPM_WORDS"]))
-    assert ((motion["_E12_HI"] << 30) + motion["_E12_LO"] == pl["NM_PER_MM"] * pl["SPM_SCALE"]
+    assert ((motion["_E12_HI"] << 30) + motion["_E12_LO"] == fil["NM_PER_MM"] * fil["SPM_SCALE"]
             == motion["_FIVE6"] ** 2 << 12)
 
 
@@ -226,10 +234,12 @@ def test_the_letters_indexes_are_the_parsers():
 
 OWNERS_ON_THE_PORT = """
 import json
-from mixfw import compat, mixer, ramp, stepper, lookahead, geometry, planner, piodma, cmd_motion
+from mixfw import (compat, mixer, ramp, stepper, lookahead, geometry, filament, planner,
+                   piodma, cmd_motion)
 names = json.loads(%r)
 out = {}
-for m in (compat, mixer, ramp, stepper, lookahead, geometry, planner, piodma, cmd_motion):
+for m in (compat, mixer, ramp, stepper, lookahead, geometry, filament, planner, piodma,
+          cmd_motion):
     key = m.__name__.split(".")[-1]
     out[key] = {n: getattr(m, n, None) for n in names[key]}
 print(json.dumps(out))
@@ -238,8 +248,8 @@ print(json.dumps(out))
 
 def test_the_owners_public_values_are_what_the_firmware_imports(mp):
     # The source's reading of the constants, against the modules themselves.
-    modules = ["compat", "mixer", "ramp", "stepper", "lookahead", "geometry", "planner",
-               "piodma", "cmd_motion"]
+    modules = ["compat", "mixer", "ramp", "stepper", "lookahead", "geometry", "filament",
+               "planner", "piodma", "cmd_motion"]
     public = {m: sorted(n for n in consts(m) if not n.startswith("_")) for m in modules}
     got = mp.json(OWNERS_ON_THE_PORT % json.dumps(public))
     for m in modules:

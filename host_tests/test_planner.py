@@ -4,7 +4,7 @@ plans. Its look-ahead, ramps and geometry have test files of their own
 (test_lookahead.py, test_ramp.py, test_geometry.py)."""
 import json
 
-# --- positions to steps without big ints (planner.scaled_round) --------------------
+# --- positions to steps without big ints (filament.scaled_round) --------------------
 
 
 def test_positions_become_the_same_steps_as_by_the_full_product(mp):
@@ -60,7 +60,7 @@ def test_positions_become_the_same_steps_in_small_ints(mp):
     the options' whole range of steps/mm and positions within +-2**30 nm, on both
     builds."""
     import random
-    from mixfw.planner import scaled_round, steps_per_nm
+    from mixfw.filament import scaled_round, steps_per_nm
     rnd = random.Random(17)
     top = 2 ** 30 - 1
     cases = []
@@ -121,7 +121,7 @@ def test_xyz_words_become_the_exact_nanometres_or_a_clear_refusal(mp):
         if rnd.random() < 0.3:  # again: the steps of the same positions, as it keeps them
             cases.append(cases[-1])
     got = mp.script_json("planner_xyz_targets", stdin=json.dumps(cases).encode())
-    from mixfw.planner import scaled_round, steps_per_nm
+    from mixfw.filament import scaled_round, steps_per_nm
     fractions = [steps_per_nm(s) for s in (80.0, 93.71234, 400.0)]
     e_read = 0
     for (text, pos, relative, travel, at), (verdict, target, steps) in zip(cases, got):
@@ -270,7 +270,7 @@ def test_short_moves_slow_down_while_the_queue_is_under_half_full(mp):
     assert [v2 for _, v2 in got[16:]] == [nominal] * 12  # M205 B0
 
 
-# --- metres of filament: each drive's base (Planner._rebase) ------------------------
+# --- metres of filament: each drive's base (filament.rebase) ------------------------
 
 
 def test_metres_of_filament_give_each_drive_the_same_steps_with_a_base_as_without(mp):
@@ -308,12 +308,12 @@ def test_targets_beyond_the_chips_small_ints_are_refused_as_words_as_in_lists(mp
     assert got == [["move too long", True]] * 4 + [["planned", True]] * 2
 
 
-# --- each drive's plan in one viper call (planner._drive_targets) ------------------
+# --- each drive's plan in one viper call (filament.plan_e_words) ------------------
 
 
 def test_each_drives_plan_in_one_viper_call_is_the_plan_in_python_exactly(mp):
-    """Most lines' filament is planned in _drive_targets (viper, machine words and
-    limbs), else in _plan_e (Python's integers of any size): over mixes whose totals
+    """Most lines' filament is planned in filament.plan_e_words (viper, machine words and
+    limbs), else in filament.plan_e (Python's integers of any size): over mixes whose totals
     and drives' steps per mm fit the words in machine words, in limbs or not at all,
     extrusion and retraction past zero filament, and moves long enough to move a
     drive's base, every drive's steps after every move, its target and its exact
@@ -327,7 +327,7 @@ def test_each_drives_plan_in_one_viper_call_is_the_plan_in_python_exactly(mp):
 
 
 def _edge_cases():
-    """Filament that leaves drive 0 where _drive_targets' arithmetic turns: exactly
+    """Filament that leaves drive 0 where plan_e_words' arithmetic turns: exactly
     half a step (rounded away from zero), and a negative filament whose remainder
     borrows a whole q; with mixes whose steps fit machine words, limbs or neither."""
     import random
@@ -361,9 +361,9 @@ def _edge_cases():
 
 
 def test_each_drives_plan_in_one_viper_call_is_exact_where_its_arithmetic_turns(mp):
-    """_drive_targets' step for filament at exactly half a step, and for negative
+    """plan_e_words' step for filament at exactly half a step, and for negative
     filament whose remainder borrows a whole q, in machine words and in limbs, is
-    _plan_e's in Python; and so are its filament and remainder."""
+    plan_e's in Python; and so are its filament and remainder."""
     cases = _edge_cases()
     fast, got = mp.script_json("planner_drive_target_edges", stdin=json.dumps(cases).encode())
     assert len(got) == len(cases) > 300

@@ -6,7 +6,7 @@ from mixfw.compat import const
 from mixfw.gcode import GcodeError
 from mixfw.mixer import normalize
 from mixfw.gradient import Gradient, ALONG_Z, ALONG_E
-from mixfw.planner import NM_PER_MM
+from mixfw.filament import NM_PER_MM
 
 _MARLIN_LETTERS = const("ABCDHI")  # Marlin's letters for drives 0..5 in M165
 

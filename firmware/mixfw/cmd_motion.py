@@ -2,8 +2,8 @@
 # Handlers parse and check; the planner does the work.
 from array import array
 from mixfw.gcode import GcodeError, letter_index
-from mixfw.planner import (array_offsets, nm_from_mm, scaled_round, spm_digits,
-                           steps_per_nm, NM_PER_MM)
+from mixfw.filament import nm_from_mm, scaled_round, spm_digits, steps_per_nm, NM_PER_MM
+from mixfw.ramp import array_offsets
 from mixfw import stepper as st
 from mixfw.compat import const, micropython, ptr8, ptr32
 
@@ -67,14 +67,14 @@ def xyz_targets(spm_buf, named: int, pos_buf, target_buf, at) -> int:
     target: pos's where not named, added to pos's if relative (spm_buf's modes word). Further decimals round
     half away from zero, as Line.fixed_at. Then each axis's absolute step at its
     machine position (target + G92's offset) into the steps array, with the steps/mm
-    planner.spm_digits put in spm_buf (SPM_WORDS: the step an axis had at the same
+    filament.spm_digits put in spm_buf (SPM_WORDS: the step an axis had at the same
     position is taken again, as a line mostly leaves Z). An E word named goes, as
     nanometres, into the steps array's word 4 where it is within +-_MASK30. The line's
     words, the offsets, the steps and the soft limits' travel are the arrays whose
-    places spm_buf holds (_SPM_MANT on: planner.array_offsets).
+    places spm_buf holds (_SPM_MANT on: ramp.array_offsets).
 
     A step is div_round(nm * spm_fixed, NM_PER_MM * SPM_SCALE), the integer
-    planner.scaled_round gives, in small ints where scaled_round's products pass them
+    filament.scaled_round gives, in small ints where scaled_round's products pass them
     for most steps/mm: (2 |nm| spm + 10**12) in three 30-bit limbs, shifted right 13
     bits, then over 5**6 twice, each in three machine divisions. Written out here, as
     a call of its own would cost the chip about 5 us an axis.

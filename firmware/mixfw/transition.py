@@ -6,7 +6,7 @@
 # Only positive extrusion on moves that also move X, Y or Z counts, as in `advance`.
 # A tool pair may have its own L1 and L2 (transition_pairs); other changes use the
 # defaults. Extrusion is counted in integer nanometres, as the planner takes it.
-from mixfw.planner import nm_from_mm, div_round
+from mixfw.filament import nm_from_mm, div_round
 
 
 def l0_mm(l1_mm, l2_mm):

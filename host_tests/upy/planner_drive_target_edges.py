@@ -1,11 +1,12 @@
 # For each case on stdin (JSON: steps/mm, weights, drive 0's filament and remainder
 # after the move, the move's filament in nm): drive 0's filament, remainder and the
-# drives' targets planned by _drive_targets (viper) and by _plan_e in Python; first the
+# drives' targets planned by filament.plan_e_words (viper) and by filament.plan_e in Python; first the
 # lines the viper call planned.
 import json
 import sys
 
-from planner_sim import fast, pl, planner, python, viper, whole
+from mixfw import filament
+from planner_sim import fast, pl, python, use, viper, whole
 
 out = []
 for spm, w, nm_f, rem_f, e_nm in json.loads(sys.stdin.read()):
@@ -14,7 +15,7 @@ for spm, w, nm_f, rem_f, e_nm in json.loads(sys.stdin.read()):
     total = sum(w)
     got = []
     for plan in (viper, python):
-        planner._drive_targets = plan
+        use(plan)
         pl._shares = (w, total)  # the planner's weights, as after a move with them
         for i in range(pl.drives):
             # The filament before the move that leaves drive 0 at nm_f + rem_f / total.
@@ -24,9 +25,9 @@ for spm, w, nm_f, rem_f, e_nm in json.loads(sys.stdin.read()):
             pl.drive_rem[i] = rem
         pl.targets_known = True
         pl.rem_total = total
-        pl.resync()  # the words from that state
-        pl._plan_e(e_nm, w)
+        filament.resync(pl)  # the words from that state
+        filament.plan_e(pl, e_nm, w)
         got.append([pl.drive_nm[0], pl.drive_rem[0], list(pl.drive_targets)])
     out.append(got)
-planner._drive_targets = whole
+use(whole)
 print(json.dumps([fast[0], out]))

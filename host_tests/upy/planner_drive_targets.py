@@ -1,17 +1,17 @@
 # 800 moves over mixes, extrusion and retraction past zero filament and metres forward,
-# each drive's filament planned by _drive_targets (viper) where it can; stdin "python":
-# every plan by _plan_e in Python. Prints every drive's steps after every move, the
+# each drive's filament planned by filament.plan_e_words (viper) where it can; stdin "python":
+# every plan by filament.plan_e in Python. Prints every drive's steps after every move, the
 # targets, filament, remainders, bases, and how many lines the viper call planned.
 import json
 import sys
 
-from planner_sim import fast, pl, planner, printer, python, viper
+from planner_sim import fast, pl, printer, python, use, viper
 from plan_only import retire_all
 
 pl.idle = retire_all(printer.mem, pl.queue)
-planner._drive_targets = python if sys.stdin.read() == "python" else viper
+use(python if sys.stdin.read() == "python" else viper)
 # Steps per mm whose p / q fit the words in machine words, in limbs, or not at all
-# (a calibrated drive's 93.71234: _plan_e plans every mix it has a share in).
+# (a calibrated drive's 93.71234: plan_e plans every mix it has a share in).
 pl.set_drive_steps([415.0, 80.0, 400.5, 93.71234, 415.0, 2000.0][:pl.drives])
 seed = [12345]
 

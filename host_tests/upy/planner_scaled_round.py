@@ -3,7 +3,7 @@
 import json
 import sys
 
-from mixfw.planner import NM_PER_MM, SPM_SCALE, div_round, scaled_round, spm_fixed, steps_per_nm
+from mixfw.filament import NM_PER_MM, SPM_SCALE, div_round, scaled_round, spm_fixed, steps_per_nm
 
 out = []
 for spm, x in json.loads(sys.stdin.read()):

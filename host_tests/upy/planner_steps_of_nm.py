@@ -5,7 +5,8 @@ import sys
 from array import array
 
 from mixfw.cmd_motion import SPM_WORDS, xyz_targets
-from mixfw.planner import array_offsets, scaled_round, spm_digits, steps_per_nm
+from mixfw.filament import scaled_round, spm_digits, steps_per_nm
+from mixfw.ramp import array_offsets
 
 nm = array("i", bytes(12))
 zeros = array("i", bytes(12))

@@ -7,7 +7,8 @@ from array import array
 
 from mixfw.cmd_motion import MOVE_BITS, SPM_WORDS, xyz_targets
 from mixfw.gcode import Parser
-from mixfw.planner import array_offsets, spm_digits
+from mixfw.filament import spm_digits
+from mixfw.ramp import array_offsets
 
 p = Parser()
 spm = array("i", bytes(4 * SPM_WORDS))
