@@ -78,14 +78,28 @@ def test_the_step_path_list_holds_what_the_interrupts_import():
 
 def test_deploy_frozen_copies_only_board_py_and_the_step_path(tmp_path):
     cmds = [[str(c) for c in cmd[3:]] for cmd in deploy.frozen_commands(tmp_path, "COM3")]
-    # The old package goes first: a mixfw folder on the board would hide the frozen one.
-    assert cmds[0][0] == "exec" and "rm('mixfw')" in cmds[0][1]
+    # The old package goes first (a mixfw folder on the board would hide the frozen one),
+    # kept as mixfw.bak until the new files are on.
+    assert cmds[0][0] == "exec" and "os.rename('mixfw', 'mixfw.bak')" in cmds[0][1]
     assert "rm('mixfw_ram')" in cmds[0][1]
     assert cmds[1] == ["cp", str(tmp_path / "board.py"), ":"]
     assert cmds[2] == ["mkdir", ":mixfw_ram"]
     assert cmds[3] == (["cp"] + [str(tmp_path / "mixfw" / (n + ".mpy"))
                                  for n in inram.STEP_PATH] + [":mixfw_ram/"])
-    assert cmds[4] == ["reset"]
+    assert cmds[4][0] == "exec" and cmds[4][1].endswith("rm('mixfw.bak')\n")
+    assert cmds[5] == ["reset"]
+
+
+def test_deploy_keeps_the_boards_own_board_py_unless_forced(tmp_path):
+    def copies(board_py):
+        return [[str(c) for c in cmd[3:]] for cmd in deploy.deploy_commands(
+            tmp_path, "COM3", board_py)]
+    board_py = str(tmp_path / "board.py")
+    assert any(board_py in cmd for cmd in copies("copy"))
+    assert not any(board_py in cmd for cmd in copies("keep"))
+    forced = copies("replace")
+    at = [i for i, cmd in enumerate(forced) if board_py in cmd][0]
+    assert "os.rename('board.py', 'board.py.bak')" in forced[at - 1][1]
 
 
 def test_deploy_frozen_dry_run(capsys):

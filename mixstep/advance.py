@@ -75,6 +75,7 @@ import sys
 from collections import deque
 
 from mixstep import gcodeio
+from mixstep.outfile import refuse_input, replacing
 
 _SNAP_MM = 5e-6     # a split closer than this to a move's end is not worth a new line
 _E_EPS_MM = 1e-7    # retraction debt below this is rounding, not filament
@@ -139,6 +140,8 @@ class PurgeMatrix:
 
 def l0_mm(l1_mm, l2_mm):
     """Ovenbird's advancement length: the delay plus half the transition."""
+    if l1_mm < 0 or l2_mm < 0:
+        raise ValueError("lengths must be >= 0 mm, got L1 %g, L2 %g" % (l1_mm, l2_mm))
     return l1_mm + l2_mm / 2.0
 
 
@@ -465,10 +468,12 @@ def advance(lines_in, write, purge_for, max_purge_mm=None,
 
 def advance_file(in_path, out_path, purge_for, max_purge_mm=None,
                  max_buffer_lines=_DEFAULT_MAX_BUFFER_LINES, on_record=None):
-    """advance() from one file to another; lines are kept byte for byte."""
+    """advance() from one file to another; lines are kept byte for byte. The output
+    is written whole or not at all, and never over the input."""
+    refuse_input(out_path, in_path)
     with open(in_path, newline="", encoding="utf-8", errors="surrogateescape") as fin, \
-            open(out_path, "w", newline="", encoding="utf-8", errors="surrogateescape",
-                 buffering=1 << 20) as fout:
+            replacing(out_path, "w", newline="", encoding="utf-8", errors="surrogateescape",
+                      buffering=1 << 20) as fout:
         return advance(fin, fout.write, purge_for, max_purge_mm, max_buffer_lines, on_record)
 
 
@@ -507,6 +512,7 @@ def main(args):
     # Changes and warnings are printed as they are made, and the JSON report (one
     # record per line, then a summary line) is written as it goes: the command's
     # memory does not grow with the file.
+    refuse_input(args.report, args.gcode, args.output, what="report")
     report_file = None
     if args.report == "-":
         report_file = sys.stdout

@@ -1,8 +1,10 @@
 """The `mixstep` command."""
 import argparse
+import signal
 import sys
 
 from mixstep import paths
+from mixstep.outfile import UsageError
 
 
 def _sim(args):
@@ -78,7 +80,25 @@ def main(argv=None):
     from mixstep import emu  # `mixstep emu print`: the firmware on an emulated Pico
     emu.add_parser(sub)
     args = parser.parse_args(argv)
-    return args.run(args)
+    name = "mixstep " + args.command
+    signal.signal(signal.SIGTERM, _terminated)
+    try:
+        return args.run(args)
+    except KeyboardInterrupt:
+        print("%s: interrupted" % name, file=sys.stderr)
+        return 130
+    except (UsageError, ValueError) as err:
+        print("%s: %s" % (name, err), file=sys.stderr)
+        return 2
+    except OSError as err:  # a file that isn't there, a folder, a port in use
+        what = ": %s" % err.filename if getattr(err, "filename", None) else ""
+        print("%s: %s%s" % (name, err.strerror or err, what), file=sys.stderr)
+        return 2
+
+
+def _terminated(signum, frame):
+    # SIGTERM as Ctrl-C: every `with` and `finally` runs, so no temporary file stays.
+    raise KeyboardInterrupt
 
 
 if __name__ == "__main__":

@@ -37,10 +37,11 @@ SOURCE_FILES = ("boot.py", "main.py", "board.py")
 INFO_CODE = ("import sys, json; i = sys.implementation; print(json.dumps({"
              "'version': list(i.version[:3]), 'mpy': getattr(i, '_mpy', None), "
              "'platform': sys.platform, 'machine': getattr(i, '_machine', '')}))")
-# Run on the board: remove the previous mixfw package and step path copy, so no stale
-# module survives (a left-over .py would even win over the new .mpy, and a mixfw folder
-# would hide a frozen one). /mixstep.cfg stays.
-REMOVE_CODE = ("import os\n"
+# Run on the board: keep the previous mixfw package as mixfw.bak until the new one is
+# on (a copy cut short leaves the old firmware to put back), and remove the step path
+# copy, so no stale module survives (a left-over .py would even win over the new .mpy,
+# and a mixfw folder would hide a frozen one). /mixstep.cfg stays.
+_RM_CODE = ("import os\n"
                "def rm(p):\n"
                "    try:\n"
                "        mode = os.stat(p)[0]\n"
@@ -51,9 +52,25 @@ REMOVE_CODE = ("import os\n"
                "            rm(p + '/' + n)\n"
                "        os.rmdir(p)\n"
                "    else:\n"
-               "        os.remove(p)\n"
-               "rm('mixfw')\n"
+               "        os.remove(p)\n")
+REMOVE_CODE = (_RM_CODE + "rm('mixfw.bak')\n"
+               "try:\n"
+               "    os.rename('mixfw', 'mixfw.bak')\n"
+               "except OSError:\n"
+               "    pass\n"
                "rm('%s')\n" % inram.RAM_DIR.lstrip("/"))
+# Run on the board once the new package is on.
+DROP_BACKUP_CODE = _RM_CODE + "rm('mixfw.bak')\n"
+# Run on the board: whether it has a board.py of its own (the user's, edited there).
+HAS_BOARD_CODE = ("import os, json\n"
+                  "print(json.dumps({'board_py': 'board.py' in os.listdir()}))")
+# Run on the board before a board.py replaces the user's: the old one is kept.
+BACKUP_BOARD_CODE = ("import os\n"
+                     "try:\n"
+                     "    os.remove('board.py.bak')\n"
+                     "except OSError:\n"
+                     "    pass\n"
+                     "os.rename('board.py', 'board.py.bak')\n")
 
 
 class DeployError(Exception):
@@ -244,49 +261,78 @@ def wait_for_port(port, wait_s):
     raise DeployError("%s did not come back after M997 within %.0f s" % (port, wait_s))
 
 
-def deploy_commands(out, port):
+def _board_py_commands(out, c, board_py):
+    """board_py: "copy" (the board has none), "replace" (--force: the board's is kept as
+    board.py.bak) or "keep" (the board's own stays)."""
+    if board_py == "keep":
+        return []
+    backup = [c + ["exec", BACKUP_BOARD_CODE]] if board_py == "replace" else []
+    return backup + [c + ["cp", out / "board.py", ":"]]
+
+
+def deploy_commands(out, port, board_py="copy"):
     """The mpremote commands that put build dir `out` onto the board."""
     c = _connect(port)
-    return [c + ["exec", REMOVE_CODE],
-            c + ["cp"] + [out / name for name in SOURCE_FILES] + [":"],
-            c + ["cp", "-r", out / "mixfw", ":"],
-            c + ["reset"]]
+    sources = [out / name for name in SOURCE_FILES if name != "board.py"]
+    return ([c + ["exec", REMOVE_CODE],
+             c + ["cp"] + sources + [":"]]
+            + _board_py_commands(out, c, board_py)
+            + [c + ["cp", "-r", out / "mixfw", ":"],
+               c + ["exec", DROP_BACKUP_CODE],
+               c + ["reset"]])
 
 
-def frozen_commands(out, port):
+def frozen_commands(out, port, board_py="copy"):
     """The mpremote commands for a board whose image has the firmware frozen in:
     board.py, and the step path's modules into inram.RAM_DIR, from which the frozen
     firmware loads their code into RAM (mixfw/inram.py)."""
     c = _connect(port)
     ram_dir = inram.RAM_DIR.lstrip("/")
-    return [c + ["exec", REMOVE_CODE],
-            c + ["cp", out / "board.py", ":"],
-            c + ["mkdir", ":" + ram_dir],
-            c + ["cp"] + [out / "mixfw" / (name + ".mpy") for name in inram.STEP_PATH]
-            + [":" + ram_dir + "/"],
-            c + ["reset"]]
+    return ([c + ["exec", REMOVE_CODE]]
+            + _board_py_commands(out, c, board_py)
+            + [c + ["mkdir", ":" + ram_dir],
+               c + ["cp"] + [out / "mixfw" / (name + ".mpy") for name in inram.STEP_PATH]
+               + [":" + ram_dir + "/"],
+               c + ["exec", DROP_BACKUP_CODE],
+               c + ["reset"]])
 
 
-def deploy(board, port, dry_run=False, frozen=False):
+def _board_py(port, force):
+    """What to do with board.py on the board (see _board_py_commands), asked of it."""
+    has = _json_line(_run(_connect(port) + ["exec", HAS_BOARD_CODE], capture=True))
+    if not has.get("board_py"):
+        return "copy"
+    return "replace" if force else "keep"
+
+
+def deploy(board, port, dry_run=False, frozen=False, force=False):
     chip = board_chip(board)
     out = build(board)
     headers = [mpy_header(p) for p in sorted((out / "mixfw").glob("*.mpy"))]
     info_cmd = _connect(port) + ["exec", INFO_CODE]
-    commands = (frozen_commands if frozen else deploy_commands)(out, port)
+    make = frozen_commands if frozen else deploy_commands
     if dry_run:
         print("# built %s (%d modules, -march=%s); on the board this would run:"
               % (out, len(headers), MARCH[chip]))
         print("# send M997 on %s: a running mixstep restarts into the REPL once" % port)
         print("# check the board's MicroPython (version, .mpy ABI) before copying:")
-        for cmd in [info_cmd] + commands:
+        for cmd in [info_cmd] + make(out, port, "replace" if force else "copy"):
             _show(cmd)
+        print("# board.py goes on only where the board has none%s" % (
+            "" if force else " (--force replaces the board's, kept as board.py.bak)"))
         return 0
     stop_firmware(port)
     info = _json_line(_run(info_cmd, capture=True))
     check_board_info(info, chip)
     check_mpy_compatible(info.get("mpy"), headers)
-    for cmd in commands:
+    board_py = _board_py(port, force)
+    for cmd in make(out, port, board_py):
         _run(cmd)
+    if board_py == "keep":
+        print("kept the board's own board.py; --force replaces it with %s (the board's "
+              "kept as board.py.bak)" % (paths.BOARDS / board / "board.py"))
+    elif board_py == "replace":
+        print("replaced the board's board.py; its old one is board.py.bak")
     print("deployed %s to %s (MicroPython %s)" % (board, port, ".".join(map(str, info["version"]))))
     return 0
 
@@ -349,7 +395,7 @@ def evaluate_check(report):
     return problems
 
 
-def board_check(board, port, dry_run=False):
+def board_check(board, port, dry_run=False, force=False):
     board_chip(board)
     c = _connect(port)
     push = c + ["cp", paths.BOARDS / board / "board.py", ":board.py"]
@@ -360,6 +406,13 @@ def board_check(board, port, dry_run=False):
             _show(cmd)
         return 0
     stop_firmware(port)
+    board_py = _board_py(port, force)
+    if board_py == "keep":
+        raise DeployError("the board has a board.py of its own, which board-check would "
+                          "replace with %s: --force does (the board's is kept as "
+                          "board.py.bak)" % (paths.BOARDS / board / "board.py"))
+    if board_py == "replace":
+        _run(c + ["exec", BACKUP_BOARD_CODE])
     _run(push)
     report = _json_line(_run(run, capture=True))
     print(json.dumps(report))
@@ -388,7 +441,10 @@ def add_parser(sub):
                    help="the board runs an image with the firmware frozen in (mixstep "
                         "freeze): copy only board.py and the step path's modules, "
                         "which run from RAM")
-    p.set_defaults(run=lambda a: _guard(deploy, a.board, a.port, a.dry_run, a.frozen))
+    p.add_argument("--force", action="store_true",
+                   help="replace the board's own board.py (kept as board.py.bak)")
+    p.set_defaults(run=lambda a: _guard(deploy, a.board, a.port, a.dry_run, a.frozen,
+                                        a.force))
     p = sub.add_parser("freeze", help="print how to build a MicroPython image with the "
                                       "firmware frozen in")
     p.add_argument("--board", required=True, help="board name (boards/<NAME>)")
@@ -399,4 +455,7 @@ def add_parser(sub):
     p.add_argument("--port", required=True, help="the board's serial port")
     p.add_argument("--dry-run", action="store_true",
                    help="print the mpremote commands instead of running them")
-    p.set_defaults(run=lambda a: _guard(board_check, a.board, a.port, a.dry_run))
+    p.add_argument("--force", action="store_true",
+                   help="replace the board's own board.py (kept as board.py.bak)")
+    p.set_defaults(run=lambda a: _guard(board_check, a.board, a.port, a.dry_run,
+                                        a.force))

@@ -22,6 +22,7 @@ import os
 import re
 
 from mixstep import gcodeio
+from mixstep.outfile import refuse_input, replacing
 
 _COMMAND = re.compile(rb"\s*[A-Za-z]\s*[\d.]*")
 _TOOL_WORD = re.compile(rb"[Tt]\s*(\d+)")
@@ -126,7 +127,8 @@ def detool(in_path, out_path, matrix):
     active = tools[0] if tools else 0
     converted = dropped = 0
     header_done = False
-    with open(in_path, "rb") as fin, open(out_path, "wb") as fout:
+    refuse_input(out_path, in_path)
+    with open(in_path, "rb") as fin, replacing(out_path, "wb") as fout:
         for raw, code, words in _tool_lines(fin):
             if not header_done:
                 stripped = raw.strip()

@@ -407,11 +407,30 @@ def _setting(text):
     return key, boards.setting_value(value)
 
 
+# The step paths that run a timer callback every tick (timer, pio) need ticks this long
+# on an RP2040: a callback costs about 15 us (boards/pico/board.py).
+_CALLBACK_TICK_MIN_US = 50
+
+
+def check_tick(board, settings):
+    """EmuError for a step path a tick too short for it, said before the emulator
+    spends a minute finding out."""
+    s = dict(paths.load_board(board)["SETTINGS"], **settings)
+    if s.get("step_backend") in ("timer", "pio") and s["tick_us"] < _CALLBACK_TICK_MIN_US:
+        raise EmuError("step_backend %s runs a timer callback every tick, which takes "
+                       "about 15 us on an RP2040: %d us ticks leave it no time; add "
+                       "--set tick_us=%d" % (s["step_backend"], s["tick_us"],
+                                             _CALLBACK_TICK_MIN_US))
+
+
 def _print(args):
     try:
-        report = run(args.gcode or paths.EXAMPLE_GCODE, args.board, args.trace, args.report,
-                     args.image, args.diag_every, args.max_emu_s, args.max_wall_s,
-                     settings=dict(_setting(t) for t in args.set))
+        settings = dict(_setting(t) for t in args.set)
+        check_tick(args.board, settings)
+        # The excerpt `make emu` prints: the whole example takes the emulator hours.
+        report = run(args.gcode or paths.ROOT / "testdata" / "part_3tool_emu_excerpt.gcode",
+                     args.board, args.trace, args.report, args.image, args.diag_every,
+                     args.max_emu_s, args.max_wall_s, settings=settings)
     except (EmuError, deploy.DeployError) as e:
         print("mixstep emu: %s" % e, file=sys.stderr)
         return 2
@@ -428,7 +447,8 @@ def add_parser(sub):
     esub = p.add_subparsers(dest="emu_command", required=True)
     q = esub.add_parser("print", help="boot the firmware on an emulated Pico and print a "
                                       "G-code file over its USB console")
-    q.add_argument("gcode", nargs="?", help="G-code file (default: the example 3-colour print)")
+    q.add_argument("gcode", nargs="?", help="G-code file (default: the first lines of the "
+                                            "example 3-colour print, as make emu prints)")
     q.add_argument("--board", default="pico", help="an RP2040 board (boards/<name>)")
     q.add_argument("--trace", help="write the STEP/DIR/ENABLE trace here (VCD, 1 ns)")
     q.add_argument("--report", help="write the JSON report here")

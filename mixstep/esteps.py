@@ -13,6 +13,8 @@ is (nozzle/filament)^2 mm of filament.
 """
 import math
 
+from mixfw.mixer import MAX_DRIVES
+
 
 def filament_steps_per_mm(motor_steps, microsteps, gear_ratio, drive_diameter_mm):
     """Steps that feed 1 mm of filament. gear_ratio is motor turns per drive-gear turn."""
@@ -48,8 +50,9 @@ def mcodes(steps_per_mm, drive=None):
     value = "%.3f" % steps_per_mm
     if drive is None:
         return ["M92 E" + value, "M926 Isteps_per_mm_e V%s ; or this, then M930" % value]
-    if drive < 0:
-        raise ValueError("drive must be >= 0, got %d" % drive)
+    if not 0 <= drive < MAX_DRIVES:
+        raise ValueError("--drive %d: the firmware's drives are 0 to %d"
+                         % (drive, MAX_DRIVES - 1))
     return ["M926 Idrive_steps_per_mm_%d V%s" % (drive, value), "M930"]
 
 

@@ -31,6 +31,8 @@ import re
 import numpy as np
 
 from mixstep import gcodeio
+from mixstep.outfile import temporary_path
+from mixfw.mixer import MAX_DRIVES
 
 DEFAULT_COLORS = "#e03030,#30a0e0,#f0d020,#40c040,#a050d0,#f0f0f0"
 EXTRUDATE_WIDTH_MM = 0.45  # drawn line width; slicers' usual width for a 0.4 mm nozzle
@@ -113,6 +115,8 @@ class Toolpath:
     the mixture fed (designed) and the mixture coming out (r)."""
 
     def __init__(self, drives, l1_mm, l2_mm, matrix=None):
+        if l1_mm < 0 or l2_mm < 0:
+            raise ValueError("lengths must be >= 0 mm, got L1 %g, L2 %g" % (l1_mm, l2_mm))
         self.drives = drives
         self.l1_mm, self.l2_mm = l1_mm, l2_mm
         self.tools = {}
@@ -137,6 +141,10 @@ class Toolpath:
             w = np.zeros(self.drives)
             if tool < self.drives:
                 w[tool] = 1.0
+            elif self.drives < MAX_DRIVES:
+                raise ValueError("the file selects T%d but only %d colours are given: give "
+                                 "one per filament (--colors) or a --matrix"
+                                 % (tool, self.drives))
             else:
                 w[:] = 1.0 / self.drives  # the firmware's default above the drive count
             self.tools[tool] = w
@@ -260,7 +268,9 @@ def collect(path, drives, l1_mm, l2_mm, matrix=None, layer=None, all_layers=Fals
     current = None
     chosen = layer
     finished = False
+    last = -1
     for lay, z_mm, xy, mix, out in tp.pieces(path):
+        last = lay
         item = (lay, z_mm, xy, out)
         if all_layers:
             keep.append(item)
@@ -279,6 +289,8 @@ def collect(path, drives, l1_mm, l2_mm, matrix=None, layer=None, all_layers=Fals
                         first_layer = keep
                 keep, current = [], lay
             keep.append(item)
+    if layer is not None and not keep:
+        raise ValueError("%s has no layer %d: its layers are 0 to %d" % (path, layer, last))
     if not all_layers and layer is None and not finished:
         if keep and _blends(keep, tp.used_mixes) or first_layer is None:
             chosen = current
@@ -420,7 +432,8 @@ def render(paths, out_png, l1_mm=1.0, l2_mm=1.5, colors=DEFAULT_COLORS, matrix=N
     fig.tight_layout(rect=(0, 0.08, 1, 0.98))
     for ax, collections in widths:
         _set_widths(ax, collections, EXTRUDATE_WIDTH_MM)
-    fig.savefig(out_png)
+    with temporary_path(out_png) as part:
+        fig.savefig(part, format="png")
     plt.close(fig)
     return drawn
 

@@ -17,6 +17,7 @@ import ctypes
 import os
 import selectors
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -86,8 +87,25 @@ def stop(proc, timeout_s=5):
             proc.wait()
 
 
+def _check_free(address):
+    """OSError (EADDRINUSE, or an address this machine doesn't have) before the
+    firmware starts, so that nothing is announced that won't listen."""
+    host, _, port = address.rpartition(":")
+    try:
+        port = int(port)
+    except ValueError:
+        raise ValueError("--tcp wants HOST:PORT, got %r" % address)
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            s.bind((host or "0.0.0.0", port))
+        except OSError as err:
+            raise OSError(err.errno, "can't listen on %s: %s" % (address, err.strerror))
+
+
 def serve_tcp(address, realtime=1.0, announce=print, settings=None, config=None, files=None,
               console_log=None):
+    _check_free(address)
     proc = _start(_command(address, realtime, stdio=False, settings=settings, config=config,
                            files=files, console_log=console_log),
                   stdin=subprocess.DEVNULL)

@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 from mixstep import paths, trace
+from mixstep.outfile import refuse_input, replacing, temporary_path
 from mixstep.simprinter import SimPrinter
 
 HEAP_CODE = paths.BOARDS / "sim" / "heap_code.py"
@@ -20,26 +21,37 @@ def run(gcode_path, trace_path=None, report_path=None, heap_lock=False, edges_pa
     files_dir: the simulated flash (M500, M20-M32), none by default; settings: board
     settings to override, as `mixstep serve --set` ({"retract_policy": 2})."""
     gcode_path = Path(gcode_path)
-    tmp = tempfile.TemporaryDirectory(prefix="mixstep-sim-")
-    edges = Path(edges_path) if edges_path else Path(tmp.name) / "run.edges"
-    wall0 = time.perf_counter()
-    printer = SimPrinter(edges_path=edges, heap_lock=heap_lock, board=board,
-                         config_path=config_path, files_dir=files_dir, settings=settings)
-    errors = []
-    lines = 0
-    with open(gcode_path, "r", encoding="ascii", errors="replace") as f:
-        for number, raw in enumerate(f, 1):
-            replies = printer.send(raw.rstrip("\r\n"))
-            lines += 1
-            for text in replies:
-                if text.startswith("Error:"):
-                    errors.append("line %d: %s" % (number, text))
-    fw = printer.finish()
-    sim_wall = time.perf_counter() - wall0
-    if trace_path:
-        trace.write_vcd(edges, trace_path, board)
-    steps = trace.net_steps(edges, board)
-    wall = time.perf_counter() - wall0
+    for out in (trace_path, report_path, edges_path):
+        refuse_input(out, gcode_path)
+    # The edges of a run (tens of MB) live in a temporary folder that goes on every
+    # exit, an error or Ctrl-C (and SIGTERM, which the command turns into an exit).
+    with tempfile.TemporaryDirectory(prefix="mixstep-sim-") as tmp, \
+            open(gcode_path, "r", encoding="ascii", errors="replace") as f:
+        edges = Path(edges_path) if edges_path else Path(tmp) / "run.edges"
+        wall0 = time.perf_counter()
+        printer = SimPrinter(edges_path=edges, heap_lock=heap_lock, board=board,
+                             config_path=config_path, files_dir=files_dir,
+                             settings=settings)
+        errors = []
+        lines = 0
+        try:
+            for number, raw in enumerate(f, 1):
+                replies = printer.send(raw.rstrip("\r\n"))
+                lines += 1
+                for text in replies:
+                    if text.startswith("Error:"):
+                        errors.append("line %d: %s" % (number, text))
+            fw = printer.finish()
+        except BaseException:
+            printer.proc.kill()
+            printer.proc.wait()
+            raise
+        sim_wall = time.perf_counter() - wall0
+        if trace_path:
+            with temporary_path(trace_path) as part:
+                trace.write_vcd(edges, part, board)
+        steps = trace.net_steps(edges, board)
+        wall = time.perf_counter() - wall0
     report = {
         "gcode": str(gcode_path),
         "board": board,
@@ -66,8 +78,8 @@ def run(gcode_path, trace_path=None, report_path=None, heap_lock=False, edges_pa
         "trace": str(trace_path) if trace_path else None,
     }
     if report_path:
-        Path(report_path).write_text(json.dumps(report, indent=2) + "\n")
-    tmp.cleanup()
+        with replacing(report_path) as out:
+            out.write(json.dumps(report, indent=2) + "\n")
     return report
 
 
