@@ -24,6 +24,21 @@ def test_matrix_rows_are_normalised_and_bad_rows_refused(tmp_path):
         detool.parse_matrix("1,0;1,0,0")
 
 
+def test_small_weights_are_written_as_plain_decimals_the_firmware_reads_whole(sim_printer):
+    """0.0001 as %g writes it (1e-04) would be read by any G-code parser as 1 followed
+    by an E word: the mix 1:0.0001 written out must come back as 9999:1 from the
+    firmware itself."""
+    text = detool.header([[1.0, 0.0001, 0.0]], [0]).decode()
+    assert "e-" not in text and "M163 S1 P0.0001" in text
+    printer = sim_printer()
+    for line in text.splitlines():
+        if not line.startswith(";"):
+            assert printer.send(line)[-1] == "ok"
+    assert printer.send("M165 R")[0] == "M567 P0 E9999:1:0:0:0:0"
+    with pytest.raises(ValueError, match="millionth"):
+        detool.decimal(1e-7)
+
+
 def test_defines_used_tools_converts_temperatures_keeps_other_bytes(tmp_path):
     src = tmp_path / "in.gcode"
     src.write_bytes(b"; made by a slicer\r\n"

@@ -84,13 +84,23 @@ def tools_used(path):
     return used
 
 
+def decimal(x):
+    """A weight as the firmware reads a number: plain decimals, never an exponent
+    ("%g" writes 0.0001 as 1e-04, which a G-code parser takes for 1), to the millionth."""
+    text = ("%.6f" % x).rstrip("0").rstrip(".")
+    if text in ("0", "-0") and x:
+        raise ValueError("a weight of %r is below the millionth G-code carries: scale the "
+                         "matrix row" % x)
+    return text or "0"
+
+
 def header(matrix, tools, newline=b"\n"):
     lines = [b"; mixstep detool: slicer tool T<n> is virtual tool T<n>, mix = matrix row n"]
     for tool in sorted(tools):
         mix = matrix[tool]
-        lines.append(b"; T%d mix %s" % (tool, ":".join("%.6g" % w for w in mix).encode()))
+        lines.append(b"; T%d mix %s" % (tool, ":".join(decimal(w) for w in mix).encode()))
         for drive, weight in enumerate(mix):
-            lines.append(b"M163 S%d P%s" % (drive, ("%.6g" % weight).encode()))
+            lines.append(b"M163 S%d P%s" % (drive, decimal(weight).encode()))
         lines.append(b"M164 S%d" % tool)
     return newline.join(lines) + newline
 

@@ -74,13 +74,17 @@ def _value(text):
 
 
 class ConsoleLog:
-    """One file of every console's lines in and out, with the simulated time."""
+    """One file of every console's lines in and out, with the simulated time. The
+    lines in are written as the bytes that came, whatever they are (a host may send
+    any byte, and the firmware answers it)."""
 
     def __init__(self, path):
-        self.f = open(path, "w")
+        self.f = open(path, "wb")
 
-    def line(self, way, text):
-        self.f.write("%d %s %s\n" % (simmachine.now_us, way, text))
+    def line(self, way, data):
+        self.f.write(b"%d %s " % (simmachine.now_us, way.encode()))
+        self.f.write(data if isinstance(data, (bytes, bytearray)) else data.encode())
+        self.f.write(b"\n")
         self.f.flush()
 
 
@@ -99,7 +103,8 @@ class LoggedConsole:
         for i in range(max(n, 0)):
             c = mv[i]
             if c == 10:
-                self.log.line("<", bytes(self.rx_line).decode("ascii", "replace").rstrip("\r"))
+                line = self.rx_line
+                self.log.line("<", line[:-1] if line[-1:] == b"\r" else line)
                 self.rx_line = bytearray()
             else:
                 self.rx_line.append(c)
