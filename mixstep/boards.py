@@ -78,6 +78,27 @@ def setting_value(text):
     return text
 
 
+def check_settings(board, settings):
+    """settings ({key: VALUE text} of --set) laid over the board's, checked as the
+    firmware checks its configuration; returns them as values. UsageError, naming the
+    key, for one the firmware doesn't have or a value it refuses."""
+    from mixfw.config import Config, ConfigError
+    from mixstep.outfile import UsageError
+    base = paths.load_board(board)["SETTINGS"]
+    known = Config(base, None).settings
+    values = {}
+    for key, text in settings.items():
+        if key not in known:
+            raise UsageError("--set %s: the board has no setting %s (the settings are "
+                             "listed in docs/Config_Reference.md)" % (key, key))
+        values[key] = setting_value(text) if isinstance(text, str) else text
+    try:
+        Config(dict(base, **values), None)
+    except ConfigError as err:
+        raise UsageError("--set %s" % str(err).replace("board default ", "", 1))
+    return values
+
+
 def board_names():
     return sorted(p.parent.name for p in paths.BOARDS.glob("*/board.py"))
 

@@ -7,25 +7,35 @@ from mixstep import paths
 from mixstep.outfile import UsageError
 
 
+def _settings(args, board="sim"):
+    """--set KEY=VALUE ..., checked against the board's settings."""
+    from mixstep import boards
+    settings = {}
+    for item in args.set:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise UsageError("--set wants KEY=VALUE, got %r" % item)
+        settings[key] = value
+    return boards.check_settings(board, settings)
+
+
 def _sim(args):
     from mixstep import sim
     from mixstep.serve import default_flash
-    config, files = default_flash(args.config, args.files)
+    settings = _settings(args, args.board)
+    # Its flash only where asked: a run of a file repeats whatever M500 did elsewhere.
+    config, files = (default_flash(args.config, args.files) if args.config or args.files
+                     else (None, None))
     report = sim.run(args.gcode or paths.EXAMPLE_GCODE, args.trace, args.report,
                      heap_lock=args.heap_lock, board=args.board, config_path=config,
-                     files_dir=files)
+                     files_dir=files, settings=settings)
     sim.print_summary(report, ("lines", "sim_seconds", "wall_seconds", "steps"))
     return 1 if report["errors"] else 0
 
 
 def _serve(args):
     from mixstep import serve
-    settings = {}
-    for item in args.set:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise SystemExit("mixstep serve: --set wants KEY=VALUE, got %r" % item)
-        settings[key] = value
+    settings = _settings(args)
     return serve.main(tcp=args.tcp, pty=args.pty, realtime=args.realtime, settings=settings,
                       config=args.config, files=args.files, console_log=args.console_log)
 
@@ -50,7 +60,14 @@ def main(argv=None):
                    help="lock the MicroPython heap around every step-loop call")
     p.add_argument("--board", default="sim",
                    help="run with this board's pin map and settings (boards/<name>)")
-    _add_flash_args(p)
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="a setting over the board's and the saved configuration's, e.g. "
+                        "retract_policy=2 (repeatable)")
+    p.add_argument("--config", metavar="FILE",
+                   help="the simulated flash's configuration file, kept by M500 (default: "
+                        "none, the board's settings)")
+    p.add_argument("--files", metavar="DIR",
+                   help="the simulated flash's G-code folder for M20-M32 (default: none)")
     p.set_defaults(run=_sim)
     p = sub.add_parser("serve", help="run the simulated printer for host software (TCP or PTY)")
     p.add_argument("--tcp", metavar="HOST:PORT", help="serve the TCP G-code console here")
@@ -58,7 +75,8 @@ def main(argv=None):
     p.add_argument("--realtime", type=float, default=1.0,
                    help="simulated seconds per wall second (0: as fast as possible)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a board setting, e.g. trace_records=60000 (repeatable)")
+                   help="a setting over the board's and the saved configuration's, e.g. "
+                        "trace_records=60000 (repeatable)")
     _add_flash_args(p)
     p.add_argument("--console-log", metavar="FILE",
                    help="write every console line in and out, with the simulated time")

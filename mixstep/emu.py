@@ -401,12 +401,6 @@ def summarize(printed, final, board, gcode_path, steps, boot_lines):
     return report
 
 
-def _setting(text):
-    """KEY=VALUE of --set, as `mixstep serve --set` reads it."""
-    key, _, value = text.partition("=")
-    return key, boards.setting_value(value)
-
-
 # The step paths that run a timer callback every tick (timer, pio) need ticks this long
 # on an RP2040: a callback costs about 15 us (boards/pico/board.py).
 _CALLBACK_TICK_MIN_US = 50
@@ -425,7 +419,8 @@ def check_tick(board, settings):
 
 def _print(args):
     try:
-        settings = dict(_setting(t) for t in args.set)
+        from mixstep.cli import _settings
+        settings = _settings(args, args.board)
         check_tick(args.board, settings)
         # The excerpt `make emu` prints: the whole example takes the emulator hours.
         report = run(args.gcode or paths.ROOT / "testdata" / "part_3tool_emu_excerpt.gcode",

@@ -176,6 +176,12 @@ class _Terminated(Exception):
     pass
 
 
+def _sources(config, files, settings):
+    """Where the settings come from, in their order: the board's, the saved file, --set."""
+    return "mixstep: the board's settings, then configuration %s, then --set %s; files in %s" % (
+        config, " ".join("%s=%s" % kv for kv in (settings or {}).items()) or "(none)", files)
+
+
 def _on_sigterm(signum, frame):
     raise _Terminated()
 
@@ -195,11 +201,11 @@ def main(tcp=None, pty=False, realtime=1.0, settings=None, config=None, files=No
         if tcp:
             proc = serve_tcp(tcp, realtime, announce=lambda s: print(s, flush=True),
                              settings=settings, **flash)
-            print("mixstep: configuration %s, files in %s" % (config, files), flush=True)
+            print(_sources(config, files, settings), flush=True)
             return proc.wait()
         bridge = PtyBridge(realtime, settings, **flash)
         print("mixstep: simulated printer on serial device %s" % bridge.path, flush=True)
-        print("mixstep: configuration %s, files in %s" % (config, files), flush=True)
+        print(_sources(config, files, settings), flush=True)
         bridge.run()
         return 0
     except (KeyboardInterrupt, _Terminated):

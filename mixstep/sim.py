@@ -76,6 +76,9 @@ def run(gcode_path, trace_path=None, report_path=None, heap_lock=False, edges_pa
         "sim_buffer_bytes": fw["sim_buffer_bytes"],
         "heap_locked_step_loop": fw["heap_locked"],
         "trace": str(trace_path) if trace_path else None,
+        # Where the settings came from, in their order over the board's.
+        "config": str(config_path) if config_path else None,
+        "set": {k: list(v) if isinstance(v, tuple) else v for k, v in (settings or {}).items()},
     }
     if report_path:
         with replacing(report_path) as out:

@@ -12,8 +12,9 @@
 # configuration (M500/M501); without it the printer has no configuration storage.
 # --files is the simulated flash folder for printing from flash (M20-M32). Both are
 # written through simfaults.Flash, whose writes can stall the chip (M7103 F).
-# --set overrides a board setting before the machine is assembled, e.g.
-# --set pin_writer=registers (VALUE: a number, a comma-separated tuple, or text).
+# --set overrides a setting, the board's and the saved configuration's, before the
+# machine is assembled, e.g. --set pin_writer=registers (VALUE: a number, a
+# comma-separated tuple, or text).
 # --jitter-us fires the timer callbacks up to N us late (interrupt latency; seeded by
 # --jitter-seed, so a run repeats exactly).
 # --console-log writes every line the consoles receive and send, stamped with the
@@ -206,6 +207,12 @@ def main():
     config = firmware.Config(board.SETTINGS, opts["config"], flash, warn=warnings.append,
                              clock_hz=simmachine.freq())
     config.boot()
+    # --set over the saved configuration too: the board's settings, then the saved
+    # ones, then --set (the command line says what it wants for this run).
+    if opts["set"]:
+        asked = config._default_settings()
+        for key, _ in opts["set"]:
+            config.settings[key] = asked[key]
     printer = firmware.build(config, files_root=opts["files"])
     heap_data_at_rest = _heap_bytes() - data_from
     before = _heap_bytes()
