@@ -99,6 +99,19 @@ def check_settings(board, settings):
     return values
 
 
+def set_items(board, items):
+    """The settings of --set KEY=VALUE items, checked against the board's
+    (check_settings)."""
+    from mixstep.outfile import UsageError
+    settings = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise UsageError("--set wants KEY=VALUE, got %r" % item)
+        settings[key] = value
+    return check_settings(board, settings)
+
+
 def board_names():
     return sorted(p.parent.name for p in paths.BOARDS.glob("*/board.py"))
 

@@ -8,15 +8,8 @@ from mixstep.outfile import UsageError
 
 
 def _settings(args, board="sim"):
-    """--set KEY=VALUE ..., checked against the board's settings."""
     from mixstep import boards
-    settings = {}
-    for item in args.set:
-        key, sep, value = item.partition("=")
-        if not sep or not key:
-            raise UsageError("--set wants KEY=VALUE, got %r" % item)
-        settings[key] = value
-    return boards.check_settings(board, settings)
+    return boards.set_items(board, args.set)
 
 
 def _sim(args):

@@ -419,8 +419,7 @@ def check_tick(board, settings):
 
 def _print(args):
     try:
-        from mixstep.cli import _settings
-        settings = _settings(args, args.board)
+        settings = boards.set_items(args.board, args.set)
         check_tick(args.board, settings)
         # The excerpt `make emu` prints: the whole example takes the emulator hours.
         report = run(args.gcode or paths.ROOT / "testdata" / "part_3tool_emu_excerpt.gcode",
