@@ -38,3 +38,26 @@ def test_bytes_that_are_not_utf8_get_an_answer_and_the_log_keeps_them(tmp_path):
     logged = log.read_bytes()
     for data in (b"< \xff\n", b"< M117 caf\xe9\n", b"< M118 E1 \xc2\xb0C\n"):
         assert data in logged
+
+
+def test_m997_ends_serve_with_a_line_for_its_user(tmp_path):
+    """M997 ends the served firmware (a board restarts into its REPL): the terminal of
+    `mixstep serve` gets one line saying so, not the simulation's report."""
+    import subprocess
+    import sys
+    address = "127.0.0.1:%d" % free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "mixstep.cli", "serve", "--tcp", address,
+                             "--config", str(tmp_path / "mixstep.cfg"),
+                             "--files", str(tmp_path / "files")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_for_port(address)
+        host, port = address.rsplit(":", 1)
+        with socket.create_connection((host, int(port)), timeout=60) as c:
+            c.sendall(b"M997\n")
+            out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert "//sim" not in out and "Traceback" not in err
+    assert "the firmware stopped on M997" in out.splitlines()[-1]

@@ -266,7 +266,11 @@ def main():
                                 for b in simthermal.world.bodies},
         "drivers_enabled_at_exit": _drivers_enabled(board),
     }
-    sys.stdout.write("//sim " + json.dumps(report) + "\n")
+    if opts["stdio"]:  # for the host that drives this console (mixstep sim, the tests)
+        sys.stdout.write("//sim " + json.dumps(report) + "\n")
+    else:  # on the terminal of `mixstep serve --tcp`: a line for its user
+        print("mixstep: the firmware stopped%s" % (
+            " on M997 (a board restarts into its REPL)" if printer.leaving == "M997" else ""))
     if fault is not None:
         raise fault
 
