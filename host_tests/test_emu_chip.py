@@ -347,6 +347,7 @@ def test_the_program_counters_profile_adds_up_to_the_planners_time(tmp_path):
     assert abs(sum(thread.values()) + sum(irq.values()) - line_us) < 0.01 * line_us
     for name in ("mixfw.cmd_motion.Motion.g1", "mixfw.planner._plan_move",
                  "mixfw.filament.plan_e_words", "mixfw.gcode._scan"):
-        assert thread[name] > 1, name
+        # A function another module imports is known by both names ("a = b").
+        assert sum(us for key, us in thread.items() if name in key.split(" = ")) > 1, name
     assert "stepper.tick" in max(irq, key=irq.get)
     assert 0.05 * line_us < sum(irq.values()) < 0.3 * line_us

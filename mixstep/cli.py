@@ -2,6 +2,7 @@
 import argparse
 import signal
 import sys
+import threading
 
 from mixstep import paths
 from mixstep.outfile import UsageError
@@ -92,7 +93,10 @@ def main(argv=None):
     emu.add_parser(sub)
     args = parser.parse_args(argv)
     name = "mixstep " + args.command
-    signal.signal(signal.SIGTERM, _terminated)
+    # SIGTERM as Ctrl-C while the command runs (restored after: main may be called
+    # from another program).
+    main_thread = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _terminated) if main_thread else None
     try:
         return args.run(args)
     except KeyboardInterrupt:
@@ -105,6 +109,9 @@ def main(argv=None):
         what = ": %s" % err.filename if getattr(err, "filename", None) else ""
         print("%s: %s%s" % (name, err.strerror or err, what), file=sys.stderr)
         return 2
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
 
 
 def _terminated(signum, frame):
