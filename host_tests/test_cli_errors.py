@@ -113,7 +113,10 @@ def test_sim_stopped_leaves_no_temporary_file_and_no_traceback(tmp_path, sig):
     tmp.mkdir()
     proc = subprocess.Popen([sys.executable, "-m", "mixstep.cli", "sim", str(SHORT)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=dict(os.environ, TMPDIR=str(tmp)), cwd=tmp_path)
+                            env=dict(os.environ, TMPDIR=str(tmp)), cwd=tmp_path,
+                            # A test runner's worker may ignore SIGINT, and the child
+                            # would inherit that: a user's Ctrl-C is never ignored.
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.monotonic() + 60
     while not any(tmp.rglob("*.edges")):  # the run has begun
         assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()

@@ -17,7 +17,7 @@ BOARD = "pico"
 PINS = paths.load_board(BOARD)["PINS"]
 # Real slicer output: homing, a tool change, perimeters with retractions.
 GCODE = paths.ROOT / "testdata" / "part_3tool_prusaslicer_rel.gcode"
-LINES = [l.rstrip("\n") for l in itertools.islice(open(GCODE), 500)]
+LINES = [l.rstrip("\n") for l in itertools.islice(open(GCODE), 360)]
 PIO_DMA = {"step_backend": "pio_dma"}
 TIMER = {"step_backend": "timer", "tick_us": 50}  # the Pico's timer runs at 50 us ticks
 

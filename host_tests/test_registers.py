@@ -56,13 +56,13 @@ def test_register_writes_give_the_same_trace_as_pin_writes(tmp_path, board):
 
 
 def _captured(board_name, tick_us, tmp_path):
-    """The example's lines 40-300 recorded with M7300, the host draining the capture
+    """The example's lines 40-200 recorded with M7300, the host draining the capture
     after every line while the print goes on. Returns the records, the edges file
     and the board's STEP GPIOs."""
     p, edges = run(tmp_path, "capture", {"trace_records": 30000, "tick_us": tick_us},
                    LINES[:40] + ["M7300 S1"], board=board_name)
     records = []
-    for line in LINES[40:300] + ["M400", None]:
+    for line in LINES[40:200] + ["M400", None]:
         if line:
             p.send(line)
         dump = p.send("M7301")

@@ -151,6 +151,7 @@ def test_a_logic_analysers_names_are_mapped(snippet, tmp_path):
     assert _run_cli(renamed, "--gcode", gcode, "--map", "e1_step=D0,e1_dir=D1") == 0
 
 
+@pytest.mark.slow  # sigrok's own format; test_print decodes a trace with sigrok in make test
 def test_a_sigrok_capture_reads_back_and_passes(snippet, tmp_path):
     need_sigrok()
     gcode, vcd_path, _, _ = snippet
