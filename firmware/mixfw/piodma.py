@@ -125,8 +125,8 @@ def make_ring(ticks):
 def refill(mem_buf, io, done: int):
     """Channel `done` (0 or 1) has read its segment: arm it with the ready one, chain
     the running channel to it, and fill the freed segment with the next batch. io:
-    (DMA registers, PIO registers, ring, step loop's io (stepper.tick), tail, the
-    chip's MULTI_CHAN_TRIGGER word), one tuple because a viper call with more
+    (DMA registers, PIO registers, ring, step loop's io, tail, the chip's
+    MULTI_CHAN_TRIGGER word, stepper.tick), one tuple because a viper call with more
     arguments allocates."""
     mem = ptr32(mem_buf)
     regs = ptr32(io[0])
@@ -166,7 +166,7 @@ def refill(mem_buf, io, done: int):
         i += 1
     mem[_R_W] = base
     mem[_R_SEG_LV + freed] = mem[_S_LEVELS]
-    w = int(tick(io[3]))
+    w = int(io[6](io[3]))
     mem[_R_SEG_N + freed] = w - base
     mem[_R_SEG_SEQ + freed] = mem[_R_BATCHES]
     mem[_R_READY] = freed
@@ -294,14 +294,17 @@ class Feed:
         mem[st.R_SM] = sm_id
         # The step loop's own io (stepper.tick) is io[3].
         io = self.io = (self.regs, self.pio_regs, self.ring, (mem, self.ring, pins.endstops),
-                        self.tail, self.chip[_MULTI_CHAN_TRIGGER])
+                        self.tail, self.chip[_MULTI_CHAN_TRIGGER], tick)
+        fill = refill
 
-        # Bound once: the interrupt does no lookups and allocates nothing.
+        # Bound once: the interrupt looks up no name and allocates nothing. A global's
+        # lookup goes through the VM's lookup cache, which the main loop's names share:
+        # its cost would depend on which names the main loop used last.
         def irq0(_dma):
-            refill(mem, io, 0)
+            fill(mem, io, 0)
 
         def irq1(_dma):
-            refill(mem, io, 1)
+            fill(mem, io, 1)
 
         self.handlers = (irq0, irq1)
         # Assembled once: it takes ms on the chip. The homing ones first look at the

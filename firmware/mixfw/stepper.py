@@ -876,10 +876,12 @@ def schedule_counts(weights, steps):
 
 
 def make_irq(mem, out, endstops):
-    """The timer callback, bound once so the interrupt does no lookups."""
+    """The timer callback, bound once so the interrupt looks up no name (see
+    piodma's handlers)."""
     io = (mem, out, endstops)
+    step = tick
 
     def irq(_timer):
-        tick(io)
+        step(io)
 
     return irq
