@@ -10,7 +10,7 @@ def parse(mp, *lines):
 
 
 def test_words_case_spacing_and_comments(mp):
-    got = parse(mp, "G1 X76.923 Y79.437 E.06669", "g1x10y-2.5 ; move", "G1 (why) X1 ( ) Y2",
+    got = parse(mp, "G1 X76.923 Y79.437 E.06669", "g1 x10 y-2.5 ; move", "G1 (why) X1 ( ) Y2",
                 "  M163   S 0 P+0.2  ", "G28 X", "T2", "", "; just a comment")
     assert got == [
         ["G", 1, {"X": 76.923, "Y": 79.437, "E": 0.06669}],
@@ -27,6 +27,10 @@ def test_words_case_spacing_and_comments(mp):
 @pytest.mark.parametrize("line, reason", [
     ("G1 X1.2.3", "malformed number after X"),
     ("G1 X-", "malformed number after X"),
+    # A number is read whole or not at all: no exponent, no lower-case letter after it.
+    ("M163 S1 P9.999e-05", "malformed number after P"),
+    ("M104 S5x", "malformed number after S"),
+    ("g1x10y5", "malformed number after G"),
     ("G1 X1 X2", "parameter X given twice"),
     ("X10", "line must start with G, M or T"),
     ("G1 X1 (open", "unclosed ( comment"),

@@ -912,3 +912,11 @@ def test_pull_over_tcp_from_the_served_printer_passes_trace_check(tmp_path, caps
     assert checks["steps_x"]["measured"] > 1000 and checks["steps_e0"]["measured"] > 100
     assert checks["moves"]["measured"] > 10
     assert _run_cli(pulled, "--gcode", gcode) == 0
+
+
+@pytest.mark.parametrize("line", ["M163 S1 P9.999e-05", "M104 S5x", "G1 X1.2.3", "g1x10y5"])
+def test_the_model_refuses_a_number_the_firmware_refuses(line):
+    """The firmware answers these with Error:malformed number and runs nothing
+    (test_gcode): the model must not take a part of the number either."""
+    with pytest.raises(tracemodel.Refused, match="malformed number"):
+        tracemodel.parse_words(line)

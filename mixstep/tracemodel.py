@@ -195,7 +195,7 @@ def _number(text, i):
         else:
             break
         i += 1
-    if i < n and not (text[i] in " \t\r\n;(*" or text[i].isalpha() and text[i].isascii()):
+    if i < n and not (text[i] in " \t\r\n;(*" or "A" <= text[i] <= "Z"):
         raise Refused("malformed number")
     if (signed or seen_dot) and not seen_digit:
         raise Refused("malformed number")

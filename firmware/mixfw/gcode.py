@@ -208,10 +208,12 @@ def _scan(buf: ptr8, n: int, words) -> int:
                     d += 1
                 i += 1
         if i < n:
-            # Only a blank, a comment, a checksum or the next letter may follow.
+            # Only a blank, a comment, a checksum or the next word's letter may follow,
+            # and a letter right after the digits only in upper case (G1X10Y5, as
+            # Marlin reads it): 9.999e-05 or 5x is a number not to be read in part.
             c = buf[i]
             if not (c == 32 or c == 9 or c == 13 or c == 10 or c == 59 or c == 40 or c == 42
-                    or (c >= 65 and c <= 90) or (c >= 97 and c <= 122)):
+                    or (c >= 65 and c <= 90)):
                 return _E_MALFORMED
         if (neg or seen_dot) and not has_number:
             return _E_MALFORMED
