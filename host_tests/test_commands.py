@@ -47,7 +47,7 @@ def test_every_line_gets_one_ok_and_bad_lines_an_error_first(session):
     assert got["M9999"] == ['echo:Unknown command: "M9999"']
     assert got["G20"] == ["Error:G20 (inch units) is not supported; use G21 (mm)"]
     assert got["G1 X" + "1" * 120] == ["Error:line longer than 96 bytes"]
-    assert got["G1 X\x01"] == ["Error:byte 0x01 is not printable ASCII"]
+    assert got["G1 X\x01"] == ["Error:byte 0x01 is a control character"]
     assert got["M163 S9 P1"] == ["Error:S9 out of range 0..5"]
     assert got["T16"] == ["Error:tool T16 out of range T0..T15"]
     assert got["G4 P-1"] == ["Error:dwell time must be >= 0"]

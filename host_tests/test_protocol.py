@@ -6,6 +6,7 @@ The oracle for "executed exactly once" is motion: every move a test sends is rel
 as missing steps and a line run twice as extra steps."""
 import fnmatch
 import json
+import re
 import socket
 import sys
 import threading
@@ -187,14 +188,17 @@ def test_bare_m110_keeps_the_line_number():
 BAD_LINES = [
     (b"G1 X1 " + b" " * (LINE_BYTES - 5), "Error:line longer than 96 bytes"),
     (b"G1 X1" + b"0" * 200, "Error:line longer than 96 bytes"),
-    (b"G1 X1\x00", "Error:byte 0x00 is not printable ASCII"),
-    (b"\x00G1 X1", "Error:byte 0x00 is not printable ASCII"),
-    (b"G1 X1\x80", "Error:byte 0x80 is not printable ASCII"),
-    (b"G1 \xffX1", "Error:byte 0xff is not printable ASCII"),
-    (b"G1 X1\x7f", "Error:byte 0x7f is not printable ASCII"),
-    (b"G1 X1\x1b[2J", "Error:byte 0x1b is not printable ASCII"),
-    (bytes(range(128, 256)), "Error:byte 0x80 is not printable ASCII"),
-    (b"\xfe\xed\xfa\xce" * 40, "Error:byte 0xfe is not printable ASCII"),
+    (b"G1 X1\x00", "Error:byte 0x00 is a control character"),
+    (b"\x00G1 X1", "Error:byte 0x00 is a control character"),
+    (b"G1 X1\x7f", "Error:byte 0x7f is a control character"),
+    (b"G1 X1\x1b[2J", "Error:byte 0x1b is a control character"),
+    # Bytes above 127 are kept for text (UTF-8), and refused in words.
+    (b"G1 X1\x80", "Error:malformed number after X"),
+    (b"G1 \xffX1", "Error:unexpected byte 0xff"),
+    (b"G1 X1 \xc3\xa4", "Error:unexpected byte 0xc3"),
+    (bytes(range(128, 256)), "Error:line longer than 96 bytes"),
+    (bytes(range(128, 200)), "Error:unexpected byte 0x80"),
+    (b"\xfe\xed\xfa\xce" * 40, "Error:line longer than 96 bytes"),
     (b"G1 X1.2.3", "Error:malformed number after X"),
     (b"G1 X--1", "Error:malformed number after X"),
     (b"G1 X-", "Error:malformed number after X"),
@@ -396,7 +400,7 @@ def test_tcp_hostile_client_and_two_flooding_connections(tcp_printer):
     # by the hang-up ("G1 X100" of "G1 X1000"?), so it must not run.
     rude = TcpHost(tcp_printer)
     rude.send_all(b"\x00\xff garbage\nG1 X100 F6000").join()
-    assert rude.answers(1) == [["Error:byte 0x00 is not printable ASCII", "ok"]]
+    assert rude.answers(1) == [["Error:byte 0x00 is a control character", "ok"]]
     rude.close()
 
     b = TcpHost(tcp_printer)
@@ -546,7 +550,7 @@ def test_refuse_after_error_mode():
     # A protocol error is a transmission fault, not a failed command; a bad byte is.
     assert host.ask("M932") == ["ok"]  # M932 again: clears the state, stays armed
     assert host.ask("G1 X1") == ["ok"]
-    assert host.ask(b"G1 X1\x01") == ["Error:byte 0x01 is not printable ASCII", "ok"]
+    assert host.ask(b"G1 X1\x01") == ["Error:byte 0x01 is a control character", "ok"]
     assert host.ask("G1 X1") == [REFUSED, "ok"]
     assert host.ask("M933") == ["ok"]
     assert host.ask("G1 X1") == ["ok"]
@@ -605,7 +609,9 @@ _text_line = st.tuples(
                      "M0", "M1", "M9998"]),
     # M118 sends its text back: one that reads as a reply of the protocol ("ok ...")
     # would be one to the host as well.
-    st.text(alphabet=[chr(c) for c in range(32, 127)], max_size=70).filter(
+    # UTF-8 text as slicers write it, up to twice the line's bytes (cut, not refused).
+    st.text(alphabet=[chr(c) for c in range(32, 127)] + list("äöüßé°±€✓—"),
+            max_size=70).filter(
         lambda t: not any(w in t.lower() for w in ("ok", "error", "resend", "busy"))),
 ).map(lambda t: ("%s %s" % t).encode())
 _line = st.one_of(
@@ -624,22 +630,52 @@ def _is_text_command(line):
     the protocol refuses: its answer must never be Error:."""
     if intake_verdict(line) or b"*" in line.split(b";")[0]:
         return False
-    words = line.replace(b"\r", b"").split(b";")[0].split()
-    return bool(words) and words[0].upper() in (b"M117", b"M118", b"M0", b"M1", b"M9998")
+    stored = _cut_message(_stored(line))
+    words = stored.split()
+    if not words or words[0].upper() not in (b"M117", b"M118", b"M0", b"M1", b"M9998"):
+        return False
+    try:
+        stored.decode()  # the firmware refuses text that is not UTF-8
+    except UnicodeError:
+        return words[0].upper() not in (b"M117", b"M118")
+    return True
+
+
+def _stored(line):
+    """The bytes of a line the intake keeps: up to a `;`, without CR."""
+    return line.split(b";")[0].replace(b"\r", b"")
+
+
+_MESSAGE = re.compile(rb"[ \t]*[Mm]11[78][ \t]")
+
+
+def _cut_message(stored):
+    """A plain M117/M118 line longer than the buffer is cut at the last whole UTF-8
+    character that fits, as Marlin cuts its messages."""
+    if len(stored) <= LINE_BYTES or not _MESSAGE.match(stored):
+        return stored
+    cut = LINE_BYTES
+    while cut > 0 and stored[cut] & 0xC0 == 0x80:  # inside a character: back to its start
+        cut -= 1
+    return stored[:cut]
 
 
 def intake_verdict(line):
-    """What the intake must say about one line, from the rules alone: printable ASCII
-    (and tab) up to a `;`, CR ignored, at most 96 bytes stored; the first fault wins."""
+    """What the intake must say about one line, from the rules alone: control bytes
+    but tab refused, every other byte kept (text is UTF-8), up to a `;`, CR ignored,
+    at most 96 bytes stored unless the line is a message to cut; the first fault
+    wins."""
     stored = 0
     for c in line:
         if c == 13:
             continue
         if c == 59:
             return None
-        if (c < 32 and c != 9) or c > 126:
-            return "Error:byte 0x%02x is not printable ASCII" % c
+        if (c < 32 and c != 9) or c == 127:
+            return "Error:byte 0x%02x is a control character" % c
         if stored >= LINE_BYTES:
+            if _MESSAGE.match(_stored(line)):
+                return None
             return "Error:line longer than 96 bytes"
         stored += 1
     return None

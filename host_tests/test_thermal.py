@@ -166,6 +166,18 @@ def test_m190_bed_and_m116_wait_for_every_heater(printer):
         assert abs(printer.temps()[2] - 70.0) <= 1.5
 
 
+def test_m116_waits_for_the_heaters_it_names(printer):
+    # A named heater with no target would wait for nothing: an error at once.
+    assert printer.send("M116 B") == ["Error:bed has no target to wait for", "ok"]
+    assert printer.send("M116 T B") == ["Error:hotend has no target to wait for", "ok"]
+    printer.send("M104 S180", "M140 S50")
+    assert printer.send("M116 B")[-1] == "ok"
+    t = printer.temps()
+    assert t[2] >= 49.0 and t[0] < 179.0  # the bed reached, the hot end not waited for
+    assert printer.send("M116 T")[-1] == "ok"
+    assert printer.temps()[0] >= 179.0
+
+
 def test_out_of_range_values_are_refused(printer):
     assert printer.send("M104 S300")[0].startswith(
         "Error:temperature S300.0 out of range 0..285.0")
@@ -275,6 +287,7 @@ def _inject_and_measure(p, board, heater, code, kind, words, phase_ms):
     x = p.x_mm()
     assert 0 <= x < 200
     t = p.temps()
+    # Off, and its target cleared (as Marlin's kill): M922 re-arms it cold.
     assert t[4 + heater] == 0 and t[1 + 2 * heater] == 0
     assert p.send("M104 S200")[0].startswith("Error:printer halted (%s: " % name)
     assert p.send("G1 X10")[0].startswith("Error:printer halted")

@@ -241,7 +241,7 @@ DESCRIPTIONS = {
     "line_buffer_bytes": (
         "consoles", "bytes",
         "Longest G-code line taken, from a console or a file; a longer one is refused "
-        "with an error."),
+        "with an error, except a plain M117/M118 message, which is cut to fit."),
     "console_uart": (
         "consoles", "UART id", "A serial console on this UART besides USB; -1: none."),
     "console_baud": ("consoles", "baud", "Baud rate of the UART console."),

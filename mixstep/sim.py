@@ -26,7 +26,7 @@ def run(gcode_path, trace_path=None, report_path=None, heap_lock=False, edges_pa
     # The edges of a run (tens of MB) live in a temporary folder that goes on every
     # exit, an error or Ctrl-C (and SIGTERM, which the command turns into an exit).
     with tempfile.TemporaryDirectory(prefix="mixstep-sim-") as tmp, \
-            open(gcode_path, "r", encoding="ascii", errors="replace") as f:
+            open(gcode_path, "rb") as f:  # the bytes as a host would send them
         edges = Path(edges_path) if edges_path else Path(tmp) / "run.edges"
         wall0 = time.perf_counter()
         printer = SimPrinter(edges_path=edges, heap_lock=heap_lock, board=board,
@@ -36,7 +36,7 @@ def run(gcode_path, trace_path=None, report_path=None, heap_lock=False, edges_pa
         lines = 0
         try:
             for number, raw in enumerate(f, 1):
-                replies = printer.send(raw.rstrip("\r\n"))
+                replies = printer.send(raw.rstrip(b"\r\n"))
                 lines += 1
                 for text in replies:
                     if text.startswith("Error:"):

@@ -65,12 +65,14 @@ class SimPrinter:
         if not raw:
             code = self.proc.wait()
             raise RuntimeError("firmware exited (status %s) before answering" % code)
-        return raw.decode("ascii", "replace").rstrip("\r\n")
+        return raw.decode("utf-8", "replace").rstrip("\r\n")
 
     def send(self, line):
-        """Send one line; return the lines the firmware printed before its `ok`, and
-        the `ok` line itself last."""
-        self.proc.stdin.write(line.encode("ascii", "replace") + b"\n")
+        """Send one line (bytes as they are, or text as UTF-8); return the lines the
+        firmware printed before its `ok`, and the `ok` line itself last."""
+        if isinstance(line, str):
+            line = line.encode()
+        self.proc.stdin.write(line + b"\n")
         replies = []
         while True:
             text = self._readline()
@@ -83,7 +85,7 @@ class SimPrinter:
         self.proc.stdin.close()
         extra = []
         for raw in self.out:
-            text = raw.decode("ascii", "replace").rstrip("\r\n")
+            text = raw.decode("utf-8", "replace").rstrip("\r\n")
             if text.startswith("//sim "):
                 self.report = json.loads(text[6:])
             else:

@@ -263,8 +263,10 @@ def parse_words(text):
 
 class Intake:
     """The firmware's line protocol, as a host's line stream reaches it: `;` comments
-    are not stored, a stored line longer than line_buffer_bytes or with a byte that is
-    not printable ASCII is refused, `N<n> ... *<checksum>` lines are checked (XOR of
+    are not stored, a stored line with a control byte, or longer than
+    line_buffer_bytes unless it is a message (M117/M118 with no line number, cut at the
+    last whole UTF-8 character), is refused; other bytes are kept, text is UTF-8 and
+    they are refused in words; `N<n> ... *<checksum>` lines are checked (XOR of
     the bytes before `*`; the number must follow the last; a repeat is not run
     again), and M110 sets the number."""
 
@@ -276,11 +278,19 @@ class Intake:
         """raw bytes of one line (no newline) -> Line to run, None when not run (a
         repeat, or nothing on it), or Refused."""
         stored = raw.split(b";", 1)[0].replace(b"\r", b"")
-        if any((c < 32 and c != 9) or c > 126 for c in stored):
-            raise Refused("byte not printable ASCII")
+        if any((c < 32 and c != 9) or c == 127 for c in stored[:self.line_bytes + 1]):
+            raise Refused("control byte")
         if len(stored) > self.line_bytes:
-            raise Refused("line too long")
-        text = stored.decode("ascii")
+            if not _MESSAGE.match(stored):
+                raise Refused("line too long")
+            cut = self.line_bytes
+            while cut > 0 and stored[cut] & 0xC0 == 0x80:  # back to a character's start
+                cut -= 1
+            stored = stored[:cut]
+        try:
+            text = stored.decode()
+        except UnicodeError:
+            raise Refused("text is not UTF-8")
         star = text.find("*")
         if star >= 0:
             cs = 0
@@ -314,6 +324,7 @@ class Intake:
 
 
 _LINE_NUMBER = re.compile(r"[ \t]*[Nn][ \t]*(-?[0-9]+)?")
+_MESSAGE = re.compile(rb"[ \t]*[Mm]11[78][ \t]")
 _M110 = re.compile(r"[ \t]*[Nn][ \t]*-?[0-9]*[ \t]*[Mm][ \t]*110(?![0-9])")
 
 

@@ -86,9 +86,17 @@ class ThermalCommands:
         h = self._heater("bed")
         self._wait(h, self._target(line, h) == "R")
 
-    # M116: wait until every heater with a target has reached it. Example: M116
+    # M116 [T] [B]: wait until the heaters named (T the hot end, B the bed; with
+    # neither, every heater with a target) reach their targets. A named heater with no
+    # target is an error, as APrinter's: the wait would be for nothing. Example: M116 B
     def m116(self, line):
         heaters = self.thermal.heaters
+        if line.has("T") or line.has("B"):
+            heaters = [self._heater(name) for letter, name in (("T", "hotend"), ("B", "bed"))
+                       if line.has(letter)]
+            for h in heaters:
+                if h.target_c <= 0:
+                    raise GcodeError("%s has no target to wait for" % h.name)
         self._wait_reporting(lambda: all(h.fault or h.reached() for h in heaters))
 
     # M105: temperatures in Marlin's form, heater power as 0..127.
@@ -155,7 +163,7 @@ def register(printer, thermal, motion):
         ("M", 109, c.m109, True),  # set hot end temperature S<C> and wait
         ("M", 140, c.m140, True),  # set bed temperature S<C>
         ("M", 190, c.m190, True),  # set bed temperature S<C> and wait
-        ("M", 116, c.m116, True),  # wait for every heater to reach its target
+        ("M", 116, c.m116, True),  # wait for heaters to reach their targets: [T] [B]
         ("M", 105, c.m105, False),  # report temperatures
         ("M", 155, c.m155, False),  # report temperatures every S<s> seconds (S0: stop)
         ("M", 106, c.m106, False),  # part fan on S<0-255>

@@ -163,12 +163,11 @@ class Files:
             self.upload_failed = str(e) or "out of memory"
             raise FileError("%s; the lines up to M29 are not run" % self.upload_failed)
 
-    def _write(self, text):
+    def _write(self, data):
         """One received line into the chunk, the chunk to flash when it is full. After
         a failed write the lines are still taken (never run as G-code) until M29."""
         if self.upload_failed is not None:
             return
-        data = text.encode()
         if self.chunk_n + len(data) + 1 > len(self.chunk):
             self._flush()
         n = self.chunk_n

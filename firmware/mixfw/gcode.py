@@ -310,6 +310,7 @@ class Parser:
         r = self.result
         ln.has_line_number = r[_R_HAS_N] == 1
         ln.line_number = r[_R_N]
+        r[_R_HELD] = 1  # stays so if the text is refused: the next line clears them
         self.args_text(buf, n)
         r[_R_HELD] = 1 if ln.has_line_number or ln.args_text else 0
 
@@ -323,7 +324,11 @@ class Parser:
         end = start
         while end < n and buf[end] != 59 and buf[end] != 42:
             end += 1
-        ln.args_text = bytes(buf[start:end]).decode().strip()
+        try:
+            ln.args_text = bytes(buf[start:end]).decode().strip()
+        except UnicodeError:
+            ln.args_text = ""
+            raise GcodeError("text is not UTF-8")
 
     def command_of_failed(self):
         """After parse() raised: the command_key of the line's command, if its command
@@ -337,6 +342,8 @@ class Parser:
         if err == _E_UNCLOSED:
             return "unclosed ( comment"
         if err == _E_CHARACTER:
+            if r[_R_AT] > 126:  # part of a UTF-8 character, in a word
+                return "unexpected byte 0x%02x" % r[_R_AT]
             return "unexpected character %r" % at
         if err == _E_TOO_LONG:
             return "number too long for %s" % at

@@ -1,8 +1,9 @@
 # Intake: bytes from a console -> a receive ring -> complete lines in one fixed-size
 # buffer. As in Marlin, a `;` comment is not stored, so long slicer comments never fill
 # the buffer; the parser still handles `;` and `( )` for lines that reach it. A line
-# that overflows the buffer, or holds bytes that are not printable ASCII, is flagged
-# and answered with an error when its end arrives; the stream goes on.
+# that overflows the buffer, or holds a control byte, is flagged and answered with an
+# error when its end arrives; the stream goes on. Bytes above 127 are kept: free text
+# (M117 Druck läuft) is UTF-8 as slicers write it, and the parser refuses them in words.
 #
 # Every byte a host sends passes through here twice (into the ring, then into the
 # line), so both loops are viper: in bytecode they would cost about 100 us a byte on
@@ -80,7 +81,7 @@ def _take(ring_buf, st_buf, line_buf, size: int) -> int:
             continue
         if c == 59:
             in_comment = 1
-        elif (c < 32 and c != 9) or c > 126:
+        elif (c < 32 and c != 9) or c == 127:
             fault = _LINE_BAD_BYTE
             st[_BAD_BYTE] = c
         elif n >= size:
@@ -161,9 +162,33 @@ class Intake:
         st[_FAULT] = 0
         st[_IN_COMMENT] = 0
 
+    def cut_text(self, status):
+        """A line too long that shows a message (M117, M118, without a line number,
+        whose checksum would no longer match) is cut, as Marlin cuts it, at the last
+        whole UTF-8 character that fits: LINE_OK then. Any other status is returned
+        as it is."""
+        if status != _LINE_TOO_LONG:
+            return status
+        buf = self.buf
+        n = self.size
+        i = 0
+        while i < n - 5 and (buf[i] == 32 or buf[i] == 9):
+            i += 1
+        if (buf[i] | 32) != 109 or buf[i + 1] != 49 or buf[i + 2] != 49 or \
+                buf[i + 3] not in (55, 56) or buf[i + 4] not in (32, 9):
+            return status
+        lead = n - 1
+        while lead > 0 and buf[lead] & 0xC0 == 0x80:
+            lead -= 1
+        c = buf[lead]
+        if c >= 0xC0 and lead + (2 if c < 0xE0 else (3 if c < 0xF0 else 4)) > n:
+            n = lead
+        self.st[_LEN] = n
+        return LINE_OK
+
     def error_text(self, status):
         if status == LINE_CUT:
             return "line cut off by the end of the stream (no newline); not run"
         if status == _LINE_TOO_LONG:
             return "line longer than %d bytes" % self.size
-        return "byte 0x%02x is not printable ASCII" % self.st[_BAD_BYTE]
+        return "byte 0x%02x is a control character" % self.st[_BAD_BYTE]

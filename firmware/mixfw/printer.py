@@ -471,6 +471,7 @@ class Printer:
         self._cmd_halt_count = self.halt_count
         self._cmd_stop_count = self.stop_count
         self._busy_at_ms = time.ticks_ms()
+        status = intake.cut_text(status)
         if status != LINE_OK:
             raise GcodeError(intake.error_text(status))
         if self.sink is not None:
@@ -528,7 +529,7 @@ class Printer:
         end = start
         while end < n and buf[end] != 42:
             end += 1
-        self.sink(bytes(buf[start:end]).decode().strip())
+        self.sink(bytes(buf[start:end]).strip())  # the bytes as they came
         return None
 
     def run_job_line(self):
@@ -544,6 +545,7 @@ class Printer:
         self._cmd_halt_count = self.halt_count
         self._cmd_stop_count = self.stop_count
         intake = job.intake
+        status = intake.cut_text(status)
         if status != LINE_OK:
             raise GcodeError(intake.error_text(status))
         self.run_line(self.parser.parse(intake.buf, intake.n))
