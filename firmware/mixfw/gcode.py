@@ -266,6 +266,15 @@ def _scan(buf: ptr8, n: int, words) -> int:
     return 0
 
 
+def _utf8(data):
+    """A handler of its own: its words would make the frame of every numbered line's
+    parse too large (see Parser.parse)."""
+    try:
+        return data.decode()
+    except UnicodeError:
+        raise GcodeError("text is not UTF-8")
+
+
 class Parser:
     def __init__(self, raw_commands=()):
         """raw_commands: (letter, number) pairs whose arguments are text, such as file
@@ -324,11 +333,8 @@ class Parser:
         end = start
         while end < n and buf[end] != 59 and buf[end] != 42:
             end += 1
-        try:
-            ln.args_text = bytes(buf[start:end]).decode().strip()
-        except UnicodeError:
-            ln.args_text = ""
-            raise GcodeError("text is not UTF-8")
+        ln.args_text = ""
+        ln.args_text = _utf8(bytes(buf[start:end])).strip()
 
     def command_of_failed(self):
         """After parse() raised: the command_key of the line's command, if its command
