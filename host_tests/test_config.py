@@ -513,3 +513,39 @@ def test_the_option_table_is_a_constant():
     row naming FLOAT or LIVE would be built at import: 11 KB on this port)."""
     from mixstep import sim
     assert sim.code_heap(["mixfw.options"])["module_body_bytes"] < 1024
+
+
+def test_a_refused_file_is_told_to_every_host_until_a_save_replaces_it(mp, tmp_path):
+    """A host on USB connects after the board has started and never sees the boot's
+    lines: M115, which hosts send when they connect, repeats the warning, and so does
+    every network connection and the simulation's report. M500 ends it."""
+    good = good_file(mp)
+    cfg = tmp_path / "mixstep.cfg"
+    data, problem = damaged_files(good)["flipped bit"]
+    cfg.write_bytes(data)
+    warning = "echo:config %s: %s; using defaults" % (cfg, problem)
+    s = Session(mp, cfg, ["M115", "M500", "M115"])
+    assert s.boot == [warning]
+    assert s.of(0)[-1] == warning and s.of(0)[0].startswith("FIRMWARE_NAME:mixstep")
+    assert warning not in s.of(2)
+
+    from mixstep import serve, sim
+    from net import free_port, wait_for_port
+    import socket
+    cfg.write_bytes(data)
+    address = "127.0.0.1:%d" % free_port()
+    proc = serve.serve_tcp(address, realtime=0, announce=lambda text: None, config=cfg,
+                           files=tmp_path / "files")
+    try:
+        wait_for_port(address)
+        host, port = address.rsplit(":", 1)
+        with socket.create_connection((host, int(port)), timeout=60) as c, \
+                c.makefile("rb") as console:
+            assert console.readline() == b"start\n"
+            assert console.readline().decode().rstrip("\n") == warning
+    finally:
+        serve.stop(proc)
+    gcode = tmp_path / "short.gcode"
+    gcode.write_bytes(b"".join(paths.EXAMPLE_GCODE.read_bytes().splitlines(True)[:20]))
+    report = sim.run(gcode, config_path=cfg, files_dir=tmp_path / "files")
+    assert report["warnings"] == [warning]

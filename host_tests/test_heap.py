@@ -21,6 +21,15 @@ def test_arrays_take_one_block_each_from_the_reserve_held_while_the_modules_load
     assert got["arrays"] + 2048 <= got["need"]
 
 
+def test_main_drops_the_code_that_built_the_printer(mp):
+    """main.py on a board starts the printer, then drops assemble before serving: its
+    code and tables go back to the heap, unless something built still refers to the
+    module (a closure made in build would keep all of it)."""
+    got = mp.script_json("heap_forget")
+    assert got["gone"]
+    assert got["freed"] >= 4096  # of about 5.8 kB on this 64-bit port
+
+
 FILLED = 64  # lines: more moves than the simulated board's queue holds
 
 

@@ -57,6 +57,8 @@ def run(gcode_path, trace_path=None, report_path=None, heap_lock=False, edges_pa
         "board": board,
         "lines": lines,
         "errors": errors,
+        # What the firmware's start-up found wrong: a saved configuration it refused.
+        "warnings": fw["warnings"],
         "steps": steps,
         "firmware_steps": fw["steps"],
         "sim_seconds": fw["sim_us"] / 1e6,
@@ -91,6 +93,8 @@ def print_summary(report, keys):
     summary = {k: report.get(k) for k in keys}
     summary["errors"] = len(report["errors"])
     print(json.dumps(summary, indent=2))
+    for text in report.get("warnings", ()):
+        print(text, file=sys.stderr)
     for e in report["errors"][:20]:
         print(e, file=sys.stderr)
 

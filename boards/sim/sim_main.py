@@ -254,6 +254,8 @@ def main():
         # The whole MicroPython heap in use, simulation included.
         "heap_process_peak_bytes": max(simmachine.heap_peak_bytes, heap_after),
         "firmware_modules": firmware_modules,
+        # What the start-up found wrong (a saved configuration refused), as hosts hear.
+        "warnings": warnings,
         # The firmware's largest buffer (step-loop state, block ring, trace ring):
         # bytes, the same on any port.
         "step_memory_bytes": len(printer.mem) * 4,

@@ -131,7 +131,7 @@ def build(config=None, pin_map=None, files_root=_FILES_ROOT):
         printer.on_halt.insert(0, motion.queue.drop)
         printer.on_quick_stop.insert(0, motion.queue.drop)
     mixing = cmd_mixing.Mixing(planner, settings, config, printer.reply,
-                               lambda i: mem[st.S_DRIVE_POS + i], motion.queue, motion)
+                               st.drive_steps_reader(mem), motion.queue, motion)
     config.before_save.append(mixing.filament_used_mm)
     cmd_mixing.register(printer, mixing)
     thermal = Thermal(machine, pin_map, settings, printer)
@@ -213,9 +213,11 @@ def board_consoles(settings):
     return consoles, listeners
 
 
-def run(consoles=None, listeners=(), printer=None, warnings=None, repl_flag=_REPL_FLAG):
-    """Serve until every console closes or M997; repl_flag: where M997 leaves its flag
-    before the reset (None: no flag, no reset; the simulation)."""
+def start(consoles=None, listeners=(), printer=None, warnings=None, repl_flag=_REPL_FLAG):
+    """Build the printer (unless given one), start its step loop, safety checks and
+    consoles; safety.serve(printer) then serves it. repl_flag: where M997 leaves its
+    flag before the reset (None: no flag, no reset; the simulation). warnings: what
+    loading the configuration said, told to every host (Printer.warnings)."""
     if printer is None:
         warnings = []
         # The imports left garbage in every hole of the heap; collected first, the
@@ -224,33 +226,32 @@ def run(consoles=None, listeners=(), printer=None, warnings=None, repl_flag=_REP
         gc.collect()
         printer = build(load_config(warn=warnings.append))
     settings = printer.settings
-    timer = start_timer(printer, settings["tick_us"])
+    printer.step_timer = start_timer(printer, settings["tick_us"])
+    printer.repl_flag = repl_flag
     printer.add_background(safety.StepWatch(printer, printer.mem, settings["step_stall_ms"]))
     safety.start_watchdog(machine, printer, settings["watchdog_ms"])
     if consoles is None:
         consoles, listeners = board_consoles(printer.settings)
         printer.max_channels = len(consoles) + printer.settings.get("tcp_max_clients", 4)
+    printer.warnings = warnings or []
     for console in consoles:
-        printer.add_channel(console)
-        console.write("start\n")
-        for text in warnings or ():
-            console.write(text + "\n")
+        printer.greet(printer.add_channel(console))
     printer.listeners.extend(listeners)
-    # A host's 0x03 byte on the USB console is data, not Ctrl-C: it must not stop a
-    # print (and leave the heaters as they were).
-    micropython.kbd_intr(-1)
-    try:
-        printer.serve()
-    finally:
-        fault = safety.all_off(printer, timer)
-        micropython.kbd_intr(3)
-    if fault is not None:
-        raise fault  # everything is off: now the fault may stop the firmware
-    if printer.leaving == "M997" and repl_flag:
-        with open(repl_flag, "w") as f:
-            f.write("M997\n")
-        machine.reset()
     return printer
+
+
+def run(consoles=None, listeners=(), printer=None, warnings=None, repl_flag=_REPL_FLAG):
+    """start(), then serve until every console closes or M997 (the simulation's way:
+    a board's main.py serves without this module, see forget)."""
+    return safety.serve(start(consoles, listeners, printer, warnings, repl_flag))
+
+
+def forget():
+    """This module's code is needed only to build and start the printer: main.py drops
+    it before serving, and the kilobytes it held on the heap are free for printing.
+    Nothing built here refers to the module (closures would: build makes none)."""
+    del sys.modules[__name__]
+    del mixfw.assemble
 
 
 def repl_boot(flag=_REPL_FLAG):

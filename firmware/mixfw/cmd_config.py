@@ -73,6 +73,7 @@ class ConfigCommands:
     # M501: load the saved configuration, all or nothing; M930 applies. Example: M501
     def m501(self, line):
         note = self.config.load()
+        self.printer.warnings = []  # the start-up's, about the file now loaded
         if note:
             self.printer.reply("echo:config " + note)
 
@@ -82,6 +83,7 @@ class ConfigCommands:
     # Example: M500
     def m500(self, line):
         self.config.save()
+        self.printer.warnings = []  # the start-up's, about the file now replaced
 
     # M930: apply the configuration, reporting options that need a restart. Example: M930
     def m930(self, line):

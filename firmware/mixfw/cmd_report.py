@@ -62,6 +62,8 @@ class Reports:
                            "MACHINE_TYPE:%s EXTRUDER_COUNT:1" % self.board_name)
         for cap in self.capabilities:
             self.printer.reply(cap)
+        for text in self.printer.warnings:  # hosts ask M115 when they connect
+            self.printer.reply(text)
 
     # M122: diagnostics, as RepRapFirmware's: the planner's underruns (the step loop
     # ran dry between two moves with no wait between them) and the free heap, as it is

@@ -16,7 +16,11 @@ from mixfw.options import SCHEMA, FIRMWARE_DEFAULTS, FLOAT, INT, BOOL, MIX, PAIR
 from mixfw.mixer import normalize, default_tool_mixes
 from mixfw.pwm import CLOCK_HZ, HEATER_OPTIONS, range_hz, clock_text
 
-_HEADER = const("# mixstep configuration, version 1\n")
+_VERSION = const("# mixstep configuration, version 1")
+# The file is the firmware's: an edit by hand fails the checksum, and the printer then
+# starts with its defaults and says so.
+_HEADER = const("# mixstep configuration, version 1\n"
+                "# written by M500; set options with M926: a hand edit fails the checksum\n")
 _CRC_PREFIX = const(b"crc32 = ")
 _CRC_LINE = const("crc32 = %08x\n")
 _MAX_FILE_BYTES = const(16384)  # far above a real file; bounds what a junk file costs in RAM
@@ -383,11 +387,13 @@ class Config:
             lines = body.decode().split("\n")
         except UnicodeError:
             raise ConfigError("not text")
-        if lines[0] + "\n" != _HEADER:
+        if lines[0] != _VERSION:
             raise ConfigError("unsupported header %r" % lines[0])
         values = {}
         skipped = []
         for n in range(1, len(lines) - 1):
+            if lines[n].startswith("#"):
+                continue
             name, eq, text = lines[n].partition("=")
             name = name.strip()
             if not eq or name in values:

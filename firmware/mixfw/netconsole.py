@@ -77,6 +77,4 @@ class TcpListener:
             conn, _addr = self.sock.accept()
         except OSError:
             return None
-        console = SocketConsole(conn)
-        console.write("start\n")
-        return console
+        return SocketConsole(conn)  # Printer.greet says `start`

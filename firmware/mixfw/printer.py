@@ -231,6 +231,10 @@ class Printer:
         self.failed = False
         self.sink = None  # M28 upload: takes each received line's text instead of running it
         self.job = None  # a file being printed: next_line() -> its intake's status, .paused
+        # What the start-up found wrong (a saved configuration refused): said at start,
+        # to every host that connects later and in M115's answer, as a host on USB
+        # connects after the board has started; M500 and M501 clear it.
+        self.warnings = []
         for letter, number, fn in (
             ("M", 110, self.m110),  # set the line number: M110 N<n>
             ("M", 112, self.m112),  # emergency stop
@@ -265,6 +269,13 @@ class Printer:
         ch = Channel(console, self.line_bytes)
         self.channels.append(ch)
         return ch
+
+    def greet(self, ch):
+        """A console at start, or a host that connected over the network: `start`, as
+        Marlin's, and the warnings."""
+        ch.write("start\n")
+        for text in self.warnings:
+            ch.write(text + "\n")
 
     def reply(self, text):
         """A line to the host whose command is running (all hosts if none)."""
@@ -304,7 +315,7 @@ class Printer:
             if len(self.channels) < self.max_channels:
                 console = lst.accept()
                 if console is not None:
-                    self.add_channel(console)
+                    self.greet(self.add_channel(console))
 
     def idle(self):
         """Let time pass inside a command: the step loop runs, background tasks run,

@@ -8,7 +8,9 @@
 # watchdog reset, until boot.py drives it inactive. An external pull-up on EN (10 kOhm
 # to the driver's VIO) keeps the drivers off until then, on any chip. Heater and fan
 # outputs come up low, which leaves their MOSFETs off.
+import gc
 import time
+from mixfw.compat import micropython
 from mixfw import stepper as st
 from mixfw.printer import run_each
 
@@ -60,3 +62,25 @@ def all_off(printer, step_loop):
 
     later = run_each((step_loop.deinit, drivers_off, lambda: printer.thermal.set_fan(0.0)))
     return fault or later
+
+
+def serve(printer):
+    """Serve the started printer (assemble.start) until every console closes or M997;
+    everything off on any way out, then M997's reset into the REPL."""
+    gc.collect()  # the boot's garbage, and on a board the code that built the printer
+    # A host's 0x03 byte on the USB console is data, not Ctrl-C: it must not stop a
+    # print (and leave the heaters as they were).
+    micropython.kbd_intr(-1)
+    try:
+        printer.serve()
+    finally:
+        fault = all_off(printer, printer.step_timer)
+        micropython.kbd_intr(3)
+    if fault is not None:
+        raise fault  # everything is off: now the fault may stop the firmware
+    if printer.leaving == "M997" and printer.repl_flag:
+        with open(printer.repl_flag, "w") as f:
+            f.write("M997\n")
+        import machine
+        machine.reset()
+    return printer
