@@ -324,7 +324,7 @@ _PAIR_SETTINGS = {"retract_policy": 2, "transition_l1_mm": 1.0, "transition_l2_m
                   "transition_pairs": _PAIRS}
 
 
-def test_a_print_with_per_pair_transitions_passes(sim_printer, tmp_path):
+def test_a_print_with_per_pair_transitions_passes(sim_printer, tmp_path, capsys):
     """transition_pairs given to the firmware the way docs/G-Codes.md says (M926, M500, a
     restart) and to the check as a setting: the trace passes, and the same trace
     checked without any one of the pairs (that change at the default lengths) fails,
@@ -352,6 +352,18 @@ def test_a_print_with_per_pair_transitions_passes(sim_printer, tmp_path):
     for k, pair in enumerate(_PAIRS):
         fewer = dict(_PAIR_SETTINGS, transition_pairs=_PAIRS[:k] + _PAIRS[k + 1:])
         assert "moves" in _failed(tracecheck.check(vcd_path, gcode, settings=fewer)), pair
+    # The saved file itself, as the printer started with it: the same verdict.
+    by_file = tracecheck.check(vcd_path, gcode, config=cfg)
+    assert _failed(by_file) == [] and by_file["config"] == str(cfg)
+    assert _run_cli(vcd_path, "--gcode", gcode, "--config", cfg) == 0
+    # --set goes over it, as over the firmware's: a pair changed there counts.
+    assert "moves" in _failed(tracecheck.check(
+        vcd_path, gcode, config=cfg, settings={"transition_pairs": _PAIRS[1:]}))
+    # A file the firmware refuses (edited by hand) is refused here too, with a message.
+    edited = tmp_path / "edited.cfg"
+    edited.write_bytes(cfg.read_bytes().replace(b"retract_policy = 2", b"retract_policy = 1"))
+    assert _run_cli(vcd_path, "--gcode", gcode, "--config", edited) == 2
+    assert "its checksum fails" in capsys.readouterr().err
 
 
 def _numbered(n, text):

@@ -62,10 +62,12 @@ its size; the expected moves are held in memory (they grow with the G-code only)
 """
 import json
 import os
+import re
 import subprocess
 import sys
 import tempfile
 import time
+import zlib
 
 import numpy as np
 
@@ -96,13 +98,65 @@ def expected_from_gcode(gcode_path, settings):
     return tracemodel.expected(gcode_path, settings)
 
 
-def board_settings(board="sim", overrides=None):
-    """A board's settings with --set overrides applied, as `mixstep serve` applies them
-    before the firmware starts. overrides: {key: value or value text}."""
+def board_settings(board="sim", overrides=None, config=None):
+    """A board's settings, then a configuration saved by M500 (config: its file), then
+    --set overrides, in the order the firmware takes them. overrides: {key: value or
+    value text}."""
     settings = dict(paths.load_board(board)["SETTINGS"])
+    if config:
+        settings = saved_settings(config, settings)
     for key, value in (overrides or {}).items():
         settings[key] = setting_value(value) if isinstance(value, str) else value
     return settings
+
+
+_ELEMENT = re.compile(r"(.+)_([xyze]|[0-9]+)$")
+
+
+def saved_settings(path, settings):
+    """settings with the values of a configuration file saved by M500 over them, read
+    here on their own: `name = value` lines after `#` comments, a checksum line last;
+    an option with a value per axis, drive or tool is saved an element a line, named
+    by axis (steps_per_mm_x) or index (tool_mixes_2), a row as a:b:c. A file whose
+    checksum fails, which the firmware refuses too, is a TraceError."""
+    try:
+        data = open(path, "rb").read()
+    except OSError as e:
+        raise TraceError("can't read the configuration %s: %s" % (path, e.strerror or e))
+    cut = data.rfind(b"\n", 0, len(data) - 1) + 1
+    body = data[:cut]
+    if not data.endswith(b"\n") or data[cut:] != b"crc32 = %08x\n" % zlib.crc32(body):
+        raise TraceError("%s is not a configuration as M500 saved it (its checksum fails), "
+                         "and the firmware starts with its defaults instead: leave out "
+                         "--config" % path)
+    out = dict(tracemodel.OPTION_DEFAULTS)
+    out.update(settings)
+    rows = {}
+    for text in body.decode("utf-8", "replace").splitlines():
+        name, eq, value = text.partition("=")
+        name = name.strip()
+        if text.startswith("#") or not eq:
+            continue
+        value = _saved_value(value.strip())
+        element = _ELEMENT.match(name)
+        if name in out or not element:
+            out[name] = value
+            continue
+        key, index = element.group(1), element.group(2)
+        rows.setdefault(key, {})["xyze".index(index) if index in "xyze" else int(index)] = value
+    for key, given in rows.items():
+        row = list(out.get(key) or ())
+        row += [None] * (max(given) + 1 - len(row))
+        for i, value in given.items():
+            row[i] = value
+        out[key] = tuple(row)
+    return out
+
+
+def _saved_value(text):
+    if ":" in text:
+        return tuple(_saved_value(t) for t in text.split(":"))
+    return setting_value(text)
 
 
 # --- Reading: VCD (or .sr via sigrok-cli), streamed ---------------------------------
@@ -531,14 +585,15 @@ class _MoveWalk:
 
 def check(trace_path, gcode_path, board="sim", mapping=None, step_pulse_us=None,
           dir_setup_us=None, rate_margin=0.02, window=100, mix_tolerance=2.0,
-          chunk_bytes=CHUNK_BYTES, settings=None):
+          chunk_bytes=CHUNK_BYTES, settings=None, config=None):
     """Check a trace (VCD or sigrok .sr) against a G-code file. settings: board
     settings to override ({key: value}, as `mixstep serve --set`), e.g. retract_policy
-    or transition_l1_mm. Returns the report: {"ok": bool, "checks": [{name, expected,
+    or transition_l1_mm; config: the configuration file the printer started with
+    (saved by M500), under them. Returns the report: {"ok": bool, "checks": [{name, expected,
     measured, ok, detail}], ...}. Raises TraceError for input that cannot be read."""
     pins = paths.load_board(board)["PINS"]
     overrides = settings or {}
-    settings = board_settings(board, overrides)
+    settings = board_settings(board, overrides, config)
     expected = expected_from_gcode(gcode_path, settings)
     names = [n for n in pins if n.endswith(("_step", "_dir"))]
     tmp = None
@@ -570,6 +625,7 @@ def check(trace_path, gcode_path, board="sim", mapping=None, step_pulse_us=None,
         "trace": str(trace_path),
         "gcode": str(gcode_path),
         "board": board,
+        "config": str(config) if config else None,
         "settings": {k: overrides[k] for k in sorted(overrides)},
         "signals": reader.signals,
         "timescale_us": unit_us,
@@ -693,7 +749,12 @@ def add_parser(sub):
     p.add_argument("--board", default="sim", help="board whose pins and settings apply")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="a board setting the printer ran with, as `mixstep serve --set`, "
-                        "e.g. retract_policy=2 or transition_l1_mm=1.5 (repeatable)")
+                        "e.g. retract_policy=2 or transition_l1_mm=1.5 (repeatable); "
+                        "over --config")
+    p.add_argument("--config", metavar="FILE",
+                   help="the configuration the printer started with, as M500 saved it "
+                        "(a board's /mixstep.cfg; `mixstep serve` and `sim`: "
+                        "out/printer/mixstep.cfg by default)")
     p.add_argument("--json", metavar="OUT", help="write the report as JSON here ('-': stdout)")
     p.add_argument("--map", metavar="NAME=CHANNEL,...",
                    help="VCD names of signals, e.g. x_step=D0,x_dir=D1")
@@ -720,7 +781,7 @@ def _run(args):
     try:
         report = check(args.trace, args.gcode, args.board, parse_map(args.map),
                        args.step_pulse_us, args.dir_setup_us, args.rate_margin, args.window,
-                       args.mix_tolerance, settings=overrides)
+                       args.mix_tolerance, settings=overrides, config=args.config)
     except TraceError as e:
         print("mixstep trace check: %s" % e, file=sys.stderr)
         return 2
