@@ -3,8 +3,7 @@
 
 The checks read the output with their own small G-code reader, not the module's: it
 counts as printing extrusion the positive E of moves that move X, Y or Z, outside
-PrusaSlicer's wipes. (The module also pays back retractions per slicer tool; on these
-files both rules give the same total, which the first test checks.)
+PrusaSlicer's wipes, the rule the module and the firmware's transitions follow too.
 """
 import difflib
 import io
@@ -216,10 +215,11 @@ def test_too_little_extrusion_at_the_start_advances_as_far_as_possible():
     assert abs(advanced[first[0]] - first[2]) < TOL_MM     # everything before it
     (warning,) = [w for w in report["warnings"] if w["line"] == first[0]]
     assert "not enough printing extrusion" in warning["message"]
-    # it went just before the first printing move after the initial T0, not into the header
+    # it went right after the initial T0, as far back as the firmware's transition
+    # reaches (over every move queued since): before any extrusion
     n_out = changes_in(out)[1][0]
-    assert changes_in(out)[0][0] < n_out
-    assert walk(out)[n_out][0] > 0      # the line right after it prints
+    assert changes_in(out)[0][0] == n_out - 1
+    assert walk(out)[n_out][0] == 0
 
 
 def test_huge_purge_keeps_every_change_in_order():
@@ -398,3 +398,98 @@ def test_cli_l1_l2_and_report(tmp_path, capsys):
     assert cli.main(["advance", src, "-o", str(out_path), "--purge-matrix", str(matrix)]) == 0
     with pytest.raises(SystemExit):
         cli.main(["advance", src, "-o", str(out_path)])
+
+
+# --- One rule with the firmware's transitions ---------------------------------------
+# A file advanced by the purge and printed plainly must step every drive as the
+# original printed with firmware transitions of that length (L0 = L1 + L2/2), also
+# where a retraction straddles a change (one tool retracts, the next unretracts). Both
+# sides are worked out by trace check's model (mixstep.tracemodel, tested against the
+# firmware's traces in test_trace_check.py and test_transition.py).
+
+def _drive_steps(path, settings):
+    from mixstep import tracemodel
+    return {k: v for k, v in tracemodel.expected(path, settings)["steps"].items()
+            if k.startswith("e")}
+
+
+def _same_steps_as_firmware_transitions(gcode, tmp_path, purge_mm, policy):
+    from mixstep import tracecheck
+    advanced = tmp_path / "advanced.gcode"
+    adv.advance_file(gcode, advanced, purge_mm)
+    plain = tracecheck.board_settings("sim", {"retract_policy": policy})
+    with_transitions = dict(plain, transition_l1_mm=purge_mm, transition_l2_mm=0.0)
+    firmware = _drive_steps(gcode, with_transitions)
+    advanced_steps = _drive_steps(advanced, plain)
+    return firmware, advanced_steps
+
+
+@pytest.mark.parametrize("name", ["short_3tool_m117_prusaslicer.gcode", "cura_part_3tool.gcode",
+                                  "slic3r_part_3tool_rel.gcode"])
+@pytest.mark.parametrize("policy", [0, 1, 2])
+def test_advanced_file_steps_each_drive_as_firmware_transitions_do(name, policy, tmp_path):
+    """Real slicer output, whose changes retract with one tool and unretract with the
+    next (PrusaSlicer's single-nozzle toolchange retraction, Cura's switch retraction,
+    Slic3r's wipes)."""
+    firmware, advanced = _same_steps_as_firmware_transitions(
+        os.path.join(TESTDATA, name), tmp_path, 2.0, policy)
+    assert firmware == advanced
+    assert sum(1 for v in firmware.values() if v) >= 3
+
+
+def _straddling_file(segments):
+    """G-code of printing moves along X and tool changes, each change retracting r mm
+    with the old tool and unretracting them with the new one (E-only) when r > 0."""
+    lines = ["G21", "G90", "M83", "M302 P1", "T0", "G1 Z0.3 F600"]
+    x = 0.0
+    for kind, value, r in segments:
+        if kind == "print":
+            x += 1.0 + value
+            lines.append("G1 X%.3f E%.5f F1800" % (x, value))
+        else:
+            if r:
+                lines.append("G1 E-%.5f F2400" % r)
+            lines.append("T%d" % value)
+            if r:
+                lines.append("G1 E%.5f F2400" % r)
+    return "\n".join(lines) + "\n"
+
+
+from hypothesis import given, settings as hsettings, strategies as hst, HealthCheck  # noqa: E402
+
+_segment = hst.one_of(
+    hst.tuples(hst.just("print"), hst.sampled_from([0.3, 0.8, 1.0, 2.5, 4.0, 7.3]),
+               hst.just(0.0)),
+    hst.tuples(hst.just("change"), hst.integers(0, 2), hst.sampled_from([0.0, 0.8, 2.0])))
+
+
+@hsettings(max_examples=30, deadline=None, suppress_health_check=list(HealthCheck))
+@given(hst.lists(_segment, min_size=4, max_size=24), hst.sampled_from([0, 1, 2]))
+def test_changes_straddled_by_retractions_land_where_the_firmware_puts_them(segments, policy):
+    import tempfile
+    from pathlib import Path
+    with tempfile.TemporaryDirectory() as tmp:
+        gcode = Path(tmp) / "straddling.gcode"
+        gcode.write_text(_straddling_file(segments))
+        firmware, advanced = _same_steps_as_firmware_transitions(gcode, Path(tmp), 2.5, policy)
+    assert firmware == advanced
+
+
+def test_the_firmware_itself_agrees_on_a_straddling_file(tmp_path):
+    """The issue's case and more on the simulated printer: T0 prints 10 mm, retracts
+    0.8, T1 unretracts 0.8 and prints 10, T0 prints 1, T1 prints 9, purge 2.5 mm:
+    the drives end at T0 8.5 mm and T1 21.5 mm of filament either way."""
+    from mixstep import sim
+    segments = [("print", 7.3, 0), ("print", 2.7, 0), ("change", 1, 0.8), ("print", 4.0, 0),
+                ("print", 6.0, 0), ("change", 0, 0.0), ("print", 1.0, 0), ("change", 1, 2.0),
+                ("print", 4.0, 0), ("print", 5.0, 0)]
+    gcode = tmp_path / "straddling.gcode"
+    gcode.write_text(_straddling_file(segments))
+    advanced = tmp_path / "advanced.gcode"
+    adv.advance_file(gcode, advanced, 2.5)
+    with_transitions = sim.run(gcode, settings={"transition_l1_mm": 2.5})
+    plain = sim.run(advanced)
+    assert with_transitions["errors"] == plain["errors"] == []
+    assert with_transitions["steps"] == plain["steps"]
+    # 3527.5 and 8922.5 steps at 415 steps/mm, each rounded half away from zero
+    assert (plain["steps"]["e0"], plain["steps"]["e1"]) == (3528, 8923)

@@ -8,10 +8,13 @@ without a wipe tower.
 
 What counts as extrusion
     Only positive E on printing moves, in mm of filament: G0/G1/G2/G3 moves that move
-    X, Y or Z. Not counted: travel; retraction (negative E); unretraction, i.e. positive
-    E that pays back what was retracted before (kept per slicer tool, because a slicer
-    retracts the old tool at a change and unretracts it when that tool comes back);
-    E-only priming; anything between PrusaSlicer's `;WIPE_START` and `;WIPE_END`.
+    X, Y or Z, whatever came before them. Not counted: travel; retraction (negative E);
+    E-only moves (unretraction, priming); anything between PrusaSlicer's `;WIPE_START`
+    and `;WIPE_END` (its wipes retract). This is the firmware's rule for its own
+    transitions (firmware/mixfw/transition.py), so a file advanced here and the same
+    file printed with transitions change colour at the same filament: a retraction
+    that straddles a tool change (T0 retracts, T1 unretracts) moves no change, as the
+    filament it pulls back is pushed out again before anything prints.
 
 Where a change goes
     A change found after S mm of printing extrusion, purging P mm, goes to S - P: into
@@ -26,9 +29,10 @@ Where a change goes
     one purge amount, closely spaced changes (closer than P) all move by P and keep
     their spacing (measured from the previous change's *original* place, they would
     bunch up). With a purge matrix, a change whose pair needs more than the gap to the
-    previous change is held just behind the previous one, with a warning. Near the
-    start of the print, where less than P mm was extruded before a change, it goes
-    just before the first printing move after the previous change, with a warning.
+    previous change is held just behind the previous one, with a warning; so is a
+    change near the start of the print, where less than P mm was extruded before it
+    (behind the initial selection), as the firmware's transition reaches back over
+    every move queued since, a retraction or priming among them.
     The first `T` before any printing is the initial selection and stays where it is.
     A `T` that selects the tool already in use moves with the same purge as the change
     before it, so it can never re-select a stale tool.
@@ -78,7 +82,6 @@ from mixstep import gcodeio
 from mixstep.outfile import refuse_input, replacing
 
 _SNAP_MM = 5e-6     # a split closer than this to a move's end is not worth a new line
-_E_EPS_MM = 1e-7    # retraction debt below this is rounding, not filament
 _DEFAULT_MAX_BUFFER_LINES = 200000
 
 
@@ -180,7 +183,7 @@ def _split_move(ent, t_mm):
 
     Returns (first_text, point, e_first, second_entry) or None when it can't be split
     (an arc with P turns)."""
-    s_end, line, s_start, start, code, words, repay, flags, lineno = ent
+    s_end, line, s_start, start, code, words, flags, lineno = ent
     rel_xyz, rel_e = flags & 1, flags & 2
     if "P" in words and code in gcodeio.ARCS:
         return None
@@ -188,7 +191,7 @@ def _split_move(ent, t_mm):
     nl = "\r\n" if line.endswith("\r\n") else "\n"
     x0, y0, z0, e0 = start
     (x1, y1, z1, _), de = gcodeio.move_end(start, words, rel_xyz, rel_e)
-    e_first = round(repay + (t_mm - s_start), 5)
+    e_first = round(t_mm - s_start, 5)
     if not rel_e:   # the E word written is rounded: measure the split from it
         e_first = round(e0 + e_first, 5) - e0
     f = e_first / de
@@ -236,9 +239,9 @@ def _split_move(ent, t_mm):
             second["Y"] = _fmt(y1 if not rel_xyz else y1 - ym, 4)
         second["I"] = _fmt(cx - xm, 4)
         second["J"] = _fmt(cy - ym, 4)
-    s_mid = s_start + (e_first - repay)
+    s_mid = s_start + e_first
     second_text = " ".join([code] + [k + v for k, v in second.items()]) + rest
-    second_ent = (s_end, second_text, s_mid, (xm, ym, zm, e0 + e_first), code, second, 0.0,
+    second_ent = (s_end, second_text, s_mid, (xm, ym, zm, e0 + e_first), code, second,
                   flags, lineno)
     return " ".join(first) + nl, (xm, ym, zm), s_mid, second_ent
 
@@ -316,7 +319,7 @@ class _Advancer:
         if purge_mm > 0:
             while i >= 0:
                 ent = buf[i]
-                if len(ent) == 9:    # a printing move
+                if len(ent) == 8:    # a printing move
                     if ent[0] < t - _SNAP_MM:
                         stop = None
                         break
@@ -326,7 +329,14 @@ class _Advancer:
                     break
                 i -= 1
         split = None
-        if cand is None:
+        if stop not in (None, "front") and (cand is None or buf[cand][2] >= t - _SNAP_MM):
+            # Too little printing extrusion since the previous change: right behind it,
+            # as far back as the firmware's transition reaches (over every move queued
+            # since, retractions included).
+            new_s = buf[i][0]
+            buf.insert(i + 1, (new_s, change))
+            how = "after the change at line %s" % buf[i][1].rec["line"]
+        elif cand is None:
             new_s = s_mm
             buf.append((new_s, change))
             how = "in place"
@@ -335,24 +345,24 @@ class _Advancer:
             if ent[0] <= t + _SNAP_MM:
                 new_s = ent[0]
                 buf.insert(cand + 1, (new_s, change))
-                how = "after line %d" % ent[8]
+                how = "after line %d" % ent[7]
             elif ent[2] >= t - _SNAP_MM:
                 new_s = ent[2]
                 buf.insert(cand, (new_s, change))
-                how = "before line %d" % ent[8]
+                how = "before line %d" % ent[7]
             else:
                 split = _split_move(ent, t)
                 if split is None:   # an arc with P turns: go after it
                     new_s = ent[0]
                     buf.insert(cand + 1, (new_s, change))
-                    how = "after line %d (arc with P not split)" % ent[8]
+                    how = "after line %d (arc with P not split)" % ent[7]
                 else:
                     first_text, point, new_s, second = split
                     buf[cand] = second
                     buf.insert(cand, (new_s, change))
                     buf.insert(cand, (new_s, first_text))
-                    how = "splits line %d" % ent[8]
-                    rec["split_line"] = ent[8]
+                    how = "splits line %d" % ent[7]
+                    rec["split_line"] = ent[7]
                     rec["split_point"] = list(point)
         rec["placed"] = how
         rec["s_mm"] = round(s_mm, 6)
@@ -403,33 +413,20 @@ def advance(lines_in, write, purge_for, max_purge_mm=None,
     s = 0.0                     # printing extrusion so far, mm
     tool = None                 # the input's tool (the slicer's view)
     last_purge = None
-    debt = {}                   # retracted mm per slicer tool
     n = 0
     limit = -math.inf
     cap = max_buffer_lines
     for n, line, code, words, start, _, de, printing, _, error in reader.tuples():
-        if de:      # only moves have an E delta
-            if de > 0:
-                owed = debt.get(tool, 0.0)
-                if owed > 0:
-                    if de <= owed + _E_EPS_MM:
-                        debt[tool] = owed - de if owed - de > _E_EPS_MM else 0.0
-                        append((s, line))
-                        continue
-                    debt[tool] = 0.0
-                if not printing or reader.wipe:
-                    append((s, line))
-                    continue
-                s0 = s
-                s += de - owed
-                append((s, line, s0, start, code, words, owed,
-                        (1 if reader.rel_xyz else 0) | (2 if reader.rel_e else 0), n))
-                limit = s - max_purge_mm - 2 * _SNAP_MM
-                if buf[0][0] < limit:
-                    flush_to(limit)
-                continue
-            debt[tool] = debt.get(tool, 0.0) - de
-        elif code[:1] == "T" and code[1:].isdigit():
+        if de > 0 and printing and not reader.wipe:
+            s0 = s
+            s += de
+            append((s, line, s0, start, code, words,
+                    (1 if reader.rel_xyz else 0) | (2 if reader.rel_e else 0), n))
+            limit = s - max_purge_mm - 2 * _SNAP_MM
+            if buf[0][0] < limit:
+                flush_to(limit)
+            continue
+        if not de and code[:1] == "T" and code[1:].isdigit():
             new_tool = int(code[1:])
             if tool is None and s == 0.0:
                 tool = new_tool
