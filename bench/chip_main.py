@@ -14,8 +14,9 @@
 #   functions              where each loaded function's code starts, for
 #                          bench/chip_pcprofile.py.
 # Written against the firmware's API: heap.reserve/release and planner.step_loop_bytes
-# (one more reserve, for the second printer), assemble.build(config, files_root=None), Config,
-# assemble.start_timer(printer, tick_us) (returns what has deinit()), printer.parser.parse,
+# (one more reserve, for the second printer), assemble.build(config, files_root=None),
+# assemble.forget(), Config, safety.start_timer(machine, printer, tick_us) (returns what
+# has deinit()), printer.parser.parse,
 # printer.run_line, printer.planner (.idle, .queue, .synchronize), printer.mem with the
 # stepper's S_HEAD/S_TAIL/S_ACTIVE/S_POS words (plan_only.retire_one).
 import sys
@@ -102,6 +103,7 @@ import board  # noqa: E402
 from mixfw import heap, planner  # noqa: E402
 heap.reserve(planner.step_loop_bytes(board.SETTINGS))
 from mixfw import assemble  # noqa: E402
+from mixfw import safety  # noqa: E402
 from mixfw.config import Config  # noqa: E402
 from mixfw import stepper as st  # noqa: E402
 from plan_only import make_room, retire_one  # noqa: E402
@@ -152,6 +154,15 @@ def planned_printer():
     return PRINTERS["planned"]
 
 
+def forget_builder():
+    """As main.py on a board: once the printers are built, the code that built them
+    goes (a session's one plan request builds them; a later request builds none)."""
+    global assemble
+    if assemble is not None:
+        assemble.forget()
+        assemble = None
+
+
 PRINTERS = {}
 SPACER = []
 
@@ -183,9 +194,10 @@ def plan(path, stepping, profile=0):
     timer = None
     steps0 = 0
     if stepper:
-        timer = assemble.start_timer(stepper, stepper.settings["tick_us"])
+        timer = safety.start_timer(machine, stepper, stepper.settings["tick_us"])
         time.sleep_ms(300)  # past the move's acceleration, into its cruise
         steps0 = stepper_steps(stepper)
+    forget_builder()
     if profile:
         import chip_profile
     if profile == 2:

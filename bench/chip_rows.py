@@ -107,7 +107,7 @@ NOTES = {
         "blocks (retiring them in the planner's wait hook would charge the hook's "
         "calls, about 0.1 ms a line, to the planner), WHILE the step path runs a six-drive mixed move of "
         "about 20,000 steps/s (X, Y, E 8:6:6). The stepping is a second printer built "
-        "by the same assemble.build and started by assemble.start_timer with one long move, so "
+        "by the same assemble.build and started by safety.start_timer with one long move, so "
         "what is planned never waits for the pins (bench/chip_main.py); it has no trace "
         "records and a queue of 4, which its one move does not need, for heap. "
         "The row is the median over five heap layouts (chip_planner_lines_per_s_layouts, "

@@ -167,34 +167,6 @@ def build(config=None, pin_map=None, files_root=_FILES_ROOT):
     return printer
 
 
-# rp2 timer callbacks can be hard (run in the interrupt) only since MicroPython 1.26;
-# a soft one waits for the interpreter and would make the step timing worthless.
-_HARD_TIMER_SINCE = const((1, 26, 0))
-
-
-def check_timer_support(chip, version):
-    """Refuse to run the step loop on a MicroPython that can't time it properly."""
-    if chip in ("rp2040", "rp2350") and tuple(version[:3]) < _HARD_TIMER_SINCE:
-        raise RuntimeError("mixstep needs MicroPython %d.%d or newer on %s for a hard "
-                           "machine.Timer; this is %d.%d.%d: flash a newer MicroPython"
-                           % (_HARD_TIMER_SINCE[:2] + (chip,) + tuple(version[:3])))
-
-
-def start_timer(printer, tick_us):
-    """The timer owns the step loop: hard on rp2; soft on ESP32, whose timers have no
-    hard callbacks (docs/Step_Timing.md: the jitter that gives)."""
-    chip = printer.settings.get("chip", "sim")
-    if printer.feed:
-        printer.feed.start(printer.pins)  # the DMA IRQ runs the step loop: no timer
-        return printer.feed
-    check_timer_support(chip, sys.implementation.version)
-    freq = 1000000 // tick_us
-    if chip == "esp32":
-        return machine.Timer(0, mode=machine.Timer.PERIODIC, freq=freq, callback=printer.irq)
-    return machine.Timer(-1, mode=machine.Timer.PERIODIC, freq=freq, callback=printer.irq,
-                         hard=True)
-
-
 def board_consoles(settings):
     """USB serial, a UART if configured, and TCP if the board is on a network."""
     consoles = [StreamConsole(sys.stdin.buffer, sys.stdout.buffer)]
@@ -226,7 +198,7 @@ def start(consoles=None, listeners=(), printer=None, warnings=None, repl_flag=_R
         gc.collect()
         printer = build(load_config(warn=warnings.append))
     settings = printer.settings
-    printer.step_timer = start_timer(printer, settings["tick_us"])
+    printer.step_timer = safety.start_timer(machine, printer, settings["tick_us"])
     printer.repl_flag = repl_flag
     printer.add_background(safety.StepWatch(printer, printer.mem, settings["step_stall_ms"]))
     safety.start_watchdog(machine, printer, settings["watchdog_ms"])

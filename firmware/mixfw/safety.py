@@ -1,7 +1,8 @@
-# What keeps a board safe when the firmware itself goes wrong: a step loop that stopped
-# (a hard timer callback that raised is disabled and never runs again), a main loop or
-# an interrupt that hangs (the hardware watchdog resets the chip), and every way out of
-# the main loop (heaters off first, then the step loop, drivers and fan).
+# What keeps a board safe when the firmware itself goes wrong: a step loop that can't
+# be timed properly (refused) or stopped (a hard timer callback that raised is disabled
+# and never runs again), a main loop or an interrupt that hangs (the hardware watchdog
+# resets the chip), and every way out of the main loop (heaters off first, then the
+# step loop, drivers and fan).
 #
 # A reset does not leave every output off: the RP2040's and RP2350's pads come up with
 # pull-downs, so an active-low driver ENABLE is active from power-on, and after every
@@ -9,8 +10,9 @@
 # to the driver's VIO) keeps the drivers off until then, on any chip. Heater and fan
 # outputs come up low, which leaves their MOSFETs off.
 import gc
+import sys
 import time
-from mixfw.compat import micropython
+from mixfw.compat import const, micropython
 from mixfw import stepper as st
 from mixfw.printer import run_each
 
@@ -47,6 +49,35 @@ def start_watchdog(machine, printer, timeout_ms):
     feed = wdt.feed
     printer.add_background(lambda now_ms: feed())
     return wdt
+
+
+# rp2 timer callbacks can be hard (run in the interrupt) only since MicroPython 1.26;
+# a soft one waits for the interpreter and would make the step timing worthless.
+_HARD_TIMER_SINCE = const((1, 26, 0))
+
+
+def check_timer_support(chip, version):
+    """Refuse to run the step loop on a MicroPython that can't time it properly."""
+    if chip in ("rp2040", "rp2350") and tuple(version[:3]) < _HARD_TIMER_SINCE:
+        raise RuntimeError("mixstep needs MicroPython %d.%d or newer on %s for a hard "
+                           "machine.Timer; this is %d.%d.%d: flash a newer MicroPython"
+                           % (_HARD_TIMER_SINCE[:2] + (chip,) + tuple(version[:3])))
+
+
+def start_timer(machine, printer, tick_us):
+    """The timer owns the step loop: hard on rp2; soft on ESP32, whose timers have no
+    hard callbacks (docs/Step_Timing.md: the jitter that gives). Returns what stops it
+    (deinit()): the timer, or the DMA feed that runs the step loop instead."""
+    chip = printer.settings.get("chip", "sim")
+    if printer.feed:
+        printer.feed.start(printer.pins)  # the DMA IRQ runs the step loop: no timer
+        return printer.feed
+    check_timer_support(chip, sys.implementation.version)
+    freq = 1000000 // tick_us
+    if chip == "esp32":
+        return machine.Timer(0, mode=machine.Timer.PERIODIC, freq=freq, callback=printer.irq)
+    return machine.Timer(-1, mode=machine.Timer.PERIODIC, freq=freq, callback=printer.irq,
+                         hard=True)
 
 
 def all_off(printer, step_loop):
