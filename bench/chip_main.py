@@ -15,7 +15,7 @@
 #                          bench/chip_pcprofile.py.
 # Written against the firmware's API: heap.reserve/release and planner.step_loop_bytes
 # (one more reserve, for the second printer), assemble.build(config, files_root=None),
-# assemble.forget(), Config, safety.start_timer(machine, printer, tick_us) (returns what
+# assemble.drop(), Config, safety.start_timer(machine, printer, tick_us) (returns what
 # has deinit()), printer.parser.parse,
 # printer.run_line, printer.planner (.idle, .queue, .synchronize), printer.mem with the
 # stepper's S_HEAD/S_TAIL/S_ACTIVE/S_POS words (plan_only.retire_one).
@@ -154,15 +154,6 @@ def planned_printer():
     return PRINTERS["planned"]
 
 
-def forget_builder():
-    """As main.py on a board: once the printers are built, the code that built them
-    goes (a session's one plan request builds them; a later request builds none)."""
-    global assemble
-    if assemble is not None:
-        assemble.forget()
-        assemble = None
-
-
 PRINTERS = {}
 SPACER = []
 
@@ -197,7 +188,12 @@ def plan(path, stepping, profile=0):
         timer = safety.start_timer(machine, stepper, stepper.settings["tick_us"])
         time.sleep_ms(300)  # past the move's acceleration, into its cruise
         steps0 = stepper_steps(stepper)
-    forget_builder()
+    # As main.py on a board: once the printers are built, the code that built them
+    # goes (a session's one plan request builds them; a later one builds none).
+    global assemble
+    if assemble is not None:
+        assemble.drop()
+        assemble = None
     if profile:
         import chip_profile
     if profile == 2:

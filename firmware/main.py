@@ -7,7 +7,7 @@ from mixfw import assemble
 if __name__ == "__main__" and not assemble.repl_boot():
     printer = assemble.start()
     # The code that built the printer is not needed again: off the heap, for printing.
-    assemble.forget()
+    assemble.drop()
     del assemble
     from mixfw import safety
     safety.serve(printer)

@@ -130,8 +130,8 @@ def build(config=None, pin_map=None, files_root=_FILES_ROOT):
         planner.before_sync.append(transitions.flush)
         printer.on_halt.insert(0, motion.queue.drop)
         printer.on_quick_stop.insert(0, motion.queue.drop)
-    mixing = cmd_mixing.Mixing(planner, settings, config, printer.reply,
-                               st.drive_steps_reader(mem), motion.queue, motion)
+    mixing = cmd_mixing.Mixing(planner, settings, config, printer.reply, motion.queue,
+                               motion)
     config.before_save.append(mixing.filament_used_mm)
     cmd_mixing.register(printer, mixing)
     thermal = Thermal(machine, pin_map, settings, printer)
@@ -198,7 +198,7 @@ def start(consoles=None, listeners=(), printer=None, warnings=None, repl_flag=_R
         gc.collect()
         printer = build(load_config(warn=warnings.append))
     settings = printer.settings
-    printer.step_timer = safety.start_timer(machine, printer, settings["tick_us"])
+    printer.step_loop = safety.start_timer(machine, printer, settings["tick_us"])
     printer.repl_flag = repl_flag
     printer.add_background(safety.StepWatch(printer, printer.mem, settings["step_stall_ms"]))
     safety.start_watchdog(machine, printer, settings["watchdog_ms"])
@@ -207,18 +207,18 @@ def start(consoles=None, listeners=(), printer=None, warnings=None, repl_flag=_R
         printer.max_channels = len(consoles) + printer.settings.get("tcp_max_clients", 4)
     printer.warnings = warnings or []
     for console in consoles:
-        printer.greet(printer.add_channel(console))
+        printer.add_channel(console)
     printer.listeners.extend(listeners)
     return printer
 
 
 def run(consoles=None, listeners=(), printer=None, warnings=None, repl_flag=_REPL_FLAG):
     """start(), then serve until every console closes or M997 (the simulation's way:
-    a board's main.py serves without this module, see forget)."""
+    a board's main.py serves without this module, see drop)."""
     return safety.serve(start(consoles, listeners, printer, warnings, repl_flag))
 
 
-def forget():
+def drop():
     """This module's code is needed only to build and start the printer: main.py drops
     it before serving, and the kilobytes it held on the heap are free for printing.
     Nothing built here refers to the module (closures would: build makes none)."""

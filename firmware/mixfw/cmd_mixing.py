@@ -7,20 +7,18 @@ from mixfw.gcode import GcodeError
 from mixfw.mixer import normalize
 from mixfw.gradient import Gradient, ALONG_Z, ALONG_E
 from mixfw.filament import NM_PER_MM
+from mixfw.stepper import S_DRIVE_POS
 
 _MARLIN_LETTERS = const("ABCDHI")  # Marlin's letters for drives 0..5 in M165
 
 
 class Mixing:
-    def __init__(self, planner, settings, config, reply, drive_steps, queue=None,
-                 motion=None):
-        """drive_steps(i): net steps drive i has made since start-up (the step loop's).
-        queue: where mix changes go (set_mix), as Motion's: the planner or Transitions
+    def __init__(self, planner, settings, config, reply, queue=None, motion=None):
+        """queue: where mix changes go (set_mix), as Motion's: the planner or Transitions
         in front of it; the planner if None. motion: before_extrude is in its list of
         that name while a gradient is on (a call costs every extruding line about 15 us
         on the chips)."""
         self.motion = motion
-        self.drive_steps = drive_steps
         self._counted = [0] * settings["drives"]  # steps already added to the settings
         self.planner = planner
         self.queue = queue or planner
@@ -46,8 +44,9 @@ class Mixing:
         self.planner.synchronize()
         spm = self.planner.drive_steps_per_mm
         used = list(self.settings["filament_used_mm"])
+        mem = self.planner.mem
         for i in range(self.drives):
-            steps = self.drive_steps(i)
+            steps = mem[S_DRIVE_POS + i]  # the step loop's: net steps since start-up
             used[i] += (steps - self._counted[i]) / spm[i]
             self._counted[i] = steps
         self.config.update([("filament_used_mm_%d" % i, used[i]) for i in range(self.drives)])

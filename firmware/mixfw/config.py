@@ -16,11 +16,10 @@ from mixfw.options import SCHEMA, FIRMWARE_DEFAULTS, FLOAT, INT, BOOL, MIX, PAIR
 from mixfw.mixer import normalize, default_tool_mixes
 from mixfw.pwm import CLOCK_HZ, HEATER_OPTIONS, range_hz, clock_text
 
-_VERSION = const("# mixstep configuration, version 1")
+_HEADER = const("# mixstep configuration, version 1\n")
 # The file is the firmware's: an edit by hand fails the checksum, and the printer then
 # starts with its defaults and says so.
-_HEADER = const("# mixstep configuration, version 1\n"
-                "# written by M500; set options with M926: a hand edit fails the checksum\n")
+_NOTE = const("# written by M500; set options with M926\n")
 _CRC_PREFIX = const(b"crc32 = ")
 _CRC_LINE = const("crc32 = %08x\n")
 _MAX_FILE_BYTES = const(16384)  # far above a real file; bounds what a junk file costs in RAM
@@ -344,7 +343,7 @@ class Config:
 
     # --- storage ---
     def text(self):
-        body = _HEADER + "".join(
+        body = _HEADER + _NOTE + "".join(
             "%s = %s\n" % (o.name, o.format(self._read_setting(o))) for o in self.options)
         data = body.encode()
         return data + (_CRC_LINE % crc32(data)).encode()
@@ -387,7 +386,7 @@ class Config:
             lines = body.decode().split("\n")
         except UnicodeError:
             raise ConfigError("not text")
-        if lines[0] != _VERSION:
+        if lines[0] + "\n" != _HEADER:
             raise ConfigError("unsupported header %r" % lines[0])
         values = {}
         skipped = []

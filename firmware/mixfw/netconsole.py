@@ -77,4 +77,4 @@ class TcpListener:
             conn, _addr = self.sock.accept()
         except OSError:
             return None
-        return SocketConsole(conn)  # Printer.greet says `start`
+        return SocketConsole(conn)  # Printer.add_channel says `start`

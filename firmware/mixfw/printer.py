@@ -266,16 +266,14 @@ class Printer:
             self.guarded.add(key)
 
     def add_channel(self, console):
+        """A console at start, or a host that connected over the network: it hears
+        `start`, as Marlin's, and the warnings."""
         ch = Channel(console, self.line_bytes)
         self.channels.append(ch)
-        return ch
-
-    def greet(self, ch):
-        """A console at start, or a host that connected over the network: `start`, as
-        Marlin's, and the warnings."""
         ch.write("start\n")
         for text in self.warnings:
             ch.write(text + "\n")
+        return ch
 
     def reply(self, text):
         """A line to the host whose command is running (all hosts if none)."""
@@ -315,7 +313,7 @@ class Printer:
             if len(self.channels) < self.max_channels:
                 console = lst.accept()
                 if console is not None:
-                    self.greet(self.add_channel(console))
+                    self.add_channel(console)
 
     def idle(self):
         """Let time pass inside a command: the step loop runs, background tasks run,

@@ -105,7 +105,7 @@ def serve(printer):
     try:
         printer.serve()
     finally:
-        fault = all_off(printer, printer.step_timer)
+        fault = all_off(printer, printer.step_loop)
         micropython.kbd_intr(3)
     if fault is not None:
         raise fault  # everything is off: now the fault may stop the firmware

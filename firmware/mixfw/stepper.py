@@ -875,11 +875,6 @@ def schedule_counts(weights, steps):
     return run_mix(weights, (steps,))
 
 
-def drive_steps_reader(mem):
-    """drive_steps(i): the net steps drive i has made since start-up."""
-    return lambda i: mem[S_DRIVE_POS + i]
-
-
 def make_irq(mem, out, endstops):
     """The timer callback, bound once so the interrupt looks up no name (see
     piodma's handlers)."""

@@ -1,5 +1,5 @@
 # main.py's way on a board: the printer started by assemble.start, then assemble's code
-# dropped (assemble.forget) before serving. What that gives back to the heap, and
+# dropped (assemble.drop) before serving. What that gives back to the heap, and
 # that the printer still serves.
 import gc
 import json
@@ -15,7 +15,7 @@ simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(
 printer = assemble.start(consoles=[], repl_flag=None)
 gc.collect()
 held = gc.mem_alloc()
-assemble.forget()
+assemble.drop()
 del assemble
 gc.collect()
 freed = held - gc.mem_alloc()
