@@ -480,8 +480,7 @@ class Printer:
         self._cmd_halt_count = self.halt_count
         self._cmd_stop_count = self.stop_count
         self._busy_at_ms = time.ticks_ms()
-        status = intake.cut_text(status)
-        if status != LINE_OK:
+        if status != LINE_OK and intake.cut_text(status) != LINE_OK:
             raise GcodeError(intake.error_text(status))
         if self.sink is not None:
             suffix = self._to_sink(ch, intake.buf, intake.n)
@@ -554,8 +553,7 @@ class Printer:
         self._cmd_halt_count = self.halt_count
         self._cmd_stop_count = self.stop_count
         intake = job.intake
-        status = intake.cut_text(status)
-        if status != LINE_OK:
+        if status != LINE_OK and intake.cut_text(status) != LINE_OK:
             raise GcodeError(intake.error_text(status))
         self.run_line(self.parser.parse(intake.buf, intake.n))
         intake.take()
