@@ -55,6 +55,7 @@ checksums and line numbers, lines over line_buffer_bytes, bytes that are not
 printable ASCII, malformed words, unknown tools, moves beyond the soft limits or
 max_extrude_mm, all-zero mixes.
 """
+import math
 import re
 from fractions import Fraction
 
@@ -369,16 +370,8 @@ def mix_weights(values, drives):
         for i in by_remainder[:short]:
             ints[i] += 1
         ints = [max(w, 1) if v > 0 else w for w, v in zip(ints, vals)]
-    g = 0
-    for w in ints:
-        g = _gcd(g, w)
+    g = math.gcd(*ints)
     return tuple(w // g for w in ints)
-
-
-def _gcd(a, b):
-    while b:
-        a, b = b, a % b
-    return a
 
 
 def default_mixes(drives, count):
@@ -532,9 +525,7 @@ class Planner:
         return (weights, start, end, counts, self._length_nm(counts))
 
     def _remember(self, counts):
-        g = 0
-        for c in counts:
-            g = _gcd(g, abs(c))
+        g = math.gcd(*counts)
         weights = tuple(abs(c) // g for c in counts)
         self.extruded.append((weights, 0, sum(counts), list(counts), self._length_nm(counts)))
         self.retracted = []

@@ -10,7 +10,7 @@
 # module writes them.
 from array import array
 from mixfw.compat import const, micropython, ptr32
-from mixfw.mixer import MAX_DRIVES
+from mixfw.mixer import MAX_DRIVES, gcd
 from mixfw.ramp import product
 from mixfw.stepper import schedule_counts
 
@@ -81,7 +81,7 @@ def steps_per_nm(steps_per_mm):
     steps/mm is 1/12500. scaled_round(nm, p, q) is then a position's step."""
     p = spm_fixed(steps_per_mm)
     q = NM_PER_MM * SPM_SCALE
-    g = _gcd(q, p)
+    g = gcd(q, p)
     return p // g, q // g
 
 
@@ -101,12 +101,6 @@ def spm_digits(steps_per_mm, out, at):
     s = spm_fixed(steps_per_mm)
     for k in range(3):
         out[at + k] = (s >> (15 * k)) & 0x7FFF
-
-
-def _gcd(a, b):
-    while b:
-        a, b = b, a % b
-    return a
 
 
 # plan_e_words' words, the planner's from _S_E on (resync writes them): per

@@ -35,7 +35,7 @@ class MixError(ValueError):
     pass
 
 
-def _gcd(a, b):
+def gcd(a, b):
     while b:
         a, b = b, a % b
     return a
@@ -70,7 +70,7 @@ def normalize(weights, drives):
                 ints[i] = 1
     g = 0
     for w in ints:
-        g = _gcd(g, w)
+        g = gcd(g, w)
     return tuple(w // g for w in ints)
 
 
