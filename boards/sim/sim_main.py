@@ -269,7 +269,11 @@ def main():
         "drivers_enabled_at_exit": _drivers_enabled(board),
     }
     if opts["stdio"]:  # for the host that drives this console (mixstep sim, the tests)
-        sys.stdout.write("//sim " + json.dumps(report) + "\n")
+        # Streamed: the report as one string would need a kilobyte in one piece of a
+        # heap the print has just left in pieces.
+        sys.stdout.write("//sim ")
+        json.dump(report, sys.stdout)
+        sys.stdout.write("\n")
     else:  # on the terminal of `mixstep serve --tcp`: a line for its user
         print("mixstep: the firmware stopped%s" % (
             " on M997 (a board restarts into its REPL)" if printer.leaving == "M997" else ""))
