@@ -126,3 +126,18 @@ def test_sim_stopped_leaves_no_temporary_file_and_no_traceback(tmp_path, sig):
     assert proc.returncode == 130
     assert "interrupted" in one_line(err)
     assert list(tmp.iterdir()) == []
+
+
+def test_the_readme_commands_are_ones_mixstep_takes():
+    """A newcomer copies the README's commands: each `mixstep` line in its shell blocks
+    must parse (arguments, required options), here without running it."""
+    import re
+    import shlex
+    from mixstep import cli, paths
+    text = (paths.ROOT / "README.md").read_text()
+    blocks = re.findall(r"```sh\n(.*?)```", text, re.S)
+    commands = [line.split("#")[0].split() for block in blocks for line in block.splitlines()
+                if re.match(r"(\.venv/bin/)?mixstep ", line)]
+    assert commands  # the tour has some
+    for words in commands:
+        cli.parser().parse_args(shlex.split(" ".join(words[1:])))

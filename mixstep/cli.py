@@ -43,7 +43,8 @@ def _add_flash_args(p):
                         "(default out/printer/files)")
 
 
-def main(argv=None):
+def parser():
+    """The command line: every subcommand and its arguments."""
     parser = argparse.ArgumentParser(prog="mixstep", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
     p = sub.add_parser("sim", help="run G-code on the simulated printer; write a trace and report")
@@ -91,7 +92,11 @@ def main(argv=None):
     deploy.add_parser(sub)
     from mixstep import emu  # `mixstep emu print`: the firmware on an emulated Pico
     emu.add_parser(sub)
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv=None):
+    args = parser().parse_args(argv)
     name = "mixstep " + args.command
     # SIGTERM as Ctrl-C while the command runs (restored after: main may be called
     # from another program).
