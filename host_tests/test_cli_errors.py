@@ -133,7 +133,6 @@ def test_the_readme_commands_are_ones_mixstep_takes():
     must parse (arguments, required options), here without running it."""
     import re
     import shlex
-    from mixstep import cli, paths
     text = (paths.ROOT / "README.md").read_text()
     blocks = re.findall(r"```sh\n(.*?)```", text, re.S)
     commands = [line.split("#")[0].split() for block in blocks for line in block.splitlines()
