@@ -170,6 +170,7 @@ def main():
         simmachine.record_to(opts["edges"])
     before = _heap_bytes()
     from mixfw import assemble as firmware
+    from mixfw import safety
     from mixfw.console import StreamConsole
     if opts["tcp"]:
         from mixfw.netconsole import TcpListener
@@ -230,7 +231,8 @@ def main():
     simmachine.heap_lock_ticks = opts["heap_lock"]
     fault = None
     try:
-        firmware.run(consoles, listeners, printer, warnings, repl_flag=None)
+        firmware.start(consoles, listeners, printer, warnings, repl_flag=None)
+        safety.serve(printer)
     except Exception as err:
         fault = err  # raised again below, once the report says what it left on
     # The print is over: a chip would go on to its REPL (and its watchdog would reset

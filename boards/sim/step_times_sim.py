@@ -16,6 +16,7 @@ sys.modules["machine"] = simmachine
 sys.modules["time"] = simtime
 import board
 from mixfw import assemble as firmware
+from mixfw import safety
 from mixfw import stepper as st
 from mixfw.console import StreamConsole
 
@@ -74,7 +75,8 @@ def main():
                                 printer.settings["tick_us"], blocks)
     replies = Replies()
     console = StreamConsole(open(gcode_path, "rb"), replies, blocking=True)
-    firmware.run([console], (), printer)
+    firmware.start([console], (), printer)
+    safety.serve(printer)
     simmachine.close()
     with open(blocks_path, "w") as f:
         for rec in blocks:

@@ -1,10 +1,10 @@
 # Assembles the printer from the board's settings, as APrinter does in one place:
-# each part gets its pins, timer and parameters passed in, in dependency order. main.py
-# runs it at boot; the simulation calls run() with its own consoles.
+# each part gets its pins, timer and parameters passed in, in dependency order, and
+# starts it: main.py at boot, then it drops this module and serves with safety.serve;
+# the simulation starts it with its own consoles.
 import gc
 import sys
 import machine
-import micropython
 from micropython import const
 import board
 import mixfw
@@ -210,12 +210,6 @@ def start(consoles=None, listeners=(), printer=None, warnings=None, repl_flag=_R
         printer.add_channel(console)
     printer.listeners.extend(listeners)
     return printer
-
-
-def run(consoles=None, listeners=(), printer=None, warnings=None, repl_flag=_REPL_FLAG):
-    """start(), then serve until every console closes or M997 (the simulation's way:
-    a board's main.py serves without this module, see drop)."""
-    return safety.serve(start(consoles, listeners, printer, warnings, repl_flag))
 
 
 def drop():

@@ -13,6 +13,7 @@ import board  # noqa: E402
 
 simmachine.attach_world(board.PINS, ["x", "y", "z"] + ["e%d" % i for i in range(6)])
 from mixfw import assemble as firmware  # noqa: E402
+from mixfw import safety  # noqa: E402
 from mixfw.console import StreamConsole  # noqa: E402
 
 console = StreamConsole(sys.stdin.buffer, sys.stdout.buffer, blocking=True)
@@ -28,7 +29,8 @@ def count_applies(settings):
 
 
 config.appliers.append(count_applies)
-firmware.run([console], printer=printer, warnings=warnings)
+firmware.start([console], printer=printer, warnings=warnings)
+safety.serve(printer)
 pos = simmachine.positions
 print("//end " + json.dumps({"applied": applied[0],
       "steps": {n: pos[i] for i, n in enumerate(simmachine.step_names)}}))
