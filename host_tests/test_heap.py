@@ -27,7 +27,9 @@ def test_main_drops_the_code_that_built_the_printer(mp):
     module (a closure made in build would keep all of it)."""
     got = mp.script_json("heap_forget")
     assert got["gone"]
-    assert got["freed"] >= 4096  # of about 5.8 kB on this 64-bit port
+    # 5.8 kB on the 64-bit port, 3.7 kB on the 32-bit one; about 32 bytes were a
+    # closure left in build (tried)
+    assert got["freed"] >= 2048
 
 
 FILLED = 64  # lines: more moves than the simulated board's queue holds
