@@ -66,7 +66,7 @@ def _mixfw_imports(name):
 
 def test_the_step_path_list_holds_what_the_interrupts_import():
     # What each step-path module imports is in the list before it, or loaded before
-    # the list is (compat, heap: assemble imports them first).
+    # the list is (compat: load imports it first; heap: assemble does).
     loaded = {"compat", "heap"}
     for name in inram.STEP_PATH:
         assert _mixfw_imports(name) <= loaded, name

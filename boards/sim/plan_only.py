@@ -9,7 +9,6 @@
 #               then this closure) are not planning. It does what the step path does
 #               for a block besides stepping it: it works out its ramp schedule.
 # Homing ends at once: every endstop is hit as the block is retired.
-from mixfw.compat import const, micropython, ptr32
 from mixfw import stepper as st
 
 # The words as constants, which the compiler folds: a closure over more than five

@@ -5,7 +5,6 @@
 import gc
 import sys
 import machine
-from micropython import const
 import board
 import mixfw
 from mixfw import heap

@@ -2,7 +2,6 @@
 # Marlin's aliases M92 M201 M203 M204 M205. Handlers parse; Config checks and stores.
 # M926 and friends change the settings only; M930 applies them. The Marlin aliases
 # apply at once, as Marlin users expect.
-from mixfw.compat import const
 from mixfw.gcode import GcodeError
 
 # Option names are text, so the parser hands these commands their arguments raw.

@@ -2,7 +2,6 @@
 # (Marlin: the whole mix at once; R reports every tool), M567 (RepRapFirmware: a tool's
 # mix), T<n>. Virtual tools live in the configuration (options tool_mixes_<n>), so
 # M500 keeps them across a reboot and M503 prints them.
-from mixfw.compat import const
 from mixfw.gcode import GcodeError
 from mixfw.mixer import normalize
 from mixfw.gradient import Gradient, ALONG_Z, ALONG_E

@@ -5,7 +5,6 @@ from mixfw.gcode import GcodeError, letter_index
 from mixfw.filament import nm_from_mm, scaled_round, spm_digits, steps_per_nm, NM_PER_MM
 from mixfw.ramp import array_offsets
 from mixfw import stepper as st
-from mixfw.compat import const, micropython, ptr8, ptr32
 
 _AXIS_LETTERS = const("XYZE")
 _AXIS_INDEX = tuple(letter_index(ch) for ch in _AXIS_LETTERS)

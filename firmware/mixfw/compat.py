@@ -1,15 +1,15 @@
-# Lets the pure modules (gcode, mixer) import on CPython too, so host tools reuse them
-# instead of carrying a second copy. On MicroPython the real decorators are used; the
-# CPython stand-ins are a module of their own (cpython), whose code the chips never load.
+# The chips' small-int limit, and viper's int() of a pointer for CPython.
+#
+# MicroPython's compiler knows const(), the @micropython.viper/native decorators and
+# viper's casts (ptr8/ptr16/ptr32) without any import, so the firmware's modules import
+# none of them and keep no globals for them (each would cost RAM on the chips). On
+# CPython, where host tools import the pure modules, the package's __init__ gives them
+# as builtins (cpython.py).
 try:
-    import micropython
-    const = micropython.const
-    # Inside viper functions these are the compiler's casts; the names only have to
-    # exist for the modules' imports.
-    ptr32 = ptr8 = ptr16 = None
+    import micropython  # noqa: F401
     int = int
 except ImportError:
-    from mixfw.cpython import micropython, const, ptr32, ptr8, ptr16, int  # noqa: F401
+    from mixfw.cpython import int  # noqa: F401
 
 # 2**30 - 1: the largest small int on the chips (31-bit, signed), so the mask of a
 # counter that wraps at 2**30 and of a 30-bit limb. Viper folds only a module's own

@@ -11,7 +11,6 @@
 #
 # Pure logic: no `machine`; the file system is passed in (see FileStorage).
 import os
-from mixfw.compat import const
 from mixfw.options import SCHEMA, FIRMWARE_DEFAULTS, FLOAT, INT, BOOL, MIX, PAIR, EACH, POW2
 from mixfw.mixer import normalize, default_tool_mixes
 from mixfw.pwm import CLOCK_HZ, HEATER_OPTIONS, range_hz, clock_text

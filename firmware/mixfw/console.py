@@ -1,6 +1,5 @@
 # Consoles: where G-code lines come from and replies go to.
 import select
-from mixfw.compat import micropython
 
 _READY = select.POLLIN | select.POLLHUP | select.POLLERR
 

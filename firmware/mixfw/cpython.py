@@ -1,6 +1,5 @@
-# MicroPython's decorators and viper's casts for CPython, where host tools import the
-# pure modules (see compat). Apart from compat, whose code the chips load: they never
-# import this.
+# MicroPython's const, decorators and viper's casts for CPython, where host tools import
+# the pure modules (see compat). The chips never import this.
 import builtins
 
 
@@ -43,3 +42,9 @@ def int(x=0, *base):
     at = 4 * id(x)
     _ADDRESSED[at] = x
     return at
+
+
+def install():
+    """Gives the names MicroPython's compiler knows to every module, as builtins."""
+    for name in ("micropython", "const", "ptr8", "ptr16", "ptr32"):
+        setattr(builtins, name, globals()[name])

@@ -9,7 +9,6 @@
 # line, and one object keeps each of them a single lookup on the chips. Only this
 # module writes them.
 from array import array
-from mixfw.compat import const, micropython, ptr32
 from mixfw.mixer import MAX_DRIVES, gcd
 from mixfw.ramp import product
 from mixfw.stepper import schedule_counts

@@ -7,7 +7,6 @@
 # written a chunk at a time (one flash sector), and refused while a file prints from
 # flash, which would otherwise stop at every chunk.
 import os
-from mixfw.compat import const
 from mixfw.config import FileStorage
 from mixfw.intake import Intake
 

@@ -6,7 +6,6 @@
 # line; it reports bad input as a code, and the reason is written out here. Pure logic:
 # imports on CPython for the host tools.
 from array import array
-from mixfw.compat import micropython, const, ptr8, ptr32
 
 _MAX_DIGITS = const(9)  # keeps every mantissa below 2**30
 _POW10 = (1, 10, 100, 1000, 10000, 100000, 1000000, 10000000, 100000000, 1000000000)

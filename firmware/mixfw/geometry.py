@@ -10,7 +10,6 @@
 # limbs, ramp.py), and the junction's cosine is worked out to 28 bits. Every
 # intermediate stays below 2**31, so the 32-bit chips and the 64-bit unix port give
 # the same integers.
-from mixfw.compat import const, micropython, ptr32
 from mixfw.ramp import div_limbs, isqrt_limbs, product
 
 # Words of the geometry array g (array 'i', G_WORDS): first ramp.py's io words, which

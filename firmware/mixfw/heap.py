@@ -4,7 +4,6 @@
 # region whole for them, and each array takes one block, not two.
 import gc
 from array import array
-from mixfw.compat import micropython, ptr32
 
 # Blocks held for builds to come, the one for the next build last.
 _reserves = []

@@ -9,7 +9,6 @@
 # line), so both loops are viper: in bytecode they would cost about 100 us a byte on
 # an RP2040, 3 ms of a 30-byte G1 line.
 from array import array
-from mixfw.compat import const, micropython, ptr8, ptr32
 
 LINE_OK = const(1)
 _LINE_TOO_LONG = const(2)

@@ -6,7 +6,6 @@
 # 2,900 mm/s): then the passes only add and compare (v**2 = v0**2 + 2 a s), a sum of
 # three stays below 2**31, and the 32-bit chips and the 64-bit unix port give the same
 # integers. A record's rates come from V2 by an exact integer square root.
-from mixfw.compat import const, micropython, ptr32
 from mixfw import stepper as st
 from mixfw.ramp import isqrt_limbs, product
 

@@ -13,7 +13,6 @@
 # preallocated array('i') section (see the M_ offsets). The pick itself runs inline
 # in the step loop (stepper.tick), which has no viper call to spare;
 # stepper.run_mix runs it on a scratch block for the planner's forecasts and tests.
-from mixfw.compat import micropython, const, ptr32
 
 MAX_DRIVES = const(6)
 # Normalised weights sum to at most this before the gcd is taken out, so products

@@ -1,7 +1,6 @@
 # Pins: how the step loop's GPIO masks reach the pins, and the ENABLE and endstop
 # pins. With pin_writer "registers" the step loop writes the chip's set/clear
 # registers itself (see the end of stepper.tick); "pin" is the portable Pin.value path.
-from mixfw.compat import const, micropython
 
 _AXIS_NAMES = const(("x", "y", "z"))
 # Per chip: register block address, and byte offsets of the GPIO output set and clear

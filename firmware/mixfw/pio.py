@@ -9,7 +9,6 @@
 # the step loop has work; when it goes idle the state machine stalls on an empty FIFO
 # with the pins held. The next burst starts when its first word arrives, so the
 # latency of the interrupt that opens a burst delays the whole burst (not its pulses).
-from mixfw.compat import const
 
 _CYCLES_PER_TICK = const(20)  # the program below: pull (1) + out (1) + 18 delay
 LATENCY_TICKS = const(4)  # a joined TX FIFO holds 8 words

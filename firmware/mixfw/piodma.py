@@ -28,7 +28,6 @@
 # run M122, which collects, without a late refill.
 import sys
 from array import array
-from mixfw.compat import micropython, const, ptr32
 from mixfw import heap, stepper as st
 from mixfw.stepper import tick
 from mixfw.pio import out_range

@@ -6,7 +6,6 @@
 # Pure logic: the hooks that touch the chip (waiting, masking the interrupt) are
 # passed in by assemble.py, so host tools can plan on CPython too.
 from array import array
-from mixfw.compat import const, micropython, ptr32
 from mixfw import geometry, heap, lookahead, ramp
 from mixfw import filament
 from mixfw.filament import (NM_PER_MM, SPM_SCALE, div_round, drive_pos_from_steps, plan_e,

@@ -10,7 +10,6 @@
 # its channel: the host's transport holds the rest, and no `ok` goes out until there
 # is room, so nothing is ever dropped.
 import time
-from mixfw.compat import const, micropython, ptr8
 from mixfw.gcode import Parser, GcodeError, WordsError, command_key
 from mixfw.intake import Intake, LINE_OK, LINE_CUT
 

@@ -3,7 +3,6 @@
 # 1-5 Hz; rp2's divider stops at 8 Hz at 125 MHz), a software PWM (softpwm.py).
 #
 # Pure logic: imports on CPython too. The machine module is passed in.
-from mixfw.compat import const
 
 # The system clock each chip boots with; a board's boot code may change it with
 # machine.freq(), so the firmware asks the chip rather than trusting this.

@@ -5,7 +5,6 @@
 # The squares of rates need about 56 bits, more than a chip's machine word, so they are
 # kept as two 30-bit limbs (hi, lo) in words of the io array. Every intermediate stays
 # below 2**31, so the 32-bit chips and the 64-bit unix port give the same results.
-from mixfw.compat import const, micropython, ptr32
 # Viper's cast (a pointer's address) here, and CPython's stand-in for it (see compat).
 from mixfw.compat import int  # noqa: A004
 

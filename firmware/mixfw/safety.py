@@ -12,7 +12,7 @@
 import gc
 import sys
 import time
-from mixfw.compat import const, micropython
+import micropython
 from mixfw import stepper as st
 from mixfw.printer import run_each
 

@@ -15,7 +15,6 @@
 # copies of the words they use, which host_tests/test_layouts.py checks); the planner
 # writes only block records and S_HEAD, the step loop writes everything else, and a
 # record's ramp schedule as it starts the block (F_SCHEDULE).
-from mixfw.compat import micropython, const, ptr32
 from mixfw import mixer
 from mixfw.mixer import mix_load
 from mixfw import ramp

@@ -8,7 +8,6 @@
 # Pure logic: imports on CPython too. The machine objects (ADC, PWM, Pin) are passed in.
 import math
 import time
-from mixfw.compat import const
 from mixfw.gcode import GcodeError
 from mixfw.pwm import heater_output
 

@@ -16,7 +16,6 @@
 #
 # Runs in the main loop only (at start and when the options change), never from an
 # interrupt. Pure logic: imports on CPython.
-from mixfw.compat import const
 
 GCONF = const(0x00)
 GSTAT = const(0x01)
