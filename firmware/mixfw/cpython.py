@@ -44,7 +44,6 @@ def int(x=0, *base):
     return at
 
 
-def install():
-    """Gives the names MicroPython's compiler knows to every module, as builtins."""
-    for name in ("micropython", "const", "ptr8", "ptr16", "ptr32"):
-        setattr(builtins, name, globals()[name])
+# The names MicroPython's compiler knows, for every module: as builtins.
+for _name in ("micropython", "const", "ptr8", "ptr16", "ptr32"):
+    setattr(builtins, _name, globals()[_name])

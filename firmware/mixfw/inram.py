@@ -26,7 +26,7 @@ def load(settings, package=mixfw):
     names = STEP_PATH if settings.get("step_backend") == "pio_dma" else STEP_LOOP
     import sys
     # ramp takes viper's int() from compat, which the interrupts don't run: the image's.
-    __import__(package.__name__ + ".compat")
+    __import__("mixfw.compat")
     here = package.__path__
     ram_dir = RAM_DIR
     package.__path__ = ram_dir

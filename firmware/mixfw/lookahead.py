@@ -7,6 +7,7 @@
 # three stays below 2**31, and the 32-bit chips and the 64-bit unix port give the same
 # integers. A record's rates come from V2 by an exact integer square root.
 from mixfw import stepper as st
+from mixfw.compat import MASK30, micropython  # noqa: F401 (room in the globals: see compat)
 from mixfw.ramp import isqrt_limbs, product
 
 _V2_SCALE = const(64)

@@ -7,6 +7,7 @@
 # below 2**31, so the 32-bit chips and the 64-bit unix port give the same results.
 # Viper's cast (a pointer's address) here, and CPython's stand-in for it (see compat).
 from mixfw.compat import int  # noqa: A004
+from mixfw.compat import micropython  # noqa: F401 (room in the globals: see compat)
 
 _MASK30 = const(0x3FFFFFFF)  # compat.MASK30: also the most ticks a schedule counts
 # Fraction bits of the deceleration's start time, in ticks: enough that the rate the
