@@ -876,11 +876,9 @@ def schedule_counts(weights, steps):
 
 def make_irq(mem, out, endstops):
     """The timer callback, bound once so the interrupt looks up no name (see
-    piodma's handlers)."""
-    io = (mem, out, endstops)
-    step = tick
-
-    def irq(_timer):
+    piodma's handlers): the step loop and its io as default arguments, which hold
+    less heap than a closure's cells."""
+    def irq(_timer, step=tick, io=(mem, out, endstops)):
         step(io)
 
     return irq
