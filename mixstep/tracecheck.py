@@ -29,12 +29,12 @@ Checks
                    drive steps outside its block. Fails at the first step that does
                    not fit.
     mix            the order of the steps within a block is the mixer's and is not
-                   predicted step by step (docs/Mixing.md specifies the schedule, not the
+                   predicted step by step (docs/Mixing.md specifies the rule, not the
                    weights a block hands it; only replays of part of a block need the
                    order, and there the model assumes the block's counts over their
                    common divisor): within each stretch of one mix, every window of
                    `window` drive steps gives each drive its share of the window's net
-                   steps within `mix_tolerance` steps. The divisor schedule keeps every
+                   steps within `mix_tolerance` steps. The error diffusion keeps every
                    drive within about a step of its share at any point, so 2 is a
                    margin. A replayed retraction (retract_policy 2) has no one mix and
                    no windows: its exact counts are checked by `moves`.

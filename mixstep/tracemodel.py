@@ -23,9 +23,9 @@ section, "How the mixer picks a drive" and the options' meaning), in exact arith
 - Retraction (retract_policy): 0 follows the mix (drives go back along their exact
   shares, so an unretraction restores every drive exactly); 1 moves every drive
   equally (weights 1:1:...); 2 replays the newest steps of the latest extrusion blocks
-  (at most 64 blocks, up to 50 mm), the order within a block being the mixer's
-  schedule as docs/Mixing.md specifies it (a drive's k-th step of a period is due at
-  (2k+1)/(2w), earliest first, ties to the lower drive), and the unretraction pushes
+  (at most 64 blocks, up to 50 mm), the order within a block being the mixing
+  document's error diffusion (highest error first, ties to the lower drive; see
+  docs/Mixing.md), and the unretraction pushes
   exactly those steps back; what the record does not cover follows the mix.
 - Transitions (transition_l1_mm, transition_l2_mm, transition_pairs): a mix change
   applies L0 = L1 + L2/2 of printing extrusion (E > 0 on a move of X, Y or Z) earlier,
@@ -63,7 +63,7 @@ NM_PER_MM = 10 ** 6
 SPM_SCALE = 10 ** 6
 MAX_DRIVES = 6
 WEIGHT_SCALE = 10000
-MAX_BLOCK_E_STEPS = 20000 - 2 * MAX_DRIVES  # the mixer's exact limit, less rounding
+MAX_BLOCK_E_STEPS = 2048 - 2 * MAX_DRIVES  # a block's E steps (the mixer's ring), less rounding
 REPLAY_BLOCKS = 64
 REPLAY_NM = 50 * NM_PER_MM
 _MARLIN_LETTERS = "ABCDHI"
@@ -412,23 +412,35 @@ class Gradient:
         return mix_weights(shares, self.drives)
 
 
-# --- the mixer's schedule, from docs/Mixing.md's specification ----------------------------
+# --- the mixer, from the mixing document's error diffusion ------------------------------
 
 _period_cache = {}
 
 
+def mixer_picks(weights, steps):
+    """The drive of each of `steps` E steps from a fresh start, by the mixing
+    document's rule: every drive's error starts at its weight; each step goes to the
+    drive with the highest error (ties to the lowest drive), which loses the sum of
+    the weights; then every error gains its weight. A drive of weight 0 never steps."""
+    total = sum(weights)
+    errors = list(weights)
+    picks = []
+    for _ in range(steps):
+        best = max((i for i, w in enumerate(weights) if w), key=lambda i: (errors[i], -i))
+        picks.append(best)
+        errors[best] -= total
+        errors = [e + w for e, w in zip(errors, weights)]
+    return picks
+
+
 def schedule_counts(weights, steps):
     """Per-drive steps the mixer gives in `steps` steps of a block with these integer
-    weights, from the block's start. The README: a drive's k-th step of a period is
-    due at (2k+1)/(2w); the step goes to the earliest due drive, ties to the lowest
-    index; a period is sum(w) steps, and it repeats."""
+    weights, from the block's start: a period is sum(w) steps, and it repeats."""
     weights = tuple(weights)
     period = sum(weights)
     order = _period_cache.get(weights)
     if order is None:
-        due = sorted((Fraction(2 * k + 1, 2 * w), i) for i, w in enumerate(weights) if w
-                     for k in range(w))
-        order = [i for _, i in due]
+        order = mixer_picks(weights, period)
         if len(_period_cache) < 256:
             _period_cache[weights] = order
     full, part = divmod(steps, period)

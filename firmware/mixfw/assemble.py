@@ -21,7 +21,7 @@ from mixfw import planner  # noqa: E402
 # The modules from here on load beside a reserve that build() takes its arrays from
 # (heap.py): their code would leave the heap in pieces too small for the arrays.
 heap.reserve(planner.step_loop_bytes(board.SETTINGS))
-from mixfw import stepper as st, mixer  # noqa: E402
+from mixfw import stepper as st  # noqa: E402
 from mixfw.pins import Pins  # noqa: E402
 from mixfw.planner import Planner  # noqa: E402
 from mixfw.printer import Printer  # noqa: E402
@@ -90,14 +90,12 @@ def build(config=None, pin_map=None, files_root=_FILES_ROOT):
     heap.release()
     mem = heap.zeros(st.mem_words(settings["queue_blocks"], capture))
     lk = heap.zeros(lk_words(settings["queue_blocks"]))
-    st.init_capture(mem, settings["queue_blocks"], capture)
+    st.init_mem(mem, settings["queue_blocks"], capture)
     feed = None
     if piodma:
         feed = piodma.Feed(machine, mem, settings, pin_map)
     mem[st.S_PULSE_TICKS] = _ticks(settings["step_pulse_us"], tick_us)
     mem[st.S_DIR_TICKS] = _ticks(settings["dir_setup_us"], tick_us)
-    mem[st.MIX_BASE + mixer.M_N] = settings["drives"]
-    mem[st.MIX_BASE + mixer.M_ID] = -1
     pins = Pins(machine, pin_map, settings)
     for i, m in enumerate(pins.step_masks):
         mem[st.MASK_BASE + i] = m

@@ -1,33 +1,52 @@
 # The mixer: which filament drive gets each extrusion step.
 #
-# Weights are integers that never change inside a block. The choice is an exact
-# divisor (Sainte-Lague) schedule: drive i takes its k-th step of a period at the
-# "due time" (2k+1)/(2*w_i), and the step goes to the drive with the earliest due
-# time, ties to the lowest index. From a fresh start 20/30/50 gives the mixing
-# document's sequence 3,2,1,3,2,3,3,1,2,3. Unlike a largest-error rule this schedule
-# has an exact inverse: stepping back takes the drive with the latest previous due
-# time, ties to the highest index, so n steps back and n forward restore every
-# count and every drive position, however lopsided the weights.
+# The mixing document's integer error diffusion: every drive's error starts at its
+# weight W; each step goes to the drive with the highest error (ties to the lowest
+# drive), which then loses S (the sum of the weights), and every error gains its
+# weight. From a fresh start 20/30/50 gives 3,2,1,3,2,3,3,1,2,3; after S steps every
+# drive has made exactly W steps and the errors are back where they started.
 #
-# This module holds the weights, their normalisation and the schedule's state: one
-# preallocated array('i') section (see the M_ offsets). The pick itself runs inline
-# in the step loop (stepper.tick), which has no viper call to spare;
-# stepper.run_mix runs it on a scratch block for the planner's forecasts and tests.
+# Stepping back has no rule of its own that undoes the forward one (a state has
+# several possible predecessors, and telling them apart can take a dozen steps), so
+# the mixer keeps its picks in a ring of RING_STEPS bytes, by E position, with the
+# span of positions it knows: a step back over known positions takes the recorded
+# drive, and a step forward over positions first walked backwards replays them. Only
+# new ground is picked: forward by the rule above, backward by the same rule run on
+# the mirrored errors 2W - error, so a block run backwards from a fresh start meets
+# the drives in the forward order and also gives exactly W steps each a period. Any
+# walk within RING_STEPS positions retraces itself exactly; the planner holds every
+# block's E steps within that (planner.MAX_PERIOD).
+#
+# The errors are kept less their weights (a fresh start is all zeros): the step loop
+# adds each weight as it scans for the highest, one pass over the drives. They and
+# the positions are stored plus MIX_BIAS, so that every word the step loop compares
+# is positive: a 64-bit port's ptr32 reads a negative word as a large positive one.
+#
+# This module holds the weights, their normalisation and the mixer's state: one
+# preallocated array('i') section (see the M_ offsets), whose ring lies at the end of
+# the step loop's memory (stepper.mem_words). The pick itself runs inline in the step
+# loop (stepper.tick), which has no viper call to spare; stepper.run_mix runs it on a
+# scratch block for the planner's forecasts and tests.
 
 MAX_DRIVES = const(6)
 # Normalised weights sum to at most this before the gcd is taken out, so products
-# in the schedule stay below 2**30 (the chips' small-int limit).
+# and errors stay below 2**30 (the chips' small-int limit).
 WEIGHT_SCALE = const(10000)
+RING_STEPS = const(2048)  # picks remembered, a power of 2
+MIX_BIAS = const(0x20000000)  # a multiple of RING_STEPS
 
 # Offsets inside the mixer section. M_ID..M_W has the same shape as a block's mix
 # words, so starting a block is one copy (mix_load).
 M_ID = const(0)  # id of the mix loaded, -1 for none
 M_W = const(1)  # weights, MAX_DRIVES words
-M_N = const(7)  # number of drives fitted
-M_SUM = const(8)  # sum of weights: the period of the schedule
-M_Q = const(9)  # steps taken in the current period
-M_C = const(10)  # per-drive steps in the current period, MAX_DRIVES words
-M_WORDS = const(16)
+M_SUM = const(7)  # sum of weights: the period
+M_Q = const(8)  # E position in steps since the mix was loaded
+M_QMIN = const(9)  # the ring knows the picks at positions M_QMIN .. M_QMAX - 1
+M_QMAX = const(10)
+M_E = const(11)  # each drive's error less its weight, MAX_DRIVES words
+M_RING = const(17)  # the ring's byte offset from the memory's start
+M_RING_MASK = const(18)  # its length less 1 (a power of 2 less 1)
+M_WORDS = const(19)
 
 
 class MixError(ValueError):
@@ -75,18 +94,20 @@ def normalize(weights, drives):
 
 @micropython.viper
 def mix_load(mem: ptr32, base: int, src: int):
-    """Copy a mix (id and weights at mem[src:]) into the mixer and restart its schedule."""
+    """Copy a mix (id and weights at mem[src:]) into the mixer and start it afresh."""
     mem[base + M_ID] = mem[src]
     total = 0
     i = 0
     while i < MAX_DRIVES:
         w = mem[src + 1 + i]
         mem[base + M_W + i] = w
-        mem[base + M_C + i] = 0
+        mem[base + M_E + i] = MIX_BIAS
         total += w
         i += 1
     mem[base + M_SUM] = total
-    mem[base + M_Q] = 0
+    mem[base + M_Q] = MIX_BIAS
+    mem[base + M_QMIN] = MIX_BIAS
+    mem[base + M_QMAX] = MIX_BIAS
 
 
 def load(mem, base, mix_id, weights):

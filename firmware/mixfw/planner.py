@@ -24,8 +24,8 @@ _S_HEAD = const(0)
 _S_TAIL = const(1)
 _S_ACTIVE = const(2)
 _S_QUEUE = const(26)
-_R_PENDING = const(93)
-_BLOCK_BASE = const(112)
+_R_PENDING = const(96)
+_BLOCK_BASE = const(115)
 _B_WORDS = const(24)
 _B_N = const(0)
 _B_STEPS = const(1)
@@ -80,8 +80,9 @@ _MASK30 = const(0x3FFFFFFF)
 
 _RING_IDLE = const(0x10000)  # see _ring_room
 
-# Largest schedule period the step loop's mixer takes: its products stay below 2**30.
-MAX_PERIOD = const(20000)
+# Most E steps in one block, and so the longest period of its mix: the mixer's ring
+# (mixer.RING_STEPS) holds a whole block, so the block can be walked back anywhere.
+MAX_PERIOD = const(2048)
 
 
 @micropython.viper

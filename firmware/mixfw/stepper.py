@@ -80,43 +80,47 @@ _S_RAMP_TICKS = const(47)  # ticks of velocity ramp run in the block
 _S_WORDS = const(48)
 
 MIX_BASE = const(48)  # mixer section, mixer.M_WORDS long
-# The mixer words the step loop reads: copies of mixer.py's M_W, M_N, M_SUM, M_Q, M_C
-# plus MIX_BASE (viper folds only this module's constants).
+# The mixer words the step loop reads: copies of mixer.py's M_ offsets plus MIX_BASE
+# (viper folds only this module's constants).
 _MIX_W = const(49)
-_MIX_N = const(55)
-_MIX_SUM = const(56)
-_MIX_Q = const(57)
-_MIX_C = const(58)
-MASK_BASE = const(64)  # STEP pin masks: X Y Z then the drives (9 words)
-DIR_MASK_BASE = const(73)  # DIR pin masks in the same order (9 words)
+_MIX_SUM = const(55)
+_MIX_Q = const(56)
+_MIX_QMIN = const(57)
+_MIX_QMAX = const(58)
+_MIX_E = const(59)
+_MIX_RING = const(65)
+_MIX_RING_MASK = const(66)
+_MIX_BIAS = const(0x20000000)
+MASK_BASE = const(67)  # STEP pin masks: X Y Z then the drives (9 words)
+DIR_MASK_BASE = const(76)  # DIR pin masks in the same order (9 words)
 # Event ring (step_backend "pio_dma", S_PIO == 2; see piodma.py): one call of tick runs
 # a batch of ticks and writes the pin levels between its edges into the ring passed as
 # out, a word each: the levels in the low bits, above R_LEVEL_BITS the PIO cycles they
 # hold (a word is written when the edge that ends it is known). Times are PIO cycles
 # from the batch's start.
-R_SEG_N = const(82)  # words in each of the 3 ring segments
-R_SEG_SEQ = const(85)  # batch number each segment holds (3 words)
-R_TC = const(88)  # PIO cycles per tick
-R_BATCH_TICKS = const(89)
-R_PULSE_CYC = const(90)  # STEP high time
-R_LAST = const(91)  # time of the last event written, from the batch's start (>= 0)
-R_W = const(92)  # next ring word to write
-R_PENDING = const(93)  # batches still to run before the pins have output every step
-R_LATE = const(94)  # refills that came after the running segment had ended
-R_BATCHES = const(95)  # batches filled, wraps at 2**30
-R_SEG_WORDS = const(96)  # ring words per segment
-R_READY = const(97)  # the segment filled and not yet handed to a channel
-R_RING_ADDR = const(98)  # byte address of ring word 0 as the DMA sees it
-R_CTRL = const(99)  # channel control word with CHAIN_TO 0
-R_CHAIN_SHIFT = const(100)  # where CHAIN_TO sits in a control word
-R_BUSY_BIT = const(101)
-R_CH = const(102)  # the two DMA channels (2 words)
-R_CH_SEG = const(104)  # segment each channel was last given (2 words)
-R_FIRED = const(106)  # channel completions handled
-R_SM = const(107)  # the state machine's number
-R_SEG_LV = const(108)  # pin levels before each segment's first event (3 words)
-R_LEVEL_BITS = const(111)  # the state machine's pins
-BLOCK_BASE = const(112)
+R_SEG_N = const(85)  # words in each of the 3 ring segments
+R_SEG_SEQ = const(88)  # batch number each segment holds (3 words)
+R_TC = const(91)  # PIO cycles per tick
+R_BATCH_TICKS = const(92)
+R_PULSE_CYC = const(93)  # STEP high time
+R_LAST = const(94)  # time of the last event written, from the batch's start (>= 0)
+R_W = const(95)  # next ring word to write
+R_PENDING = const(96)  # batches still to run before the pins have output every step
+R_LATE = const(97)  # refills that came after the running segment had ended
+R_BATCHES = const(98)  # batches filled, wraps at 2**30
+R_SEG_WORDS = const(99)  # ring words per segment
+R_READY = const(100)  # the segment filled and not yet handed to a channel
+R_RING_ADDR = const(101)  # byte address of ring word 0 as the DMA sees it
+R_CTRL = const(102)  # channel control word with CHAIN_TO 0
+R_CHAIN_SHIFT = const(103)  # where CHAIN_TO sits in a control word
+R_BUSY_BIT = const(104)
+R_CH = const(105)  # the two DMA channels (2 words)
+R_CH_SEG = const(107)  # segment each channel was last given (2 words)
+R_FIRED = const(109)  # channel completions handled
+R_SM = const(110)  # the state machine's number
+R_SEG_LV = const(111)  # pin levels before each segment's first event (3 words)
+R_LEVEL_BITS = const(114)  # the state machine's pins
+BLOCK_BASE = const(115)
 
 # Block record words.
 B_N = const(0)  # lead-axis steps (step events)
@@ -196,13 +200,20 @@ _HI_SHIFT = const(28)  # ESP32: GPIO 32, 33 travel as mask bits 28, 29
 _LO_MASK = const(0x0FFFFFFF)
 
 
-def mem_words(queue_blocks, capture_records=0):
-    return BLOCK_BASE + queue_blocks * B_WORDS + capture_records * CAP_WORDS
+def mem_words(queue_blocks, capture_records=0, ring_steps=mixer.RING_STEPS):
+    """The step loop's memory: its words, the block ring, the trace capture's records
+    and the mixer's ring of picks (bytes, a power of 2), in that order."""
+    return (BLOCK_BASE + queue_blocks * B_WORDS + capture_records * CAP_WORDS
+            + ring_steps // 4)
 
 
-def init_capture(mem, queue_blocks, capture_records):
+def init_mem(mem, queue_blocks, capture_records=0, ring_steps=mixer.RING_STEPS):
+    """Where the capture and the mixer's ring lie in mem (mem_words' order)."""
     mem[S_CAP_BASE] = BLOCK_BASE + queue_blocks * B_WORDS
     mem[S_CAP_SIZE] = capture_records
+    mem[_MIX_RING] = 4 * (mem[S_CAP_BASE] + capture_records * CAP_WORDS)
+    mem[_MIX_RING_MASK] = ring_steps - 1
+    mem[MIX_BASE + mixer.M_ID] = -1
 
 
 @micropython.viper
@@ -614,91 +625,92 @@ def tick(io) -> int:
             err = mem[_S_ERR + E] + blk[B_STEPS + E]
             if err > n:
                 err -= n
-                # The mixer (see mixer.py): forward, the drive whose next step is due
-                # first, ties to the lowest index; backward, the drive whose last step
-                # was due latest, ties to the highest, so a step back undoes a step forward.
-                drives = mem[_MIX_N]
+                # The mixer (see mixer.py): on new ground the highest error, ties to
+                # the lowest drive (backward: the lowest error less twice the weight,
+                # the rule on the mirrored errors); where the ring knows the pick, the
+                # pick again. A drive without a weight never wins: the top error of
+                # a mix with weights is above 0, the bottom one backward below 0 (the
+                # words hold them plus _MIX_BIAS). No mix (no weight at all): no drive
+                # steps.
                 q = mem[_MIX_Q]
+                picks = ptr8(int(mem) + mem[_MIX_RING])
                 best = -1
-                # Sentinels that the first drive with a weight beats, so the loops
-                # need no test of best (backward, best_num is 0 there), nor of a
-                # weight: a drive without one never beats a drive with one (its count
-                # stays 0, its product against a weight is 0 forward, -best_w < 0
-                # backward), and one that beats the sentinels loses to the next with a
-                # weight. A test per drive would slow the six-drive scan.
-                best_num = 1
-                best_w = 0
-                i = 0
                 if flags & (F_NEG << E):
-                    if q <= 0:  # a new period, walked backwards from its end
-                        while i < drives:
-                            mem[_MIX_C + i] = mem[_MIX_W + i]
+                    q -= 1
+                    i = 0
+                    if q >= mem[_MIX_QMIN]:
+                        best = picks[q & mem[_MIX_RING_MASK]]
+                        while i < 6:
+                            mem[_MIX_E + i] -= mem[_MIX_W + i]
                             i += 1
-                        q = mem[_MIX_SUM]
-                        i = 0
-                    best_num = 0
-                    while i < drives:
-                        w = mem[_MIX_W + i]
-                        num = 2 * mem[_MIX_C + i] - 1
-                        if num * best_w >= best_num * w:
-                            best = i
-                            best_num = num
-                            best_w = w
-                        i += 1
+                    else:
+                        top = _MIX_BIAS
+                        while i < 6:
+                            v = mem[_MIX_E + i] - mem[_MIX_W + i]
+                            mem[_MIX_E + i] = v
+                            if v < top:
+                                top = v
+                                best = i
+                            i += 1
+                        if best >= 0:
+                            picks[q & mem[_MIX_RING_MASK]] = best
+                            mem[_MIX_QMIN] = q
+                            if mem[_MIX_QMAX] - q > mem[_MIX_RING_MASK]:
+                                mem[_MIX_QMAX] = q + 1 + mem[_MIX_RING_MASK]
                     if best >= 0:
-                        mem[_MIX_C + best] -= 1
-                        mem[_MIX_Q] = q - 1
+                        mem[_MIX_E + best] += mem[_MIX_SUM]
+                        mem[_MIX_Q] = q
                         set_mask |= mem[MASK_BASE + 3 + best]
                         mem[S_DRIVE_POS + best] -= 1
                     mem[S_POS + E] -= 1
                 else:
-                    if q >= mem[_MIX_SUM]:  # a new period
-                        while i < drives:
-                            mem[_MIX_C + i] = 0
-                            i += 1
-                        q = 0
+                    if q < mem[_MIX_QMAX]:
+                        best = picks[q & mem[_MIX_RING_MASK]]
                         i = 0
-                    # Every drive's words, written out (a drive not fitted has no
-                    # weight): the loop's counter and indexes cost viper as much
-                    # again on the emulated Pico, and forward is how a print runs.
-                    w = mem[_MIX_W]
-                    num = 2 * mem[_MIX_C] + 1
-                    if num * best_w < best_num * w:
-                        best = 0
-                        best_num = num
-                        best_w = w
-                    w = mem[_MIX_W + 1]
-                    num = 2 * mem[_MIX_C + 1] + 1
-                    if num * best_w < best_num * w:
-                        best = 1
-                        best_num = num
-                        best_w = w
-                    w = mem[_MIX_W + 2]
-                    num = 2 * mem[_MIX_C + 2] + 1
-                    if num * best_w < best_num * w:
-                        best = 2
-                        best_num = num
-                        best_w = w
-                    w = mem[_MIX_W + 3]
-                    num = 2 * mem[_MIX_C + 3] + 1
-                    if num * best_w < best_num * w:
-                        best = 3
-                        best_num = num
-                        best_w = w
-                    w = mem[_MIX_W + 4]
-                    num = 2 * mem[_MIX_C + 4] + 1
-                    if num * best_w < best_num * w:
-                        best = 4
-                        best_num = num
-                        best_w = w
-                    w = mem[_MIX_W + 5]
-                    num = 2 * mem[_MIX_C + 5] + 1
-                    if num * best_w < best_num * w:
-                        best = 5
-                        best_num = num
-                        best_w = w
+                        while i < 6:
+                            mem[_MIX_E + i] += mem[_MIX_W + i]
+                            i += 1
+                    else:
+                        # Every drive's words, written out: the loop's counter and
+                        # indexes cost viper as much again on the emulated Pico, and
+                        # forward on new ground is how a print runs.
+                        top = _MIX_BIAS
+                        v = mem[_MIX_E] + mem[_MIX_W]
+                        mem[_MIX_E] = v
+                        if v > top:
+                            top = v
+                            best = 0
+                        v = mem[_MIX_E + 1] + mem[_MIX_W + 1]
+                        mem[_MIX_E + 1] = v
+                        if v > top:
+                            top = v
+                            best = 1
+                        v = mem[_MIX_E + 2] + mem[_MIX_W + 2]
+                        mem[_MIX_E + 2] = v
+                        if v > top:
+                            top = v
+                            best = 2
+                        v = mem[_MIX_E + 3] + mem[_MIX_W + 3]
+                        mem[_MIX_E + 3] = v
+                        if v > top:
+                            top = v
+                            best = 3
+                        v = mem[_MIX_E + 4] + mem[_MIX_W + 4]
+                        mem[_MIX_E + 4] = v
+                        if v > top:
+                            top = v
+                            best = 4
+                        v = mem[_MIX_E + 5] + mem[_MIX_W + 5]
+                        mem[_MIX_E + 5] = v
+                        if v > top:
+                            best = 5
+                        if best >= 0:
+                            picks[q & mem[_MIX_RING_MASK]] = best
+                            mem[_MIX_QMAX] = q + 1
+                            if q - mem[_MIX_QMIN] > mem[_MIX_RING_MASK]:
+                                mem[_MIX_QMIN] = q - mem[_MIX_RING_MASK]
                     if best >= 0:
-                        mem[_MIX_C + best] += 1
+                        mem[_MIX_E + best] -= mem[_MIX_SUM]
                         mem[_MIX_Q] = q + 1
                         set_mask |= mem[MASK_BASE + 3 + best]
                         mem[S_DRIVE_POS + best] += 1
@@ -832,17 +844,20 @@ def tick(io) -> int:
     return at
 
 
-def run_mix(weights, moves, out=None):
+def run_mix(weights, moves, out=None, ring_steps=mixer.RING_STEPS):
     """Runs this step loop on E-only moves of moves[k] steps each (negative: back) from
     a fresh start of the mix `weights`, and returns each drive's net steps: the
-    schedule exactly as the interrupt runs it, for the planner's forecasts and for
-    tests. out(set_mask, clr_mask), if given, sees every step (drive d is bit d)."""
+    mixer exactly as the interrupt runs it, for the planner's forecasts and for
+    tests. A move (steps, weights) changes the mix there: a block with a new mix id,
+    as the planner gives every extruding block. out(set_mask, clr_mask), if given,
+    sees every step (drive d is bit d). ring_steps: the mixer's ring (a power of 2,
+    at least 4), the firmware's unless a walk needs no stepping back
+    (schedule_counts)."""
     from array import array
     drives = len(weights)
-    mem = array("i", bytes(4 * mem_words(2)))
+    mem = array("i", bytes(4 * mem_words(2, 0, ring_steps)))
+    init_mem(mem, 2, 0, ring_steps)
     mem[S_QUEUE] = 2
-    mem[_MIX_N] = drives
-    mem[MIX_BASE + mixer.M_ID] = -1
     for d in range(drives):
         mem[MASK_BASE + 3 + d] = 1 << d
     if out is None:
@@ -850,7 +865,11 @@ def run_mix(weights, moves, out=None):
         mem[S_REG_SET] = 1
         mem[S_REG_CLR] = 2
     io = (mem, out, None)
+    mix_id = 1
     for steps in moves:
+        if not isinstance(steps, int):
+            steps, weights = steps
+            mix_id += 1
         if steps == 0:
             continue
         b = BLOCK_BASE + mem[S_HEAD] * B_WORDS
@@ -859,7 +878,7 @@ def run_mix(weights, moves, out=None):
         mem[b + B_DECEL_AFTER] = n + 1  # a step per tick: done before it decelerates
         mem[b + B_FLAGS] = (F_NEG << E) if steps < 0 else 0
         mem[b + B_RATE_INIT] = mem[b + B_RATE_NOM] = mem[b + B_RATE_FINAL] = ONE
-        mem[b + B_MIX] = 1
+        mem[b + B_MIX] = mix_id
         for d in range(drives):
             mem[b + B_MIX + 1 + d] = weights[d]
         mem[S_HEAD] = 1 - mem[S_HEAD]
@@ -870,8 +889,9 @@ def run_mix(weights, moves, out=None):
 
 
 def schedule_counts(weights, steps):
-    """Steps per drive the mixer gives in `steps` steps from a fresh start."""
-    return run_mix(weights, (steps,))
+    """Steps per drive the mixer gives in `steps` steps from a fresh start (forward
+    only, so a ring of 4 picks will do: no big array in the main loop)."""
+    return run_mix(weights, (steps,), None, 4)
 
 
 def make_irq(mem, out, endstops):
