@@ -101,7 +101,8 @@ LINES = {PLAN_FILE: Lines(PLAN_FILE)}
 # printer is built once and kept: a request's garbage would split a later one's heap.
 import board  # noqa: E402
 from mixfw import heap, planner  # noqa: E402
-heap.reserve(planner.step_loop_bytes(board.SETTINGS))
+# The planned printer's arrays: it keeps no trace records (see planned_printer).
+heap.reserve(planner.step_loop_bytes(dict(board.SETTINGS, trace_records=0)))
 from mixfw import assemble  # noqa: E402
 from mixfw import safety  # noqa: E402
 from mixfw.config import Config  # noqa: E402

@@ -32,7 +32,7 @@ COPIES = {
         "ramp": ["_IO_N", "_IO_R0", "_IO_RNOM", "_IO_R1", "_IO_ACC", "_IO_ACCEL_UNTIL",
                  "_IO_DECEL_AFTER", "_IO_RATE_DECEL", "_IO_HI", "_IO_LO"],
         "compat": ["_MASK30"],
-        "mixer": ["_MIX_BIAS"],
+        "mixer": ["_MIX_BIAS", "_RING_STEPS"],
     },
     "ramp": {"compat": ["_MASK30"]},
     "lookahead": {
@@ -181,11 +181,13 @@ def test_each_layout_keeps_its_rules():
     # copy; the forward pick is written out for six drives.
     assert st["_S_WORDS"] <= st["MIX_BASE"]
     assert st["MIX_BASE"] + mixer["M_WORDS"] <= st["MASK_BASE"]
-    for m in ("M_W", "M_SUM", "M_Q", "M_QMIN", "M_QMAX", "M_E", "M_RING", "M_RING_MASK"):
-        assert st["_MIX_" + m[2:]] == st["MIX_BASE"] + mixer[m], m
-    # A block's E steps fit the mixer's ring, a power of 2 that fills whole words.
-    ring = mixer["RING_STEPS"]
-    assert pl["MAX_PERIOD"] <= ring and ring & (ring - 1) == 0 and ring % 4 == 0
+    for m in ("M_W", "_M_SUM", "_M_Q", "_M_QMIN", "_M_QMAX", "_M_E", "_M_RING",
+              "_M_RING_MASK"):
+        assert st["_MIX_" + m.lstrip("_")[2:]] == st["MIX_BASE"] + mixer[m], m
+    # The mixer's ring: a power of 2 that fills whole words, and a divisor of the bias
+    # its positions start at.
+    ring = mixer["_RING_STEPS"]
+    assert ring & (ring - 1) == 0 and ring % 4 == 0 and mixer["_MIX_BIAS"] % ring == 0
     assert (mixer["M_ID"], mixer["M_W"], mixer["MAX_DRIVES"]) == (0, 1, 6)
     assert st["B_MIX"] + 1 + mixer["MAX_DRIVES"] <= st["B_RATE_DECEL"] < st["B_WORDS"]
     # Every batch has a word more than the state machine's FIFO holds, and a refill

@@ -49,7 +49,7 @@ print(list(stepper.run_mix(mixer.normalize([1, 2, 3, 4, 5, 985], 6), [1000 * 7])
 
 def _firmware_picks(mp, cases):
     """Each case [weights, moves]: the drives the step loop picks (upy/mixer_picks.py)."""
-    out = mp.script("mixer_picks", stdin=json.dumps(cases).encode()).split()
+    out = mp.script("mixer_picks", stdin=json.dumps(cases).encode()).splitlines()
     assert len(out) == len(cases)
     return [[int(d) for d in line] for line in out]
 
@@ -98,6 +98,27 @@ def test_large_mixes_of_five_and_six_drives_over_periods_and_mix_changes(mp, mix
         == want
 
 
+def test_every_kind_of_pick_runs_with_the_heap_locked(mp):
+    """New ground forward and backward, and the ring's picks both ways: each tick of
+    the walk runs under micropython.heap_lock(), as the interrupt does."""
+    counts = mp.json(MIXER + """
+import micropython
+step = stepper.tick
+
+def locked(io):
+    micropython.heap_lock()
+    try:
+        return step(io)
+    finally:
+        micropython.heap_unlock()
+
+walk = stepper.run_mix((1, 2, 3, 4, 5, 6), [300, -500, 400, -100, 21])
+stepper.tick = step
+print([list(walk), list(stepper.run_mix((1, 2, 3, 4, 5, 6), [121]))])
+""")
+    assert counts[0] == counts[1]  # the walk ends at E step 121, where it had been
+
+
 @settings(max_examples=40, deadline=None)
 @given(weights=st.lists(st.integers(0, 1000), min_size=2, max_size=6).filter(any),
        moves=st.lists(st.integers(-150, 150), min_size=1, max_size=12))
@@ -107,6 +128,64 @@ def test_retract_then_unretract_restores_every_drive(mp, weights, moves):
     reverse steps undo forward steps exactly, one by one."""
     result = mp.script_json("mixer_walk", stdin=json.dumps([weights, moves]).encode())
     assert result is True
+
+
+class RingModel:
+    """The mixer as docs/Mixing.md states it, with a ring of `size` picks: the
+    document's errors, and the picks at the positions walked, of which the ring keeps
+    a stretch of at most `size` around the latest."""
+
+    def __init__(self, weights, size):
+        self.w, self.size, self.total = weights, size, sum(weights)
+        self.errors = list(weights)
+        self.q = self.lo = self.hi = 0
+        self.known = {}
+
+    def _top(self, values):
+        return max((i for i, w in enumerate(self.w) if w), key=lambda i: (values[i], -i))
+
+    def forward(self):
+        q = self.q
+        if self.lo <= q < self.hi:
+            pick = self.known[q]
+        else:
+            pick = self._top(self.errors)
+            self.known[q] = pick
+            self.hi = q + 1
+            self.lo = max(self.lo, self.hi - self.size)
+        self.errors[pick] -= self.total
+        self.errors = [e + w for e, w in zip(self.errors, self.w)]
+        self.q += 1
+        return pick
+
+    def back(self):
+        q = self.q - 1
+        self.errors = [e - w for e, w in zip(self.errors, self.w)]
+        if self.lo <= q < self.hi:
+            pick = self.known[q]
+        else:
+            # New ground: the rule on the mirrored errors 2W - error.
+            pick = self._top([2 * w - e - w for e, w in zip(self.errors, self.w)])
+            self.known[q] = pick
+            self.lo = q
+            self.hi = min(self.hi, self.lo + self.size)
+        self.errors[pick] += self.total
+        self.q = q
+        return pick
+
+
+@settings(max_examples=40, deadline=None)
+@given(weights=st.lists(st.integers(0, 60), min_size=2, max_size=6).filter(any),
+       size=st.sampled_from([4, 8, 16, 64]),
+       moves=st.lists(st.integers(-40, 40), min_size=1, max_size=16))
+def test_walks_longer_than_a_small_ring_keep_what_it_holds(mp, weights, size, moves):
+    """The firmware's step loop with a ring of 4 to 64 picks against the model: what
+    the ring still holds is retraced, and past it the rules pick."""
+    model = RingModel(weights, size)
+    want = []
+    for m in moves:
+        want += [model.forward() if m > 0 else model.back() for _ in range(abs(m))]
+    assert _firmware_picks(mp, [[weights, moves, size]])[0] == want
 
 
 # docs/Mixing.md's table of mixes, one period each: the order of the drives' steps in

@@ -33,7 +33,7 @@ _IO_HOW = const(15)
 _P_LIMBS = const(0)
 _AT_BIAS = const(0x20000000)
 _MASK30 = const(0x3FFFFFFF)  # compat.MASK30
-_MAX_PERIOD = const(2048)  # planner.MAX_PERIOD: most E steps in one block
+_MAX_PERIOD = const(20000)  # planner.MAX_PERIOD: most E steps in one block
 
 # A drive's filament past its base (rebase), in nm: the base moves up once it
 # passes _NM_HIGH, leaving _NM_KEEP to _NM_KEEP + q, and back down below _NM_LOW. A

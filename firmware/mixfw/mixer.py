@@ -8,18 +8,17 @@
 #
 # Stepping back has no rule of its own that undoes the forward one (a state has
 # several possible predecessors, and telling them apart can take a dozen steps), so
-# the mixer keeps its picks in a ring of RING_STEPS bytes, by E position, with the
+# the mixer keeps its picks in a ring of _RING_STEPS bytes, by E position, with the
 # span of positions it knows: a step back over known positions takes the recorded
 # drive, and a step forward over positions first walked backwards replays them. Only
 # new ground is picked: forward by the rule above, backward by the same rule run on
 # the mirrored errors 2W - error, so a block run backwards from a fresh start meets
 # the drives in the forward order and also gives exactly W steps each a period. Any
-# walk within RING_STEPS positions retraces itself exactly; the planner holds every
-# block's E steps within that (planner.MAX_PERIOD).
+# walk within _RING_STEPS positions retraces itself exactly, anywhere in a block.
 #
 # The errors are kept less their weights (a fresh start is all zeros): the step loop
 # adds each weight as it scans for the highest, one pass over the drives. They and
-# the positions are stored plus MIX_BIAS, so that every word the step loop compares
+# the positions are stored plus _MIX_BIAS, so that every word the step loop compares
 # is positive: a 64-bit port's ptr32 reads a negative word as a large positive one.
 #
 # This module holds the weights, their normalisation and the mixer's state: one
@@ -32,20 +31,23 @@ MAX_DRIVES = const(6)
 # Normalised weights sum to at most this before the gcd is taken out, so products
 # and errors stay below 2**30 (the chips' small-int limit).
 WEIGHT_SCALE = const(10000)
-RING_STEPS = const(2048)  # picks remembered, a power of 2
-MIX_BIAS = const(0x20000000)  # a multiple of RING_STEPS
+_RING_STEPS = const(2048)  # picks remembered, a power of 2
+_MIX_BIAS = const(0x20000000)  # a multiple of _RING_STEPS
 
 # Offsets inside the mixer section. M_ID..M_W has the same shape as a block's mix
-# words, so starting a block is one copy (mix_load).
+# words, so starting a block is one copy (mix_load). The step loop has its own copies
+# of the private ones (stepper._MIX_*): names a chip would keep in RAM else.
 M_ID = const(0)  # id of the mix loaded, -1 for none
 M_W = const(1)  # weights, MAX_DRIVES words
-M_SUM = const(7)  # sum of weights: the period
-M_Q = const(8)  # E position in steps since the mix was loaded
-M_QMIN = const(9)  # the ring knows the picks at positions M_QMIN .. M_QMAX - 1
-M_QMAX = const(10)
-M_E = const(11)  # each drive's error less its weight, MAX_DRIVES words
-M_RING = const(17)  # the ring's byte offset from the memory's start
-M_RING_MASK = const(18)  # its length less 1 (a power of 2 less 1)
+_M_SUM = const(7)  # sum of weights: the period
+_M_Q = const(8)  # E position in steps since the mix was loaded
+# The ring knows the picks at positions _M_QMIN .. _M_QMAX - 1, the last _RING_STEPS of
+# them at most (forward steps move _M_QMAX only).
+_M_QMIN = const(9)
+_M_QMAX = const(10)
+_M_E = const(11)  # each drive's error less its weight, MAX_DRIVES words
+_M_RING = const(17)  # the ring's byte offset from the memory's start
+_M_RING_MASK = const(18)  # its length less 1 (a power of 2 less 1)
 M_WORDS = const(19)
 
 
@@ -101,13 +103,13 @@ def mix_load(mem: ptr32, base: int, src: int):
     while i < MAX_DRIVES:
         w = mem[src + 1 + i]
         mem[base + M_W + i] = w
-        mem[base + M_E + i] = MIX_BIAS
+        mem[base + _M_E + i] = _MIX_BIAS
         total += w
         i += 1
-    mem[base + M_SUM] = total
-    mem[base + M_Q] = MIX_BIAS
-    mem[base + M_QMIN] = MIX_BIAS
-    mem[base + M_QMAX] = MIX_BIAS
+    mem[base + _M_SUM] = total
+    mem[base + _M_Q] = _MIX_BIAS
+    mem[base + _M_QMIN] = _MIX_BIAS
+    mem[base + _M_QMAX] = _MIX_BIAS
 
 
 def load(mem, base, mix_id, weights):

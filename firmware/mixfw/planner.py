@@ -80,9 +80,9 @@ _MASK30 = const(0x3FFFFFFF)
 
 _RING_IDLE = const(0x10000)  # see _ring_room
 
-# Most E steps in one block, and so the longest period of its mix: the mixer's ring
-# (mixer.RING_STEPS) holds a whole block, so the block can be walked back anywhere.
-MAX_PERIOD = const(2048)
+# Most E steps in one block, and so the longest period of its mix: its weights and
+# the mixer's errors stay far below 2**30.
+MAX_PERIOD = const(20000)
 
 
 @micropython.viper

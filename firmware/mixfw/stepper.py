@@ -91,6 +91,7 @@ _MIX_E = const(59)
 _MIX_RING = const(65)
 _MIX_RING_MASK = const(66)
 _MIX_BIAS = const(0x20000000)
+_RING_STEPS = const(2048)  # the mixer's
 MASK_BASE = const(67)  # STEP pin masks: X Y Z then the drives (9 words)
 DIR_MASK_BASE = const(76)  # DIR pin masks in the same order (9 words)
 # Event ring (step_backend "pio_dma", S_PIO == 2; see piodma.py): one call of tick runs
@@ -200,14 +201,14 @@ _HI_SHIFT = const(28)  # ESP32: GPIO 32, 33 travel as mask bits 28, 29
 _LO_MASK = const(0x0FFFFFFF)
 
 
-def mem_words(queue_blocks, capture_records=0, ring_steps=mixer.RING_STEPS):
+def mem_words(queue_blocks, capture_records=0, ring_steps=_RING_STEPS):
     """The step loop's memory: its words, the block ring, the trace capture's records
     and the mixer's ring of picks (bytes, a power of 2), in that order."""
     return (BLOCK_BASE + queue_blocks * B_WORDS + capture_records * CAP_WORDS
             + ring_steps // 4)
 
 
-def init_mem(mem, queue_blocks, capture_records=0, ring_steps=mixer.RING_STEPS):
+def init_mem(mem, queue_blocks, capture_records=0, ring_steps=_RING_STEPS):
     """Where the capture and the mixer's ring lie in mem (mem_words' order)."""
     mem[S_CAP_BASE] = BLOCK_BASE + queue_blocks * B_WORDS
     mem[S_CAP_SIZE] = capture_records
@@ -638,7 +639,14 @@ def tick(io) -> int:
                 if flags & (F_NEG << E):
                     q -= 1
                     i = 0
+                    # Known if walked and not yet written over: forward steps on new
+                    # ground leave QMIN behind (one test fewer there), so this one
+                    # tells how far back the ring still reaches.
+                    known = 0
                     if q >= mem[_MIX_QMIN]:
+                        if mem[_MIX_QMAX] - q <= mem[_MIX_RING_MASK] + 1:
+                            known = 1
+                    if known:
                         best = picks[q & mem[_MIX_RING_MASK]]
                         while i < 6:
                             mem[_MIX_E + i] -= mem[_MIX_W + i]
@@ -655,7 +663,7 @@ def tick(io) -> int:
                         if best >= 0:
                             picks[q & mem[_MIX_RING_MASK]] = best
                             mem[_MIX_QMIN] = q
-                            if mem[_MIX_QMAX] - q > mem[_MIX_RING_MASK]:
+                            if mem[_MIX_QMAX] - q > mem[_MIX_RING_MASK] + 1:
                                 mem[_MIX_QMAX] = q + 1 + mem[_MIX_RING_MASK]
                     if best >= 0:
                         mem[_MIX_E + best] += mem[_MIX_SUM]
@@ -707,8 +715,6 @@ def tick(io) -> int:
                         if best >= 0:
                             picks[q & mem[_MIX_RING_MASK]] = best
                             mem[_MIX_QMAX] = q + 1
-                            if q - mem[_MIX_QMIN] > mem[_MIX_RING_MASK]:
-                                mem[_MIX_QMIN] = q - mem[_MIX_RING_MASK]
                     if best >= 0:
                         mem[_MIX_E + best] -= mem[_MIX_SUM]
                         mem[_MIX_Q] = q + 1
@@ -844,7 +850,7 @@ def tick(io) -> int:
     return at
 
 
-def run_mix(weights, moves, out=None, ring_steps=mixer.RING_STEPS):
+def run_mix(weights, moves, out=None, ring_steps=_RING_STEPS):
     """Runs this step loop on E-only moves of moves[k] steps each (negative: back) from
     a fresh start of the mix `weights`, and returns each drive's net steps: the
     mixer exactly as the interrupt runs it, for the planner's forecasts and for
