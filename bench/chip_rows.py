@@ -178,6 +178,16 @@ NOTES = {
         "at the end of both prints of chip_underruns and every %g emulated s for %g "
         "more emulated s of the print from flash; _uncollected: M122's mem_free before "
         "its collection, garbage included. " % (DIAG_EVERY_S, HEAP_PRINT_S)),
+    "chip_mixer_forward_new_us": (
+        "Microseconds per E step on the emulated Pico (board %s) of E-only blocks of "
+        "2,000 steps, six drives weighted 1:2:3:4:5:6, run by the firmware's step loop "
+        "from a Python loop that calls it once a step (stepper.run_mix, "
+        "bench/chip_mixer.py): the loop's call and the tick are included, so the rows "
+        "compare kinds of pick and versions of the mixer, not the mixer alone. "
+        "_forward_new: forward from a fresh start (how a print runs); _back_new: "
+        "backward from a fresh start (a retraction block); _back_known: back over the "
+        "steps just made forward; _forward_known: forward over the steps just made "
+        "back (the ring's picks). " % BOARD),
 }
 for _k in NOTES:
     NOTES[_k] += CAVEAT
@@ -215,9 +225,9 @@ def _settings():
 
 # --- planner ---------------------------------------------------------------------
 
-def _compiled(out, modules):
+def _compiled(out, modules, main="chip_main"):
     """{name.mpy: path} of each module compiled as `make deploy` compiles mixfw, and a
-    main.py that imports chip_main: compiling on the chip would take heap the two
+    main.py that imports `main`: compiling on the chip would take heap the two
     printers of the planner run need."""
     out.mkdir(parents=True, exist_ok=True)
     cross = deploy._tool("mpy-cross")
@@ -227,7 +237,7 @@ def _compiled(out, modules):
         subprocess.run([cross, "-march=" + deploy.MARCH["rp2040"], "-s", name + ".py",
                         "-o", str(dst), str(src)], check=True, capture_output=True)
         files[dst.name] = dst
-    (out / "main.py").write_text("import chip_main\n")
+    (out / "main.py").write_text("import %s\n" % main)
     files["main.py"] = out / "main.py"
     return files
 
@@ -602,9 +612,26 @@ def chip_print(res, work):
     res["chip_heap_samples"] = len(samples)
 
 
+# --- mixer ----------------------------------------------------------------------
+
+def chip_mixer(res, work):
+    """What each kind of the mixer's pick costs the step loop (bench/chip_mixer.py)."""
+    files = _compiled(work / "chip_mixer_flash", {"chip_mixer": BENCH_DIR / "chip_mixer.py"},
+                      "chip_mixer")
+    with emu.Chip(BOARD, settings=OVERRIDES, files=files, max_emu_s=60,
+                  max_wall_s=600) as chip:
+        answer = chip.command("mixer", max_s=30)
+    found = [t for t in answer if t.startswith("bench:")]
+    if not found:
+        raise RuntimeError("chip_mixer.py answered %s" % answer)
+    for kind, us in json.loads(found[0][len("bench:"):]).items():
+        res["chip_mixer_" + kind] = us
+
+
 # --- all of it -------------------------------------------------------------------
 
-PARTS = (("planner", chip_planner), ("stepping", chip_stepping), ("print", chip_print))
+PARTS = (("planner", chip_planner), ("stepping", chip_stepping), ("print", chip_print),
+         ("mixer", chip_mixer))
 
 
 def bench_chip(res, work):

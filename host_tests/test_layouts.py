@@ -181,7 +181,7 @@ def test_each_layout_keeps_its_rules():
     # copy; the forward pick is written out for six drives.
     assert st["_S_WORDS"] <= st["MIX_BASE"]
     assert st["MIX_BASE"] + mixer["M_WORDS"] <= st["MASK_BASE"]
-    for m in ("M_W", "_M_SUM", "_M_Q", "_M_QMIN", "_M_QMAX", "_M_E", "_M_RING",
+    for m in ("M_W", "_M_SUM", "_M_Q", "_M_QMIN", "_M_AHEAD", "_M_E", "_M_RING",
               "_M_RING_MASK"):
         assert st["_MIX_" + m.lstrip("_")[2:]] == st["MIX_BASE"] + mixer[m], m
     # The mixer's ring: a power of 2 that fills whole words, and a divisor of the bias

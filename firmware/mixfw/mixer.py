@@ -41,10 +41,10 @@ M_ID = const(0)  # id of the mix loaded, -1 for none
 M_W = const(1)  # weights, MAX_DRIVES words
 _M_SUM = const(7)  # sum of weights: the period
 _M_Q = const(8)  # E position in steps since the mix was loaded
-# The ring knows the picks at positions _M_QMIN .. _M_QMAX - 1, the last _RING_STEPS of
-# them at most (forward steps move _M_QMAX only).
+# The ring knows the picks at positions _M_QMIN .. _M_Q + _M_AHEAD - 1, the last
+# _RING_STEPS of them at most: forward steps on new ground change neither word.
 _M_QMIN = const(9)
-_M_QMAX = const(10)
+_M_AHEAD = const(10)  # known positions ahead of _M_Q
 _M_E = const(11)  # each drive's error less its weight, MAX_DRIVES words
 _M_RING = const(17)  # the ring's byte offset from the memory's start
 _M_RING_MASK = const(18)  # its length less 1 (a power of 2 less 1)
@@ -109,7 +109,7 @@ def mix_load(mem: ptr32, base: int, src: int):
     mem[base + _M_SUM] = total
     mem[base + _M_Q] = _MIX_BIAS
     mem[base + _M_QMIN] = _MIX_BIAS
-    mem[base + _M_QMAX] = _MIX_BIAS
+    mem[base + _M_AHEAD] = 0
 
 
 def load(mem, base, mix_id, weights):

@@ -86,7 +86,7 @@ _MIX_W = const(49)
 _MIX_SUM = const(55)
 _MIX_Q = const(56)
 _MIX_QMIN = const(57)
-_MIX_QMAX = const(58)
+_MIX_AHEAD = const(58)
 _MIX_E = const(59)
 _MIX_RING = const(65)
 _MIX_RING_MASK = const(66)
@@ -638,46 +638,78 @@ def tick(io) -> int:
                 best = -1
                 if flags & (F_NEG << E):
                     q -= 1
-                    i = 0
+                    ahead = mem[_MIX_AHEAD] + 1
                     # Known if walked and not yet written over: forward steps on new
-                    # ground leave QMIN behind (one test fewer there), so this one
-                    # tells how far back the ring still reaches.
+                    # ground store nothing of the ring's reach (one store fewer
+                    # there), so this tells how far back it still reaches.
                     known = 0
                     if q >= mem[_MIX_QMIN]:
-                        if mem[_MIX_QMAX] - q <= mem[_MIX_RING_MASK] + 1:
+                        if ahead <= mem[_MIX_RING_MASK] + 1:
                             known = 1
                     if known:
                         best = picks[q & mem[_MIX_RING_MASK]]
-                        while i < 6:
-                            mem[_MIX_E + i] -= mem[_MIX_W + i]
-                            i += 1
+                        mem[_MIX_E] -= mem[_MIX_W]
+                        mem[_MIX_E + 1] -= mem[_MIX_W + 1]
+                        mem[_MIX_E + 2] -= mem[_MIX_W + 2]
+                        mem[_MIX_E + 3] -= mem[_MIX_W + 3]
+                        mem[_MIX_E + 4] -= mem[_MIX_W + 4]
+                        mem[_MIX_E + 5] -= mem[_MIX_W + 5]
                     else:
+                        # Written out as forward, as are the ring's cases (a
+                        # retraction block runs here).
                         top = _MIX_BIAS
-                        while i < 6:
-                            v = mem[_MIX_E + i] - mem[_MIX_W + i]
-                            mem[_MIX_E + i] = v
-                            if v < top:
-                                top = v
-                                best = i
-                            i += 1
+                        v = mem[_MIX_E] - mem[_MIX_W]
+                        mem[_MIX_E] = v
+                        if v < top:
+                            top = v
+                            best = 0
+                        v = mem[_MIX_E + 1] - mem[_MIX_W + 1]
+                        mem[_MIX_E + 1] = v
+                        if v < top:
+                            top = v
+                            best = 1
+                        v = mem[_MIX_E + 2] - mem[_MIX_W + 2]
+                        mem[_MIX_E + 2] = v
+                        if v < top:
+                            top = v
+                            best = 2
+                        v = mem[_MIX_E + 3] - mem[_MIX_W + 3]
+                        mem[_MIX_E + 3] = v
+                        if v < top:
+                            top = v
+                            best = 3
+                        v = mem[_MIX_E + 4] - mem[_MIX_W + 4]
+                        mem[_MIX_E + 4] = v
+                        if v < top:
+                            top = v
+                            best = 4
+                        v = mem[_MIX_E + 5] - mem[_MIX_W + 5]
+                        mem[_MIX_E + 5] = v
+                        if v < top:
+                            best = 5
                         if best >= 0:
                             picks[q & mem[_MIX_RING_MASK]] = best
                             mem[_MIX_QMIN] = q
-                            if mem[_MIX_QMAX] - q > mem[_MIX_RING_MASK] + 1:
-                                mem[_MIX_QMAX] = q + 1 + mem[_MIX_RING_MASK]
+                            if ahead > mem[_MIX_RING_MASK] + 1:
+                                ahead = mem[_MIX_RING_MASK] + 1
                     if best >= 0:
+                        mem[_MIX_AHEAD] = ahead
                         mem[_MIX_E + best] += mem[_MIX_SUM]
                         mem[_MIX_Q] = q
                         set_mask |= mem[MASK_BASE + 3 + best]
                         mem[S_DRIVE_POS + best] -= 1
                     mem[S_POS + E] -= 1
                 else:
-                    if q < mem[_MIX_QMAX]:
+                    ahead = mem[_MIX_AHEAD]
+                    if ahead:
                         best = picks[q & mem[_MIX_RING_MASK]]
-                        i = 0
-                        while i < 6:
-                            mem[_MIX_E + i] += mem[_MIX_W + i]
-                            i += 1
+                        mem[_MIX_AHEAD] = ahead - 1
+                        mem[_MIX_E] += mem[_MIX_W]
+                        mem[_MIX_E + 1] += mem[_MIX_W + 1]
+                        mem[_MIX_E + 2] += mem[_MIX_W + 2]
+                        mem[_MIX_E + 3] += mem[_MIX_W + 3]
+                        mem[_MIX_E + 4] += mem[_MIX_W + 4]
+                        mem[_MIX_E + 5] += mem[_MIX_W + 5]
                     else:
                         # Every drive's words, written out: the loop's counter and
                         # indexes cost viper as much again on the emulated Pico, and
@@ -712,9 +744,9 @@ def tick(io) -> int:
                         mem[_MIX_E + 5] = v
                         if v > top:
                             best = 5
-                        if best >= 0:
-                            picks[q & mem[_MIX_RING_MASK]] = best
-                            mem[_MIX_QMAX] = q + 1
+                        # (With no mix, best is -1 and nothing below moves: the byte
+                        # written is never read, as the position is not walked.)
+                        picks[q & mem[_MIX_RING_MASK]] = best
                     if best >= 0:
                         mem[_MIX_E + best] -= mem[_MIX_SUM]
                         mem[_MIX_Q] = q + 1
