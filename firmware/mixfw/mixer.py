@@ -112,14 +112,6 @@ def mix_load(mem: ptr32, base: int, src: int):
     mem[base + _M_AHEAD] = 0
 
 
-def load(mem, base, mix_id, weights):
-    """Load a normalised mix from the main loop (tests, start-up)."""
-    mem[base + M_ID] = mix_id
-    for i in range(MAX_DRIVES):
-        mem[base + M_W + i] = weights[i] if i < len(weights) else 0
-    mix_load(mem, base, base)
-
-
 def default_tool_mixes(drives, count=16):
     """T<n> is 100 % drive n below the drive count, an equal mix of all drives above."""
     return tuple(tuple(1 if i == t else 0 for i in range(drives)) if t < drives
