@@ -95,6 +95,19 @@ class Lines:
         return out
 
 
+def intern_names(path):
+    """Intern the names the modules to come intern as they load (bench/chip_rows.py
+    lists them), while the heap is whole. MicroPython keeps its names in pools whose
+    sizes double (20, 40, ... 640 entries: 1,260 names): the next takes 7.7 kB in one
+    block, which a pool first needed late in the modules' loading, beside the lines
+    and the reserves, would not find. getattr interns the name it is given."""
+    with open(path) as f:
+        for line in f:
+            getattr(None, line[:-1], None)
+    gc.collect()
+
+
+intern_names("names.txt")
 LINES = {PLAN_FILE: Lines(PLAN_FILE)}
 # The firmware reserves the heap its printer's arrays take while its modules load
 # (mixfw/heap.py), and the stepping printer, built second, gets a reserve too. Each

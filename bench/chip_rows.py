@@ -242,6 +242,38 @@ def _compiled(out, modules, main="chip_main"):
     return files
 
 
+# The firmware's modules that building the board's printer imports, listed by the
+# simulated board on the unix port (which loads the same ones as the chip).
+_BUILD_MODULES = """
+import sys
+sys.path.append(sys.path.pop(0))
+import simmachine, simtime
+sys.modules["machine"] = simmachine
+sys.modules["time"] = simtime
+import board
+from mixfw import assemble
+from mixfw.config import Config
+assemble.build(Config(board.SETTINGS, None), files_root=None)
+print(" ".join(m for m in sys.modules if m.startswith("mixfw.")))
+"""
+
+
+def _names(work, harness):
+    """A file of the names that the firmware's modules, as building the board's printer
+    imports them, and the .mpy files `harness` intern as they load, a line each:
+    chip_main.py interns them first (see its intern_names)."""
+    listed = subprocess.run([paths.micropython(), "-X", "heapsize=4M", "-c", _BUILD_MODULES],
+                            env=paths.micropython_env(BOARD), capture_output=True,
+                            text=True, check=True).stdout.split()
+    deploy.compile_mixfw(work / "chip_names", deploy.MARCH["rp2040"])
+    names = set()
+    for mpy in [work / "chip_names" / "mixfw" / (m[6:] + ".mpy") for m in listed] + harness:
+        names.update(n for n in deploy.mpy_qstrs(mpy) if "\n" not in n)
+    out = work / "chip_names" / "names.txt"
+    out.write_text("".join(n + "\n" for n in sorted(names)))
+    return out
+
+
 def _planner_chip(work, requests, gcode=None, profile=None):
     """bench/chip_main.py's answers (JSON) to each request, on a chip of its own, with
     PLAN_LINES of gcode (the example) as plan.gcode. profile: a path for the program
@@ -256,6 +288,8 @@ def _planner_chip(work, requests, gcode=None, profile=None):
         "chip_main": BENCH_DIR / "chip_main.py", "chip_profile": BENCH_DIR / "chip_profile.py",
         "plan_only": paths.BOARDS / "sim" / "plan_only.py"})
     files["plan.gcode"] = excerpt
+    files["names.txt"] = _names(work, [p for p in files.values() if p.suffix == ".mpy"
+                                       and p.stem != "chip_profile"])
     got = []
     settings = dict({"tick_us": PLANNER_TICK_US}, **OVERRIDES)
     with emu.Chip(BOARD, settings=settings, files=files, max_emu_s=120,

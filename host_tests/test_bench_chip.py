@@ -128,3 +128,23 @@ def test_alloc_profile_counts_what_each_planner_function_allocates():
                          ("planner.add_move", "g1")):
         assert fns[inner]["bytes_per_line"] <= fns[outer]["bytes_per_line"]
     assert fns["g1"]["bytes_per_line"] <= got["bytes_per_line"]
+
+
+def test_the_names_the_planner_harness_interns_first(tmp_path):
+    """The firmware's modules that building the board's printer loads (listed by the
+    unix port's simulated board: the chip's own list), and the names their .mpy files
+    intern, read from each file's qstr table."""
+    names = chip_rows._names(tmp_path, [])
+    listed = set(names.read_text().split("\n"))
+    # Names from the step loop, the mixer and the planner, none from a module the board
+    # never loads (the network console).
+    assert {"mix_load", "run_mix", "schedule_counts", "add_move", "MixError"} <= listed
+    assert "SocketConsole" not in listed
+    src = tmp_path / "small.py"
+    src.write_text("import gc\nLONG_PUBLIC_NAME = 1\n\ndef made_up(value):\n"
+                   "    return value.attribute_name\n")
+    mpy = tmp_path / "small.mpy"
+    from mixstep import deploy
+    import subprocess
+    subprocess.run([deploy._tool("mpy-cross"), "-o", str(mpy), str(src)], check=True)
+    assert {"LONG_PUBLIC_NAME", "made_up", "attribute_name"} <= set(deploy.mpy_qstrs(mpy))

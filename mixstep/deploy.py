@@ -144,6 +144,35 @@ def mpy_header(path):
     return head[1], head[2] & 3, head[2] >> 2
 
 
+def mpy_qstrs(path):
+    """The names a .mpy file interns as it loads: the strings of its qstr table (those
+    not in mpy-cross's own table). The table follows the 4-byte header: its count and
+    the object count as variable-length ints, then each entry as (length << 1) |
+    static, and for a name not static its bytes and a 0."""
+    data = Path(path).read_bytes()
+    at = 4
+
+    def vuint():
+        nonlocal at
+        value = 0
+        while True:
+            byte = data[at]
+            at += 1
+            value = (value << 7) | (byte & 0x7F)
+            if not byte & 0x80:
+                return value
+
+    names = []
+    count = vuint()
+    vuint()  # the objects
+    for _ in range(count):
+        entry = vuint()
+        if not entry & 1:
+            names.append(data[at:at + (entry >> 1)].decode())
+            at += (entry >> 1) + 1
+    return names
+
+
 def check_mpy_compatible(board_mpy, headers):
     """Refuse unless the board loads every file: the same .mpy version, and for files
     with native (viper) code the same sub-version and architecture.
