@@ -16,9 +16,11 @@ is slower. Three emulator sessions, one at a time:
   print     the firmware as deployed: testdata/circles_tube_emu_excerpt.gcode streamed
             over USB, then the same file printed from the emulated flash (M23/M24), for
             the underruns and the free heap.
+  prints    whole prints of two files, over USB and from flash, against their time in
+            `mixstep sim` (bench/chip_print.py).
 
     python bench/run.py --only chip
-    python bench/chip_rows.py [planner,stepping,cpu,print,profile] [--board B] [--set K=V ...]
+    python bench/chip_rows.py [planner,stepping,cpu,print,prints,mixer,profile] [--board B] [--set K=V ...]
                                                         (figures as JSON)
 
 `cpu` is the stepping part without its step-rate search. `profile` plans the planner
@@ -37,7 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mixstep import deploy, emu, paths, steptiming
+from mixstep import boards, deploy, emu, paths, steptiming
 
 BOARD = "pico_6drives"
 ROOT = paths.ROOT
@@ -178,6 +180,19 @@ NOTES = {
         "at the end of both prints of chip_underruns and every %g emulated s for %g "
         "more emulated s of the print from flash; _uncollected: M122's mem_free before "
         "its collection, garbage included. " % (DIAG_EVERY_S, HEAP_PRINT_S)),
+    "chip_print_ratio_usb": (
+        "A whole print's emulated time on %s, from its first line to the ok of a final "
+        "M400, over its time in `mixstep sim --board %s` (where planning costs no "
+        "simulated time): the worse of testdata/circles_tube_emu_excerpt.gcode "
+        "(PrusaSlicer, 0.2 mm segments at 150 mm/s) and testdata/vase_3mix_emu_excerpt."
+        "gcode (PrusaSlicer spiral vase, 0.17-0.3 mm segments at 120 mm/s, three drives "
+        "mixed), each on a chip of its own (chip_print_files has both). _usb: streamed "
+        "as OctoPrint streams a file, comments and blank lines left out, every line "
+        "numbered with its checksum after M110 N0, one line per ok, by a host that "
+        "answers at once; _flash: printed from the emulated flash, from M24 to the ok "
+        "of an M400 after 'Done printing file'. chip_print_cpu_busy: the share of the "
+        "flash print's emulated time the CPU was not asleep (WFI), the worse file's. "
+        "bench/chip_print.py. " % (BOARD, BOARD)),
     "chip_mixer_forward_new_us": (
         "Microseconds per E step on the emulated Pico (board %s) of E-only blocks of "
         "2,000 steps, six drives weighted 1:2:3:4:5:6, run by the firmware's step loop "
@@ -664,8 +679,22 @@ def chip_mixer(res, work):
 
 # --- all of it -------------------------------------------------------------------
 
+# --- whole prints against their time in mixstep sim ------------------------------
+
+def chip_prints(res, work):
+    """chip_print_ratio_usb / _flash / chip_print_cpu_busy: the worse of the two
+    files (bench/chip_print.py)."""
+    import chip_print as whole
+    got = [whole.ratios(path, board=BOARD, settings=OVERRIDES or None)
+           for path in (whole.CIRCLES, whole.VASE)]
+    for way in ("usb", "flash"):
+        res["chip_print_ratio_" + way] = max(g[way + "_ratio"] for g in got)
+    res["chip_print_cpu_busy"] = max(g["flash_busy"] for g in got)
+    res["chip_print_files"] = got
+
+
 PARTS = (("planner", chip_planner), ("stepping", chip_stepping), ("print", chip_print),
-         ("mixer", chip_mixer))
+         ("prints", chip_prints), ("mixer", chip_mixer))
 
 
 def bench_chip(res, work):
@@ -705,7 +734,7 @@ if __name__ == "__main__":
     ap.add_argument("--board", default=BOARD)
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     args = ap.parse_args()
-    configure(args.board, dict(emu._setting(t) for t in args.set))
+    configure(args.board, boards.set_items(args.board, args.set))
     parts = args.parts.split(",")
     for name, part in PARTS + (("cpu", chip_cpu), ("profile", chip_profile)):
         if name in parts:

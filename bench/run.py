@@ -27,6 +27,7 @@ import numpy as np
 from mixstep import deploy, paths, sim, steptiming
 from mixstep.simprinter import SimPrinter
 from mixfw.gcode import Parser
+import chip_print
 import chip_rows
 
 ROOT = paths.ROOT
@@ -77,6 +78,10 @@ TARGETS = {
     "chip_step_time_error_max_us": ("<=", 2),
     "chip_underruns": ("<=", 0),
     "chip_heap_free_min_bytes": None,
+    "chip_print_ratio_usb": ("<=", 1.05),
+    "chip_print_ratio_flash": ("<=", 1.05),
+    "chip_print_cpu_busy": ("<=", 0.70),
+    "sim_circles_speed_ratio": (">=", 0.95),
 }
 
 
@@ -283,6 +288,14 @@ def bench_sim_speed(res):
     res["sim_seconds"] = r["sim_seconds"]
     res["sim_wall_seconds"] = r["wall_seconds"]
     vcd.unlink()
+    ratio, asked = chip_print.speed_ratio(work=WORK)
+    res["sim_circles_speed_ratio"] = round(ratio, 4)
+    res["sim_circles_speed_ratio_method"] = (
+        "testdata/circles_tube_emu_excerpt.gcode in mixstep sim on %s: the time its "
+        "extrusion would take if the queue never held it back (each run of extrusion, "
+        "read off the trace as the drives stepping forward with no pause over 5 ms, from "
+        "rest to rest along its X/Y path at the file's %g mm/s and the board's "
+        "acceleration) over its time in the trace" % (chip_print.BOARD, asked))
 
 
 # --- host tools on big inputs ----------------------------------------------------

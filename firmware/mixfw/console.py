@@ -50,6 +50,17 @@ class StreamConsole:
             n += 1
             if c == 10:
                 break
+            if c == 78 and n == 1 and limit > 1:
+                # A numbered line (N...*checksum) comes from a host program, which
+                # writes whole lines: the rest of it is read in one call, whose loop
+                # runs in C (a byte at a time from Python costs the chip about 50 us).
+                # Its bytes object is the only garbage a line makes.
+                rest = rx.readline(limit - 1)
+                if rest:
+                    k = len(rest)
+                    mv[1:1 + k] = rest
+                    n += k
+                break
         return n
 
     def write(self, text):
