@@ -677,7 +677,12 @@ class Motion:
                 arc[k] = pos[i]
                 arc[k + 3] = i
                 k += 1
-            # Every segment's end is checked (soft limits, range) before one is queued.
+            # Every segment's end is checked (soft limits, range) before one is queued:
+            # xyz_targets checks the soft limits of the axes a line names, so here
+            # they are checked for all three.
+            soft = spm[_SPM_MODES] & _MODE_SOFT
+            off = self.offset_nm
+            travel = self._travel_nm
             for k in range(2):
                 for i in range(_ARC_ACC, _ARC_ACC + 12, 4):
                     arc[i] = 0
@@ -689,6 +694,11 @@ class Motion:
                     v = xyz_targets(spm, 0, arc, arc, None)
                     if v < 0:
                         self._refuse_target(arc, v)
+                    if soft:
+                        for j in range(3):
+                            v = arc[j] + off[j]
+                            if v < -1 or v > travel[j] + 1:
+                                self._refuse_target(arc, -_OUTSIDE - j)
         if e_nm and not self._guards_passed:
             for guard in self.extrusion_guards:
                 guard()
