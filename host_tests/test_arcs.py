@@ -108,12 +108,14 @@ def test_a_bad_arc_is_refused_and_moves_nothing(mp, line, message):
 
 
 def test_an_arc_of_many_segments_takes_no_more_heap_than_a_short_one(mp):
+    """Per segment nothing: what an arc takes is per line (its floats; with P turns,
+    angles beyond the chips' small ints), so more segments take no more."""
     lines = ["M302 P1", "G1 X50 Y50 F3000", "G2 X50 Y50 I2 J0 E1", "G2 X50 Y50 I40 J0 E1",
-             "G2 X50 Y50 I40 J0 E1 P4"]
+             "G2 X50 Y50 I2 J0 E1 P1", "G2 X50 Y50 I40 J0 E1 P4"]
     got = run(mp, lines, heap=True)
-    short, long, turns = got[2], got[3], got[4]
-    assert short[1] == 72 and long[1] > 250 and turns[1] > 1250
-    assert long[2] <= short[2] and turns[2] <= short[2]
+    short, long, turn, turns = got[2], got[3], got[4], got[5]
+    assert short[1] == 72 and long[1] > 250 and turn[1] == 144 and turns[1] > 1250
+    assert long[2] <= short[2] and turns[2] <= turn[2]
 
 
 def test_segment_options_are_shown_saved_and_used(sim_printer, tmp_path):
