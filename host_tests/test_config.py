@@ -89,7 +89,7 @@ def test_options_are_the_boards_settings_one_per_axis(mp, board):
             "travel_mm": "xyz", "homing_feed_mm_s": "xyz"}
     expected = [k + "_" + a for k, ax in axes.items() for a in ax] + [
         "acceleration_mm_s2", "retract_acceleration_mm_s2", "junction_deviation_mm",
-        "min_segment_time_us",
+        "min_segment_time_us", "min_arc_segment_mm", "max_arc_segment_mm", "min_circle_segments",
         "default_feed_mm_s", "soft_limits", "max_extrude_mm", "retract_policy", "retract_mm", "trace_records",
         "watchdog_ms", "step_stall_ms",
         "retract_feed_mm_s", "unretract_feed_mm_s", "transition_l1_mm", "transition_l2_mm",

@@ -129,6 +129,18 @@ DESCRIPTIONS = {
         "motion", "mm",
         "Longest E move taken in one line; a longer one is refused with an error (a "
         "guard against a mistaken E from a slicer or host)."),
+    "min_arc_segment_mm": (
+        "motion", "mm",
+        "`G2`/`G3` arcs are cut into straight segments no shorter than this (a small "
+        "circle gets fewer than `min_circle_segments`)."),
+    "max_arc_segment_mm": (
+        "motion", "mm",
+        "`G2`/`G3` arcs are cut into straight segments no longer than this: a segment's "
+        "chord strays from the arc by at most its sagitta, r - sqrt(r^2 - (s/2)^2)."),
+    "min_circle_segments": (
+        "motion", "segments",
+        "`G2`/`G3` arcs get at least this many segments a full turn (a small circle "
+        "stays round), unless segments would be shorter than `min_arc_segment_mm`."),
     "homing_feed_mm_s": (
         "motion", "mm/s", "Speed of X, Y and Z toward their min endstops in `G28`."),
     "queue_blocks": (

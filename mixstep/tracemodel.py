@@ -67,6 +67,11 @@ MAX_BLOCK_E_STEPS = 20000 - 2 * MAX_DRIVES  # a block's E steps (planner.MAX_PER
 REPLAY_BLOCKS = 64
 REPLAY_NM = 50 * NM_PER_MM
 _MARLIN_LETTERS = "ABCDHI"
+# G2/G3 (docs/G-Codes.md): how far R may fall short of half the chord, or an I J K
+# centre's radius to the end differ from its radius to the start; and how near a
+# whole number a segment count counts as that number.
+ARC_SLACK_NM = 10000
+ARC_SLACK = 0.001
 _MAX_DIGITS = 9
 
 # Commands whose arguments are text, not words (the firmware reads them whole).
@@ -94,6 +99,9 @@ OPTION_DEFAULTS = {
     "virtual_tools": 16,
     "line_buffer_bytes": 96,
     "travel_mm": (250.0, 250.0, 200.0),
+    "min_arc_segment_mm": 0.1,
+    "max_arc_segment_mm": 1.0,
+    "min_circle_segments": 72,
 }
 
 
@@ -680,6 +688,8 @@ class Machine:
         self.retracted_nm = 0
         self.fw_retracted = False
         self.blocks = []  # (line, weights, drive targets) of every block that steps E
+        self.plane = 0  # G17, G18, G19
+        self.arcs = []  # (line, centre, radius nm, plane axes, segments, sweep) per arc
         self.moved = set()
         self.line = 0
         self.planner = Planner(drives, [fixed_spm(v) for v in drive_spm], self.policy == 2,
@@ -817,6 +827,97 @@ class Machine:
             self._queue(steps, xyz, e_nm)
         self.e_nm = target_e
         self.pos_nm = target
+
+    def arc(self, ln):
+        """G2/G3 in the plane of G17/G18/G19, in this model's own geometry: the centre
+        from I J K (or R), each segment's end on the circle through the start at
+        angle start + i * sweep / n (float64, rounded to the nanometre), the third axis
+        and E split as floor(total * i / n) in integers, the last segment exactly at
+        the end. n follows the firmware's stated rule (docs/G-Codes.md): segments of
+        at most max_arc_segment_mm and at least min_circle_segments a turn, none under
+        min_arc_segment_mm."""
+        if ln.has("F") and ln.value("F", -1) <= 0:
+            raise Refused("feed rate must be > 0")
+        a, b, c = ((0, 1, 2), (2, 0, 1), (1, 2, 0))[self.plane]
+        if ln.has("IJK"[c]):
+            raise Refused("centre letter of the wrong plane")
+        centred = ln.has("IJK"[a]) or ln.has("IJK"[b])
+        if ln.has("R") == centred:
+            raise Refused("an arc needs R or I J K, not both or neither")
+        turns = ln.int("P", 0, lo=0, hi=1000)
+        target = list(self.pos_nm)
+        moved = 0
+        for i, ch in enumerate("XYZ"):
+            if ln.has(ch):
+                v = nm(ln.value(ch))
+                target[i] = v if self.absolute else target[i] + v
+                moved |= 1 << i
+        target_e = self.e_nm
+        if ln.has("E"):
+            v = nm(ln.value("E"))
+            target_e = v if self.absolute_e else target_e + v
+        e_nm = target_e - self.e_nm
+        if e_nm and not -self.max_extrude_nm <= e_nm <= self.max_extrude_nm:
+            raise Refused("extrusion over max_extrude_mm")
+        start = self.pos_nm
+        dx, dy = target[a] - start[a], target[b] - start[b]
+        cw = ln.command == "G2"
+        if ln.has("R"):
+            r = float(ln.value("R"))
+            chord = math.hypot(dx, dy)
+            if not chord or abs(r) * NM_PER_MM < chord / 2 - ARC_SLACK_NM:
+                raise Refused("R cannot reach the end")
+            h = max((r * NM_PER_MM) ** 2 - chord * chord / 4, 0.0) ** 0.5 / chord
+            if cw != (r < 0):
+                h = -h
+            ox, oy = round(dx / 2 - h * dy), round(dy / 2 + h * dx)
+        else:
+            ox, oy = nm(ln.value("IJK"[a], Fraction(0))), nm(ln.value("IJK"[b], Fraction(0)))
+        radius = math.hypot(ox, oy)
+        if not radius or abs(math.hypot(dx - ox, dy - oy) - radius) > ARC_SLACK_NM:
+            raise Refused("arc radius zero, or the end off the circle")
+        start_angle = math.atan2(-oy, -ox)
+        sweep = math.atan2(dy - oy, dx - ox) - start_angle
+        full = 2 * math.pi
+        if cw:
+            sweep = -((-sweep) % full or (full if not (dx or dy) else 0)) - turns * full
+        else:
+            sweep = (sweep % full or (full if not (dx or dy) else 0)) + turns * full
+        along = target[c] - start[c]
+        length_mm = math.hypot(radius * sweep, along) / NM_PER_MM
+        s = self.settings
+        n = max(math.ceil(length_mm / s["max_arc_segment_mm"] - ARC_SLACK),
+                math.ceil(abs(sweep) / full * s["min_circle_segments"] - ARC_SLACK), 1)
+        n = max(1, min(n, int(length_mm / s["min_arc_segment_mm"] + ARC_SLACK)))
+        centre = (start[a] + ox, start[b] + oy)
+        points = []
+        for i in range(1, n):
+            point = list(start)
+            angle = start_angle + sweep * i / n
+            point[a] = round(centre[0] + radius * math.cos(angle))
+            point[b] = round(centre[1] + radius * math.sin(angle))
+            point[c] = start[c] + along * i // n
+            points.append(point)
+        points.append(target)
+        if self.soft_limits:
+            for point in points:
+                for i in range(3):
+                    if not -1 <= point[i] + self.offset_nm[i] <= self.travel_nm[i] + 1:
+                        raise Refused("outside the soft limits")
+        self.arcs.append((self.line, [centre[0], centre[1]], radius, (a, b), n, sweep))
+        e_done = 0
+        for i, point in enumerate(points, 1):
+            e = e_nm * i // n - e_done
+            steps = self._steps(point)
+            xyz = steps != self.axis_steps
+            if xyz or e:
+                if e:
+                    self._before_extrude(Fraction(self.pos_nm[2] + point[2], 2 * NM_PER_MM), e)
+                self._queue(steps, xyz, e)
+            e_done += e
+            self.pos_nm = point
+        self.e_nm = target_e
+        self.pos_nm = list(target)
 
     def g10(self, ln):
         if not self.fw_retracted:
@@ -985,6 +1086,10 @@ class Machine:
         cmd = ln.command
         if cmd in ("G0", "G1"):
             self.g1(ln)
+        elif cmd in ("G2", "G3"):
+            self.arc(ln)
+        elif cmd in ("G17", "G18", "G19"):
+            self.plane = int(cmd[1:]) - 17
         elif cmd[:1] == "T":
             self.tool(ln)
         elif cmd in ("G90", "G91"):
@@ -1051,4 +1156,4 @@ def expected(gcode_path, settings):
                 refused.append((number, str(e)))
     steps = m.finish()
     return {"steps": steps, "moves": m.blocks, "moved": m.moved, "unmodelled": unmodelled,
-            "refused": refused}
+            "refused": refused, "arcs": m.arcs}

@@ -1,6 +1,8 @@
-# Motion commands: G0/G1, G4, G28, G90/G91, G92, G20/G21, M82/M83, M400, M17/M18/M84.
+# Motion commands: G0/G1, G2/G3, G4, G17/G18/G19, G28, G90/G91, G92, G20/G21, M82/M83,
+# M400, M17/M18/M84.
 # Handlers parse and check; the planner does the work.
 from array import array
+from math import atan2, pi, sqrt
 from mixfw.gcode import GcodeError, letter_index
 from mixfw.filament import nm_from_mm, scaled_round, spm_digits, steps_per_nm, NM_PER_MM
 from mixfw.ramp import array_offsets
@@ -57,6 +59,125 @@ _FIVE6 = const(15625)
 _RETRACT_FOLLOW_MIX = const(0)
 _RETRACT_EQUAL = const(1)
 _RETRACT_REPLAY = const(2)
+
+
+# G2/G3. An arc's angles are binary: a full turn is 2**30, so they wrap by a mask.
+_ARC_TURN = const(0x40000000)
+# The modes word's bits 3-4: the plane (0: G17 XY, 1: G18 ZX, 2: G19 YZ).
+_MODE_PLANE_SHIFT = const(3)
+# letter_index of I, J, K, P, R
+_I_INDEX = const(8)
+_K_INDEX = const(10)
+_P_INDEX = const(15)
+_R_INDEX = const(17)
+# An R that falls short of half the chord by this much still makes a half circle, and
+# an I J K centre may be this much further from the end than from the start: what a
+# slicer's 3 decimals lose. Beyond it the arc is refused.
+_ARC_SLACK_NM = const(10000)
+# Segments are figured in floats: a segment count within this of a whole number
+# counts as that number, so a quarter circle in 72 a circle is 18 on every port.
+_ARC_SLACK = 0.001
+# The CORDIC gain of _ARC_ITERATIONS turns, times 2**30.
+_ARC_K30 = const(652032874)
+_ARC_ITERATIONS = const(28)
+# atan(2**-i) in binary angle (i = 0..27).
+_ARC_ATAN = array("i", (
+    134217728, 79233351, 41864727, 21251189, 10666833, 5338616, 2669960, 1335061,
+    667541, 333772, 166886, 83443, 41722, 20861, 10430, 5215, 2608, 1304, 652, 326,
+    163, 81, 41, 20, 10, 5, 3, 1))
+# Words of Motion._arc: the segment's end X Y Z (nm), then the start's vector from the
+# centre (pre-scaled by the CORDIC gain, then not), in units of 2**shift nm, the
+# segment count, three counters (angle, the third axis, E: value, quotient, remainder
+# over n, running remainder), the start's two plane coordinates and the third axis's
+# start, and the three axes' indexes (plane first, second, third).
+_ARC_KX = const(3)
+_ARC_X0 = const(5)
+_ARC_SHIFT = const(7)
+_ARC_N = const(8)
+_ARC_ACC = const(9)  # 3 counters of 4 words
+_ARC_P0 = const(21)
+_ARC_AXES = const(24)
+_ARC_WORDS = const(27)
+
+
+@micropython.viper
+def _arc_point(pos_buf) -> int:
+    """The next segment's end of the arc Motion._arc (pos_buf) describes, into its
+    words 0 to 2 (X Y Z nm): the start's vector from the centre turned by the angle so
+    far, added to the start; the third axis and E move on by their share. Every end is
+    worked out anew from the start, not from the end before it, so nothing drifts; the
+    counters are exact integers (angle = total * i // n). The turn is a quarter turn's
+    multiple exactly, then CORDIC in integers within +-45 degrees: no float, so no heap.
+    Returns the segment's E in nm."""
+    arc = ptr32(pos_buf)
+    atan = ptr32(_ARC_ATAN)
+    n = arc[_ARC_N]
+    e_was = 0
+    for j in range(3):
+        k = _ARC_ACC + 4 * j
+        v = arc[k]
+        if v > _MASK30:  # negative: a 64-bit port's ptr32 reads it zero-extended
+            v = 0 - ((0 - v) & _MASK30)
+        q = arc[k + 1]
+        if q > _MASK30:
+            q = 0 - ((0 - q) & _MASK30)
+        if j == 2:
+            e_was = v
+        v += q
+        rem = arc[k + 3] + arc[k + 2]
+        if rem >= n:
+            rem -= n
+            v += 1
+        if j == 0:
+            v &= _ARC_TURN - 1
+        arc[k] = v
+        arc[k + 3] = rem
+    angle = arc[_ARC_ACC]
+    quarters = (angle + (_ARC_TURN >> 3)) >> 28
+    a = angle - (quarters << 28)  # within +-1/8 turn
+    x = arc[_ARC_KX]
+    y = arc[_ARC_KX + 1]
+    if x > _MASK30:
+        x = 0 - ((0 - x) & _MASK30)
+    if y > _MASK30:
+        y = 0 - ((0 - y) & _MASK30)
+    quarters &= 3
+    if quarters == 1:
+        t = x
+        x = 0 - y
+        y = t
+    elif quarters == 2:
+        x = 0 - x
+        y = 0 - y
+    elif quarters == 3:
+        t = x
+        x = y
+        y = 0 - t
+    for i in range(_ARC_ITERATIONS):
+        dx = x >> i
+        dy = y >> i
+        if a >= 0:
+            x -= dy
+            y += dx
+            a -= atan[i]
+        else:
+            x += dy
+            y -= dx
+            a += atan[i]
+    shift = arc[_ARC_SHIFT]
+    x0 = arc[_ARC_X0]
+    y0 = arc[_ARC_X0 + 1]
+    if x0 > _MASK30:
+        x0 = 0 - ((0 - x0) & _MASK30)
+    if y0 > _MASK30:
+        y0 = 0 - ((0 - y0) & _MASK30)
+    arc[arc[_ARC_AXES]] = arc[_ARC_P0] + ((x - x0) << shift)
+    arc[arc[_ARC_AXES + 1]] = arc[_ARC_P0 + 1] + ((y - y0) << shift)
+    arc[arc[_ARC_AXES + 2]] = arc[_ARC_P0 + 2] + arc[_ARC_ACC + 4]
+    e = arc[_ARC_ACC + 8]
+    if e > _MASK30:
+        e = 0 - ((0 - e) & _MASK30)
+    return e - e_was
 
 
 @micropython.viper
@@ -253,6 +374,9 @@ class Motion:
         self.retracted_nm = 0  # retraction not yet undone (equal and replay policies)
         self.fw_retracted = False
         self._retraction_settings(settings)
+        # G2/G3: the arc worked out per line (words _ARC_*), and its segments' limits.
+        self._arc = array("i", bytes(4 * _ARC_WORDS))
+        self._arc_settings(settings)
         # Called before a move that extrudes; each raises GcodeError to refuse it
         # (cold extrusion, ...). Once they have all passed, they are called again only
         # after recheck_guards(), which their owners call where a verdict may change (a
@@ -280,11 +404,17 @@ class Motion:
         on = settings.get("soft_limits", True)
         modes = self._xyz_spm[_SPM_MODES]
         if bool(on) != bool(modes & _MODE_SOFT_OPTION):
-            self._xyz_spm[_SPM_MODES] = modes & _MODE_RELATIVE | (
+            self._xyz_spm[_SPM_MODES] = modes & (_MODE_RELATIVE | 3 << _MODE_PLANE_SHIFT) | (
                 _MODE_SOFT | _MODE_SOFT_OPTION if on else 0)
         self.max_extrude_mm = settings.get("max_extrude_mm", 200.0)
         self._max_extrude_nm = nm_from_mm(self.max_extrude_mm)
         self._retraction_settings(settings)
+        self._arc_settings(settings)
+
+    def _arc_settings(self, settings):
+        self._arc_mm = (settings.get("min_arc_segment_mm", 0.1),
+                        settings.get("max_arc_segment_mm", 1.0),
+                        settings.get("min_circle_segments", 72))
 
     def _set_steps_per_mm(self, steps_per_mm):
         self._xyz_per_nm = [steps_per_nm(s) for s in steps_per_mm[:3]]
@@ -404,6 +534,203 @@ class Motion:
         self.pos_nm = target
         self._spare_nm = pos
         return None
+
+    # G2/G3 X Y Z E F I J K R P: an arc clockwise (G2) or counter-clockwise (G3), seen
+    # from the plane's third axis, in the plane G17/G18/G19 chose, to the end X Y Z E
+    # (read as G1's). The centre is I J K, its offset from the start in the plane's two
+    # letters (G17: I J; G18: K I; G19: J K), or R the radius (negative: the longer
+    # way round). The third axis (a helix) and E move in proportion along the arc; P
+    # adds whole turns. Each segment goes the way of a G1 line.
+    # Example: G2 X20 Y10 I5 J0 E0.8 F1800
+    # Native code, as g1.
+    @micropython.native
+    def g2(self, line):
+        present = line.present
+        if (present >> _F_INDEX) & 1:
+            f = line.float_at(_F_INDEX, -1.0)
+            if f <= 0:
+                raise GcodeError("feed rate F must be > 0, got %s" % f)
+            self.feed_mm_s = f / 60.0
+        spm = self._xyz_spm
+        plane = (spm[_SPM_MODES] >> _MODE_PLANE_SHIFT) & 3
+        a = (0, 2, 1)[plane]  # the plane's first axis, its second, and the third
+        b = (1, 0, 2)[plane]
+        c = (2, 1, 0)[plane]
+        if (present >> (_I_INDEX + c)) & 1:
+            raise GcodeError("G%d in the %s%s plane takes %s%s or R, not %s"
+                             % (line.number, _AXIS_LETTERS[a], _AXIS_LETTERS[b],
+                                "IJK"[a], "IJK"[b], "IJK"[c]))
+        centred = present & (1 << (_I_INDEX + a) | 1 << (_I_INDEX + b))
+        if (present >> _R_INDEX) & 1:
+            if centred:
+                raise GcodeError("an arc takes R or a centre (I J K), not both")
+        elif not centred:
+            raise GcodeError("an arc needs its centre (I J K) or radius (R)")
+        turns = line.int("P", 0)
+        if not 0 <= turns <= 1000:
+            raise GcodeError("P (extra turns) must be 0..1000, got %d" % turns)
+        # The end, as G1 reads it: pos_nm stays as it was when the line is refused.
+        pos = self.pos_nm
+        target = self._spare_nm
+        valued = line.valued
+        if present & ~valued & _XYZ_BITS:
+            for k in _AXIS_INDEX:
+                line.fixed_at(k, _NM_DECIMALS)  # raises for the word with no number
+        if line is not self.line:
+            self.line = line
+            array_offsets(spm, _SPM_MANT, (line.mant, line.decimals))
+        moved = xyz_targets(spm, valued & MOVE_BITS, pos, target, None)
+        steps = self._steps_out
+        if moved < 0:
+            self._refuse_target(target, moved)
+        e_was = self.e_nm
+        target_e_nm = e_was
+        if (present >> _E_INDEX) & 1:
+            if moved & _E_READ:
+                v = steps[4]
+            else:
+                v = line.fixed_at(_E_INDEX, _NM_DECIMALS)
+            target_e_nm = v if self.absolute_e else target_e_nm + v
+        e_nm = target_e_nm - e_was
+        if e_nm > self._max_extrude_nm or e_nm < -self._max_extrude_nm:
+            raise GcodeError("extrusion of %.1f mm in one move is over max_extrude_mm %g"
+                             % (abs(e_nm) / NM_PER_MM, self.max_extrude_mm))
+        along = target[c] - pos[c]
+        if along > _MASK30 or along < -_MASK30:
+            self._refuse_target(target, -_BEYOND - c)
+        # The end from the start in the plane, and the centre's offset from the start.
+        dx = target[a] - pos[a]
+        dy = target[b] - pos[b]
+        cw = line.number == 2
+        if (present >> _R_INDEX) & 1:
+            r = line.float_at(_R_INDEX)
+            r_nm = abs(r) * NM_PER_MM
+            chord = sqrt(float(dx) * dx + float(dy) * dy)
+            if not chord:
+                raise GcodeError("an arc by R needs an end apart from its start; a full "
+                                 "circle takes I J K")
+            h = r_nm * r_nm - chord * chord / 4
+            if r_nm < chord / 2 - _ARC_SLACK_NM:
+                raise GcodeError("R%g cannot reach an end %.3f mm away"
+                                 % (r, chord / NM_PER_MM))
+            # Toward the centre from the chord's middle: left of the chord counter-
+            # clockwise, right clockwise; a negative R swaps them (the longer way).
+            h = (sqrt(h) if h > 0 else 0.0) / chord
+            if cw != (r < 0):
+                h = -h
+            ox = dx / 2 - h * dy
+            oy = dy / 2 + h * dx
+            ox = int(ox + 0.5) if ox >= 0 else -int(0.5 - ox)
+            oy = int(oy + 0.5) if oy >= 0 else -int(0.5 - oy)
+        else:
+            ox = line.fixed_at(_I_INDEX + a, _NM_DECIMALS, 0)
+            oy = line.fixed_at(_I_INDEX + b, _NM_DECIMALS, 0)
+        if not (ox or oy):
+            raise GcodeError("arc radius is zero")
+        r_nm = sqrt(float(ox) * ox + float(oy) * oy)
+        r_end = sqrt(float(dx - ox) * (dx - ox) + float(dy - oy) * (dy - oy))
+        if abs(r_end - r_nm) > _ARC_SLACK_NM:
+            raise GcodeError("the arc's end is %.3f mm from its centre, its start %.3f mm"
+                             % (r_end / NM_PER_MM, r_nm / NM_PER_MM))
+        # The turn from start to end, in binary angle, the arc's way round; an end at
+        # the start is a full turn.
+        angle = int((atan2(dy - oy, dx - ox) - atan2(-oy, -ox)) / (2 * pi) * _ARC_TURN)
+        if cw:
+            angle = -(-angle % _ARC_TURN or (_ARC_TURN if not (dx or dy) else 0)) \
+                - turns * _ARC_TURN
+        else:
+            angle = (angle % _ARC_TURN or (_ARC_TURN if not (dx or dy) else 0)) \
+                + turns * _ARC_TURN
+        # Segments: at most max_arc_segment_mm and at least min_circle_segments a turn,
+        # but none under min_arc_segment_mm; at least one.
+        least_mm, most_mm, per_turn = self._arc_mm
+        turned = abs(angle) / _ARC_TURN
+        length_mm = sqrt((2 * pi * r_nm * turned) ** 2 + float(along) * along) / NM_PER_MM
+        x = length_mm / most_mm - _ARC_SLACK
+        n = int(x) + (x > int(x))
+        x = turned * per_turn - _ARC_SLACK
+        n = max(n, int(x) + (x > int(x)), 1)
+        n = max(1, min(n, int(length_mm / least_mm + _ARC_SLACK)))
+        arc = self._arc
+        if n > 1:
+            # The start's vector from the centre, in units of 2**shift nm below 2**29,
+            # so that CORDIC's sums stay within the chips' words.
+            shift = 0
+            while r_nm >= 0x20000000:
+                r_nm /= 2
+                shift += 1
+            x = -ox >> shift
+            y = -oy >> shift
+            arc[_ARC_KX] = (x * _ARC_K30 + 0x20000000) >> 30
+            arc[_ARC_KX + 1] = (y * _ARC_K30 + 0x20000000) >> 30
+            arc[_ARC_X0] = x
+            arc[_ARC_X0 + 1] = y
+            arc[_ARC_SHIFT] = shift
+            arc[_ARC_N] = n
+            k = _ARC_ACC
+            for total in (angle, along, e_nm):
+                arc[k + 1] = total // n
+                arc[k + 2] = total % n
+                k += 4
+            k = _ARC_P0
+            for i in (a, b, c):
+                arc[k] = pos[i]
+                arc[k + 3] = i
+                k += 1
+            # Every segment's end is checked (soft limits, range) before one is queued:
+            # xyz_targets checks the soft limits of the axes a line names, so here
+            # they are checked for all three.
+            soft = spm[_SPM_MODES] & _MODE_SOFT
+            off = self.offset_nm
+            travel = self._travel_nm
+            for k in range(2):
+                for i in range(_ARC_ACC, _ARC_ACC + 12, 4):
+                    arc[i] = 0
+                    arc[i + 3] = 0
+                if k:
+                    break
+                for i in range(n - 1):
+                    _arc_point(arc)
+                    v = xyz_targets(spm, 0, arc, arc, None)
+                    if v < 0:
+                        self._refuse_target(arc, v)
+                    if soft:
+                        for j in range(3):
+                            v = arc[j] + off[j]
+                            if v < -1 or v > travel[j] + 1:
+                                self._refuse_target(arc, -_OUTSIDE - j)
+        if e_nm and not self._guards_passed:
+            for guard in self.extrusion_guards:
+                guard()
+            self._guards_passed = True
+        z_nm = pos[2]
+        e_sum = 0
+        end = arc
+        for i in range(n):
+            if i < n - 1:
+                e = _arc_point(arc)
+            else:
+                end = target  # the last segment ends exactly at the end
+                e = e_nm - e_sum
+            moved = xyz_targets(spm, 0, end, end, self.queue.position_steps)
+            xyz = (moved >> 4) & 7
+            if xyz or e:
+                if e:
+                    for fn in self.before_extrude:
+                        fn(z_nm + end[2], e)
+                _queue(self, steps, xyz, e, self.feed_mm_s)
+            e_sum += e
+            z_nm = end[2]
+        self.e_nm = target_e_nm
+        self.pos_nm = target
+        self._spare_nm = pos
+        return None
+
+    # G17 / G18 / G19: the plane of G2/G3 arcs: XY, ZX or YZ.
+    def g17(self, line):
+        spm = self._xyz_spm
+        spm[_SPM_MODES] = spm[_SPM_MODES] & ~(3 << _MODE_PLANE_SHIFT) | \
+            (line.number - 17) << _MODE_PLANE_SHIFT
 
     def recheck_guards(self):
         """The next extruding move calls the extrusion guards again."""
@@ -624,6 +951,11 @@ def register(printer, motion):
     for letter, number, fn, guarded in (
         ("G", 0, m.g1, True),  # rapid move (same as G1)
         ("G", 1, m.g1, True),  # straight move X Y Z E F
+        ("G", 2, m.g2, True),  # clockwise arc X Y Z E F I J K R P
+        ("G", 3, m.g2, True),  # counter-clockwise arc
+        ("G", 17, m.g17, False),  # arcs in the XY plane
+        ("G", 18, m.g17, False),  # arcs in the ZX plane
+        ("G", 19, m.g17, False),  # arcs in the YZ plane
         ("G", 4, m.g4, True),  # dwell P<ms> or S<s>
         ("G", 28, m.g28, True),  # home axes to min endstops
         ("G", 90, m.g90, False),  # absolute coordinates

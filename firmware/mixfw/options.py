@@ -38,6 +38,11 @@ FIRMWARE_DEFAULTS = {
     "watchdog_ms": 4000,
     # The step loop counts as stopped after this long without a tick.
     "step_stall_ms": 250,
+    # G2/G3 segments: Marlin's MIN_ARC_SEGMENT_MM, MAX_ARC_SEGMENT_MM and
+    # MIN_CIRCLE_SEGMENTS.
+    "min_arc_segment_mm": 0.1,
+    "max_arc_segment_mm": 1.0,
+    "min_circle_segments": 72,
     # Marlin's SLOWDOWN and its DEFAULT_MINSEGMENTTIME (M205 B).
     "min_segment_time_us": 20000,
 }
@@ -74,6 +79,12 @@ SCHEMA = (
      "refuse moves outside 0..travel"),
     ("max_extrude_mm",             "",     "float", 0.1,     100000,      False,
      "longest E move accepted in one line"),
+    ("min_arc_segment_mm",         "",     "float", 0.001,   100,         False,
+     "G2/G3: shortest arc segment"),
+    ("max_arc_segment_mm",         "",     "float", 0.001,   100,         False,
+     "G2/G3: longest arc segment"),
+    ("min_circle_segments",        "",     "int",   8,       3600,        False,
+     "G2/G3: fewest segments a full turn"),
     ("homing_feed_mm_s",           "xyz",  "float", 0.01,    1000,        False,
      "homing speed"),
     ("drives",                     "",     "int",   1,       6,           True,
