@@ -69,12 +69,11 @@ SETTINGS = dict(
     step_backend="pio_dma",
     pin_writer="registers",  # SIO set/clear registers: one write per tick
     drives=6,
-    # The look-ahead plans every move to stop by the end of its queue: 16 blocks of a
-    # slicer's 0.2 mm curve segments hold 3.2 mm, from which 1,500 mm/s**2 stops about
-    # 95 mm/s, whatever the file asks. 24 blocks (1.1 kB more) let the circles print
-    # from flash run 20 % faster on the emulated chip (a line's look-ahead costs about
-    # 4 % more there).
-    queue_blocks=24,
+    # The look-ahead plans every move to stop by the end of its queue: 48 blocks of a
+    # slicer's 0.2 mm curve segments hold 9.6 mm, from which 1,500 mm/s**2 stops from
+    # about 170 mm/s, so curves print at the 150 mm/s a fast file asks (16 blocks
+    # would hold them near 95 mm/s). A block costs 144 bytes of heap.
+    queue_blocks=48,
     enable_active_low=True,  # A4988/DRV8825/TMC2209 all enable on a low EN
     steps_per_mm=(80.0, 80.0, 400.0, 415.0),
     console_uart=-1,  # no pins left for a UART console; USB serial only
