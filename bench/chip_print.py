@@ -170,17 +170,18 @@ def asked_speed_mm_s(path):
     return feeds.pop()
 
 
-def speed_ratio(path=CIRCLES, board=BOARD, work=None):
+def speed_ratio(path=CIRCLES, board=BOARD, work=None, settings=None):
     """The time the file's extrusion takes as a planner whose queue never holds it back
     would plan it (each run of extrusion from rest to rest at the file's feed rate and
     the board's acceleration) over its time in mixstep sim."""
-    work = Path(work or tempfile.mkdtemp())
-    edges = work / "speed.edges"
-    sim_seconds(path, board, edges_path=edges)
+    with tempfile.TemporaryDirectory(dir=work) as tmp:
+        edges = Path(tmp) / "speed.edges"
+        sim_seconds(path, board, settings, edges_path=edges)
+        runs = extrusion_runs(edges, board)
     v = asked_speed_mm_s(path)
     a = paths.load_board(board)["SETTINGS"]["acceleration_mm_s2"]
     ideal = real = 0.0
-    for seconds, mm in extrusion_runs(edges, board):
+    for seconds, mm in runs:
         # A trapezoid from rest to rest, or a triangle where the run is too short.
         ideal += mm / v + v / a if mm >= v * v / a else 2 * (mm / a) ** 0.5
         real += seconds

@@ -185,7 +185,7 @@ NOTES = {
         "M400, over its time in `mixstep sim --board %s` (where planning costs no "
         "simulated time): the worse of testdata/circles_tube_emu_excerpt.gcode "
         "(PrusaSlicer, 0.2 mm segments at 150 mm/s) and testdata/vase_3mix_emu_excerpt."
-        "gcode (PrusaSlicer spiral vase, 0.17-0.3 mm segments at 120 mm/s, three drives "
+        "gcode (PrusaSlicer spiral vase, 0.15-0.32 mm segments at 120 mm/s, three drives "
         "mixed), each on a chip of its own (chip_print_files has both). _usb: streamed "
         "as OctoPrint streams a file, comments and blank lines left out, every line "
         "numbered with its checksum after M110 N0, one line per ok, by a host that "

@@ -1,5 +1,5 @@
 ; An excerpt of PrusaSlicer output for the chip bench (bench/chip_print.py): lines
-; 1-5000 (the first 15 layers of a spiral vase of 0.15-0.3 mm segments at 120 mm/s,
+; 1-5000 (the first 15 layers of a spiral vase of 0.15-0.32 mm segments at 120 mm/s,
 ; three drives mixed 5:3:2) of vase_3mix.scad sliced with vase_3mix_prusaslicer.ini,
 ; see vase_3mix_prusaslicer.txt. M104/M109 are left out and cold extrusion is
 ; allowed (M302 P1).
