@@ -88,6 +88,8 @@ HEAP_PRINT_S = 3.0
 # (a --set tick_us overrides it). The CPU share a step path leaves at 20,000 steps/s
 # is the same at both ticks (chip_cpu_left_while_stepping, docs/Benchmarks.md).
 PLANNER_TICK_US = 50
+# And with queues of this many blocks: two of the board's own (48) do not fit either.
+PLANNER_QUEUE_BLOCKS = 24
 # The stepping planner row is the median over these heap layouts: a spacer of so many
 # bytes allocated first moves both printers' objects. The same firmware's row moved by
 # up to 7 % between layouts, in the planner's native code and bytecode (bench/
@@ -121,9 +123,11 @@ NOTES = {
         "chip_planner_circles_lines_per_s_no_stepping: the same lines of the circles "
         "print (testdata/circles_tube_emu_excerpt.gcode, 0.2 mm segments at 150 mm/s) "
         "with no step path running: there the look-ahead rewrites about 13 records a "
-        "line, as the 16-block queue is too short to reach the segments' speed. "
-        "Both printers at %d us ticks: two pio_dma rings for shorter ticks do not fit "
-        "in the heap beside each other. " % ((BOARD,) + PLAN_LINES + (PLANNER_TICK_US,))),
+        "line, as its 24-block queue is too short to reach the segments' speed. "
+        "Both printers at %d us ticks and the planned one with a queue of %d blocks: "
+        "two pio_dma rings for shorter ticks, or the board's own queue, do not fit in "
+        "the heap beside the stepping printer. "
+        % ((BOARD,) + PLAN_LINES + (PLANNER_TICK_US, PLANNER_QUEUE_BLOCKS))),
     "chip_cpu_left_while_ramping": (
         "Share of the emulated CPU time in thread mode, as chip_cpu_left_while_stepping, "
         "while the same six-drive mixed move accelerates towards its 20,000 steps/s over "
@@ -306,7 +310,8 @@ def _planner_chip(work, requests, gcode=None, profile=None):
     files["names.txt"] = _names(work, [p for p in files.values() if p.suffix == ".mpy"
                                        and p.stem != "chip_profile"])
     got = []
-    settings = dict({"tick_us": PLANNER_TICK_US}, **OVERRIDES)
+    settings = dict({"tick_us": PLANNER_TICK_US, "queue_blocks": PLANNER_QUEUE_BLOCKS},
+                    **OVERRIDES)
     with emu.Chip(BOARD, settings=settings, files=files, max_emu_s=120,
                   max_wall_s=900) as chip:
         for i, request in enumerate(requests):
