@@ -28,12 +28,13 @@ import machine
 import micropython
 from array import array
 
-SKIPPED = (b"M109", b"M190", b"M116")
+# Constants and locals rather than globals where they can be: each global is a name,
+# and the names this and the firmware's modules make fill the rp2 port's name pools
+# to within a few of the next pool's 7.7 kB (see intern_names).
 # WATCHDOG SCRATCH0, free for programs: 1 while the lines are planned, for the
 # emulator's program counter profile (bench/chip_pcprofile.py, emu/harness.mjs).
-PROFILED = 0x4005800C
-PLAN_FILE = "plan.gcode"
-LINE_MAX = 256
+_PROFILED = const(0x4005800C)
+_LINE_MAX = const(256)
 
 
 @micropython.viper
@@ -67,14 +68,14 @@ class Lines:
             while stop > at and blob[stop - 1] in (10, 13):
                 stop -= 1
             head = bytes(blob[at:at + 4])
-            if head not in SKIPPED:
+            if head not in (b"M109", b"M190", b"M116"):
                 bounds.append(at)
                 bounds.append(stop)
                 self.moves += head[:3] in (b"G1 ", b"G0 ")
             at = end + 1
         self.bounds = bounds
         self.count = len(bounds) // 2
-        self.buf = bytearray(LINE_MAX)
+        self.buf = bytearray(_LINE_MAX)
 
     def line(self, i):
         """Line i in the buffer; returns its length."""
@@ -103,12 +104,12 @@ def intern_names(path):
     and the reserves, would not find. getattr interns the name it is given."""
     with open(path) as f:
         for line in f:
-            getattr(None, line[:-1], None)
+            getattr(None, line[:-1].replace("\\n", "\n"), None)
     gc.collect()
 
 
 intern_names("names.txt")
-LINES = {PLAN_FILE: Lines(PLAN_FILE)}
+LINES = {"plan.gcode": Lines("plan.gcode")}
 # The firmware reserves the heap its printer's arrays take while its modules load
 # (mixfw/heap.py), and the stepping printer, built second, gets a reserve too. Each
 # printer is built once and kept: a request's garbage would split a later one's heap.
@@ -122,12 +123,6 @@ from mixfw.config import Config  # noqa: E402
 from mixfw import stepper as st  # noqa: E402
 from plan_only import make_room, retire_one  # noqa: E402
 
-# The step path's move while planning: X 100 mm/s, Y 75 mm/s and E 14.46 mm/s of
-# filament mixed over all six drives, i.e. 8,000 + 6,000 + 6,000 steps/s at the
-# pico_6drives steps/mm (80, 80, 415), for 8 s: longer than any planning run here.
-STEP_SETUP = (b"M302 P1", b"M211 S0", b"G91", b"M83",
-              b"M567 P6 E0.1:0.15:0.2:0.25:0.12:0.18", b"T6")
-STEP_MOVE = b"G1 X800 Y600 E115.66 F7500"
 
 
 def stepping_printer():
@@ -146,7 +141,13 @@ def stepping_printer():
         config = Config(dict(board.SETTINGS, trace_records=0, queue_blocks=4), None)
         heap.release()
         printer = assemble.build(config, files_root=None)
-        for line in STEP_SETUP + (STEP_MOVE,):
+        # The step path's move while planning: X 100 mm/s, Y 75 mm/s and E 14.46 mm/s
+        # of filament mixed over all six drives, i.e. 8,000 + 6,000 + 6,000 steps/s at
+        # the pico_6drives steps/mm (80, 80, 415), for 8 s: longer than any planning
+        # run here.
+        for line in (b"M302 P1", b"M211 S0", b"G91", b"M83",
+                     b"M567 P6 E0.1:0.15:0.2:0.25:0.12:0.18", b"T6",
+                     b"G1 X800 Y600 E115.66 F7500"):
             printer.run_line(printer.parser.parse(line, len(line)))
         PRINTERS["stepper"] = printer
     return PRINTERS["stepper"]
@@ -154,7 +155,7 @@ def stepping_printer():
 
 def planned_printer():
     """The printer whose planning is measured, its queue retired by hand."""
-    if not PRINTERS.get("planned"):
+    if not PRINTERS.get("plan"):
         gc.collect()
         # No trace records (3 kB at the firmware's 256): its step loop never runs, and
         # the heap holds two printers beside the lines.
@@ -164,17 +165,12 @@ def planned_printer():
         # The excerpts are relative E (their file's M83 comes before them).
         for line in (b"M302 P1", b"M83"):
             printer.run_line(printer.parser.parse(line, len(line)))
-        PRINTERS["planned"] = printer
-    return PRINTERS["planned"]
+        PRINTERS["plan"] = printer
+    return PRINTERS["plan"]
 
 
 PRINTERS = {}
 SPACER = []
-
-
-def stepper_steps(printer):
-    m = printer.mem
-    return m[st.S_POS + st.X] + m[st.S_POS + st.Y] + abs(m[st.S_POS + st.E])
 
 
 def plan(path, stepping, profile=0):
@@ -201,7 +197,8 @@ def plan(path, stepping, profile=0):
     if stepper:
         timer = safety.start_timer(machine, stepper, stepper.settings["tick_us"])
         time.sleep_ms(300)  # past the move's acceleration, into its cruise
-        steps0 = stepper_steps(stepper)
+        m = stepper.mem
+        steps0 = m[st.S_POS + st.X] + m[st.S_POS + st.Y] + abs(m[st.S_POS + st.E])
     # As main.py on a board: once the printers are built, the code that built them
     # goes (a session's one plan request builds them; a later one builds none).
     global assemble
@@ -219,7 +216,7 @@ def plan(path, stepping, profile=0):
     errors = []
     mem = printer.mem
     full = planner.queue - 1
-    machine.mem32[PROFILED] = 1  # the program counter's profile, if one is taken
+    machine.mem32[_PROFILED] = 1  # the program counter's profile, if one is taken
     t0 = time.ticks_us()
     buf = data.buf
     line = data.line
@@ -234,7 +231,7 @@ def plan(path, stepping, profile=0):
         make_room(mem, full)
     planner.synchronize()
     us = time.ticks_diff(time.ticks_us(), t0)
-    machine.mem32[PROFILED] = 0
+    machine.mem32[_PROFILED] = 0
     if profile == 1:
         # What a line allocates (the collector held off for a few lines), and what one
         # collection costs with the printer built.
@@ -249,7 +246,9 @@ def plan(path, stepping, profile=0):
            "move_lines_per_s": moves * 1e6 / us, "errors": errors,
            "mem_free_before": free, "mem_free_after": gc.mem_free()}
     if stepper:
-        out["stepper_steps_per_s"] = (stepper_steps(stepper) - steps0) * 1e6 / us
+        m = stepper.mem
+        steps1 = m[st.S_POS + st.X] + m[st.S_POS + st.Y] + abs(m[st.S_POS + st.E])
+        out["stepper_steps_per_s"] = (steps1 - steps0) * 1e6 / us
         out["stepper_still_moving"] = bool(stepper.planner.busy())
         timer.deinit()
     if profile == 2:

@@ -287,7 +287,10 @@ def _names(work, harness):
     deploy.compile_mixfw(work / "chip_names", deploy.MARCH["rp2040"])
     names = set()
     for mpy in [work / "chip_names" / "mixfw" / (m[6:] + ".mpy") for m in listed] + harness:
-        names.update(n for n in deploy.mpy_qstrs(mpy) if "\n" not in n)
+        # A newline in a name (string constants are names too) is written as \n,
+        # and a name with a backslash of its own is left out.
+        names.update(n.replace("\n", "\\n") for n in deploy.mpy_qstrs(mpy)
+                     if "\\" not in n)
     out = work / "chip_names" / "names.txt"
     out.write_text("".join(n + "\n" for n in sorted(names)))
     return out

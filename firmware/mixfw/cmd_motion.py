@@ -542,8 +542,8 @@ class Motion:
     # way round). The third axis (a helix) and E move in proportion along the arc; P
     # adds whole turns. Each segment goes the way of a G1 line.
     # Example: G2 X20 Y10 I5 J0 E0.8 F1800
-    # Native code, as g1.
-    @micropython.native
+    # Bytecode, unlike g1: native code would take the chips' heap about 7 kB more, and
+    # an arc's segments are long enough (a few ms each) for its loop's cost.
     def g2(self, line):
         present = line.present
         if (present >> _F_INDEX) & 1:

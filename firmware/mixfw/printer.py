@@ -10,6 +10,7 @@
 # its channel: the host's transport holds the rest, and no `ok` goes out until there
 # is room, so nothing is ever dropped.
 import time
+from array import array
 from mixfw.gcode import Parser, GcodeError, WordsError, command_key
 from mixfw.intake import Intake, LINE_OK, LINE_CUT
 
@@ -45,105 +46,111 @@ class Resend(Exception):
     """A transmission error: the host must send the line again."""
 
 
-def _skip_blanks(buf, i, n):
-    while i < n and buf[i] in (32, 9):
-        i += 1
-    return i
-
-
-def _after_line_number(buf, i, n):
-    """Index after an optional leading N<number> (and blanks)."""
-    i = _skip_blanks(buf, i, n)
-    if i < n and buf[i] in (78, 110):
-        i = _skip_blanks(buf, i + 1, n)
-        if i < n and buf[i] == 45:
-            i += 1
-        while i < n and 48 <= buf[i] <= 57:
-            i += 1
-    return _skip_blanks(buf, i, n)
-
-
-def _numbered(buf, n):
-    """Does the line start with an N word (after blanks)?"""
-    i = _skip_blanks(buf, 0, n)
-    return i < n and buf[i] in (78, 110)
-
-
-def _m110(buf, n):
-    """Is the line's command (after an optional N word) M110?"""
-    return _is_command(buf, _after_line_number(buf, 0, n), n, 110)
-
-
-def _is_command(buf, i, n, number):
-    """Is there an M<number> word at i (blanks allowed after M, as the parser does)?"""
-    if i >= n or buf[i] not in (77, 109):
-        return False
-    i = _skip_blanks(buf, i + 1, n)
-    digits = b"%d" % number
-    end = i + len(digits)
-    return buf[i:end] == digits and (end >= n or not 48 <= buf[end] <= 57)
+# Words of _frame's answer.
+_STAR = const(0)  # where the line's * is, or -1
+_SUM_OK = const(1)  # 1: the number after * is the XOR of the bytes before it
+_N_VALUE = const(2)  # the N word's number
+_N_WORD = const(3)  # 0: no N word; 1: N and a number; 2: N and no number
+_M_NUMBER = const(4)  # the M command's number after the N word, or -1
+_FRAME_WORDS = const(5)
 
 
 @micropython.viper
-def _checksum(buf: ptr8, n: int) -> int:
-    """The XOR of buf[:n]: the checksum a host appends after `*`. Hosts printing a file
-    number and check every line, and a loop in bytecode costs 10 us a byte on an RP2040."""
+def _frame(buf: ptr8, n: int, out: ptr32) -> int:
+    """A line's N word, its command's M number and its checksum, read in one pass: a
+    host printing a file numbers and checks every line, and each helper called from
+    bytecode, or a loop there, costs the chip tens of us. Returns where the command
+    starts. Numbers of more than nine digits are not read as numbers."""
+    i = 0
+    while i < n and (buf[i] == 32 or buf[i] == 9):
+        i += 1
+    out[_N_WORD] = 0
+    out[_N_VALUE] = 0
+    if i < n and (buf[i] == 78 or buf[i] == 110):
+        i += 1
+        while i < n and (buf[i] == 32 or buf[i] == 9):
+            i += 1
+        sign = 1
+        if i < n and buf[i] == 45:
+            sign = -1
+            i += 1
+        value = 0
+        digits = 0
+        while i < n and buf[i] >= 48 and buf[i] <= 57:
+            value = value * 10 + buf[i] - 48
+            digits += 1
+            i += 1
+        if digits > 0 and digits < 10:
+            out[_N_WORD] = 1
+            out[_N_VALUE] = sign * value
+        else:
+            out[_N_WORD] = 2
+        while i < n and (buf[i] == 32 or buf[i] == 9):
+            i += 1
+    start = i
+    number = -1
+    if i < n and (buf[i] == 77 or buf[i] == 109):
+        i += 1
+        while i < n and (buf[i] == 32 or buf[i] == 9):
+            i += 1
+        digits = 0
+        value = 0
+        while i < n and buf[i] >= 48 and buf[i] <= 57 and digits < 9:
+            value = value * 10 + buf[i] - 48
+            digits += 1
+            i += 1
+        if digits and not (i < n and buf[i] >= 48 and buf[i] <= 57):
+            number = value
+    out[_M_NUMBER] = number
+    # The checksum: the XOR of every byte before the first *, and the number after it
+    # (blanks and a CR around it allowed).
     cs = 0
+    star = -1
     i = 0
     while i < n:
-        cs ^= buf[i]
+        c = buf[i]
+        if c == 42:
+            star = i
+            break
+        cs ^= c
         i += 1
-    return cs
+    out[_STAR] = star
+    out[_SUM_OK] = 0
+    if star >= 0:
+        i = star + 1
+        while i < n and (buf[i] == 32 or buf[i] == 9):
+            i += 1
+        end = n
+        while end > i and (buf[end - 1] == 32 or buf[end - 1] == 9 or buf[end - 1] == 13):
+            end -= 1
+        value = 0
+        ok = 0
+        if end > i:
+            ok = 1
+        while i < end:
+            c = buf[i] - 48
+            if c < 0 or c > 9 or value > 255:
+                ok = 0
+                break
+            value = value * 10 + c
+            i += 1
+        if ok and value == cs:
+            out[_SUM_OK] = 1
+    return start
 
 
-def _number(buf, i, n):
-    """The unsigned number buf[i:n] is, blanks around it allowed, or -1. Read in place:
-    a bytes object a line would be garbage on the chips."""
-    i = _skip_blanks(buf, i, n)
-    while n > i and buf[n - 1] in (32, 9, 13):
-        n -= 1
-    if i >= n:
-        return -1
-    value = 0
-    while i < n:
-        c = buf[i] - 48
-        if not 0 <= c <= 9:
-            return -1
-        value = value * 10 + c
-        i += 1
-    return value
-
-
-def _line_number(buf, i, n):
-    """The line number after an N at i (blanks, a sign, digits), or None."""
-    i = _skip_blanks(buf, i, n)
-    start = i + 1 if i < n and buf[i] == 45 else i
-    end = start
-    while end < n and 48 <= buf[end] <= 57:
-        end += 1
-    if end == start:
-        return None
-    value = _number(buf, start, end)
-    return -value if start > i else value
+_EMERGENCY = array("i", bytes(4 * _FRAME_WORDS))
 
 
 def _emergency(scan, n):
     """The M number if this line starts (after an optional N<number>) with an emergency
     command, else 0: M112, M108, M410 and M876, acted on as soon as their line arrives,
     before the lines queued ahead of them (when their turn comes they do nothing
-    more). Written out, not a loop over them: a loop's iterator takes this function's
-    frame past what MicroPython keeps off the heap, and this runs for every line."""
-    i = _after_line_number(scan, 0, n)
-    if i >= n or scan[i] not in (77, 109):
-        return 0  # not an M command: most lines, told at the first letter
-    if _is_command(scan, i, n, 112):
-        return 112
-    if _is_command(scan, i, n, 108):
-        return 108
-    if _is_command(scan, i, n, 410):
-        return 410
-    if _is_command(scan, i, n, 876):
-        return 876
+    more)."""
+    _frame(scan, n, _EMERGENCY)
+    number = _EMERGENCY[_M_NUMBER]
+    if number == 112 or number == 108 or number == 410 or number == 876:
+        return number
     return 0
 
 
@@ -196,6 +203,7 @@ class Printer:
     def __init__(self, line_bytes, machine_idle, raw_commands=()):
         self.line_bytes = line_bytes
         self.parser = Parser(raw_commands)
+        self._framing = array("i", bytes(4 * _FRAME_WORDS))
         self.commands = {}
         self.guarded = set()  # commands refused while halted
         self.machine_idle = machine_idle
@@ -402,28 +410,29 @@ class Printer:
     def _check_protocol(self, ch, buf, n):
         """Check a line's number and checksum before anything else looks at it.
         Returns the parsed line, or None for a repeat of a line already executed."""
-        star = buf.find(b"*", 0, n)  # in C, as _checksum is viper
-        if star < 0 and not _numbered(buf, n):
+        f = self._framing
+        _frame(buf, n, f)
+        if f[_STAR] < 0 and not f[_N_WORD]:
             return self.parser.parse(buf, n)
-        return self._check_numbered(ch, buf, n, star)
+        return self._check_numbered(ch, buf, n, f)
 
-    def _check_numbered(self, ch, buf, n, at):
-        """_check_protocol's lines with an N word or a checksum (at: where its * is,
-        or -1), as hosts send every line of a print."""
+    def _check_numbered(self, ch, buf, n, f):
+        """_check_protocol's lines with an N word or a checksum (f: _frame's answer),
+        as hosts send every line of a print."""
+        at = f[_STAR]
         if at >= 0:
-            if _number(buf, at + 1, n) != _checksum(buf, at):
+            if not f[_SUM_OK]:
                 raise Resend("checksum mismatch, Last Line: %d" % ch.last_n)
             n = at  # the words end at the *
-        i = _skip_blanks(buf, 0, n)
-        if not (i < n and buf[i] in (78, 110)):
+        if not f[_N_WORD]:
             raise Resend("No Line Number with checksum, Last Line: %d" % ch.last_n)
-        if _m110(buf, n):  # M110 sets the number: its own N is not checked
+        if f[_M_NUMBER] == 110:  # M110 sets the number: its own N is not checked
             return self.parser.parse(buf, n)
         if at < 0:
             raise Resend("No Checksum with line number, Last Line: %d" % ch.last_n)
-        i = _line_number(buf, i + 1, n)
-        if i is None:
+        if f[_N_WORD] != 1:
             raise Resend("malformed line number, Last Line: %d" % ch.last_n)
+        i = f[_N_VALUE]
         if i <= ch.last_n:
             return None
         if i != ch.last_n + 1:
