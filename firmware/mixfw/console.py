@@ -22,6 +22,7 @@ class StreamConsole:
         self.one_mv = memoryview(self.one)
         self.poller = select.poll()
         self.poller.register(rx, select.POLLIN)
+        self.write = tx.write  # the stream's own: one call less for every reply
 
     @micropython.native
     def readinto(self, mv, block=False):
@@ -62,6 +63,3 @@ class StreamConsole:
                     n += k
                 break
         return n
-
-    def write(self, text):
-        self.tx.write(text)

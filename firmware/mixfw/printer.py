@@ -165,6 +165,8 @@ class Channel:
         self.last_n = 0  # last line number accepted
         self.open = True
         self.lockstep = getattr(console, "blocking", False)
+        # The console's own write, one call less for every `ok`.
+        self.write = console.write
 
     def pump(self, printer, block=False):
         """Move waiting bytes into the ring. Returns the count read."""
@@ -194,9 +196,6 @@ class Channel:
     def next_line(self):
         """Feed ring bytes to the intake until a line ends: its status, or 0."""
         return self.intake.next_line()
-
-    def write(self, text):
-        self.console.write(text)
 
 
 class Printer:
