@@ -27,34 +27,47 @@ _LEN = const(3)  # bytes of the line so far
 _FAULT = const(4)
 _BAD_BYTE = const(5)
 _IN_COMMENT = const(6)
-_WORDS = const(7)
+_SCAN_M = const(7)  # an M among the scanned bytes
+_WORDS = const(8)
+SCANNED = const(0x10000)  # _put's answer: at + scanned bytes * SCANNED
 
 
 @micropython.viper
 def _put(ring_buf, st_buf, src_buf, at: int, end: int, scan_buf) -> int:
     """src[at:end] into the ring, up to and including the first newline; the first
-    SCAN_BYTES of the line also into scan. Returns where it stopped. The caller leaves
-    room for them."""
+    SCAN_BYTES of the line also into scan. Returns where it stopped, plus, where a line
+    ended there and an M (or m) is among its scanned bytes, their count times
+    SCANNED: only such a line can be an emergency command, and most lines are G1, told
+    here without a call. The caller leaves room for the bytes."""
     ring = ptr8(ring_buf)
     st = ptr32(st_buf)
     src = ptr8(src_buf)
     scan = ptr8(scan_buf)
     tail = st[_HEAD] + st[_COUNT]
     scan_n = st[_SCAN_N]
+    m_seen = st[_SCAN_M]
     start = at
+    scanned = 0
     while at < end:
         c = src[at]
         at += 1
         ring[tail & _RX_MASK] = c
         tail += 1
         if c == 10:
+            if m_seen:
+                scanned = scan_n * SCANNED
+            scan_n = 0
+            m_seen = 0
             break
         if scan_n < _SCAN_BYTES:
             scan[scan_n] = c
             scan_n += 1
+            if c == 77 or c == 109:
+                m_seen = 1
     st[_COUNT] = st[_COUNT] + (at - start)
     st[_SCAN_N] = scan_n
-    return at
+    st[_SCAN_M] = m_seen
+    return at + scanned
 
 
 @micropython.viper
@@ -123,8 +136,9 @@ class Intake:
 
     def put(self, src, at, end):
         """src[at:end] into the ring (room() must hold them), up to and including the
-        first newline. Returns where it stopped. If a line ended there, scan[:end_scan()]
-        is its start (end_scan starts the next line's anew)."""
+        first newline. Returns where it stopped (below SCANNED); if a line ended there
+        that may be an emergency command, plus SCANNED times the count of its first
+        bytes in scan."""
         return _put(self.ring, self.st, src, at, end, self.scan)
 
     def fill_from(self, f):
@@ -135,11 +149,6 @@ class Intake:
         st = self.st
         st[_HEAD] = 0
         st[_COUNT] = n
-        return n
-
-    def end_scan(self):
-        n = self.st[_SCAN_N]
-        self.st[_SCAN_N] = 0
         return n
 
     def next_line(self):
@@ -153,6 +162,7 @@ class Intake:
         self.st[_HEAD] = 0
         self.st[_COUNT] = 0
         self.st[_SCAN_N] = 0
+        self.st[_SCAN_M] = 0
 
     def take(self):
         """Forget the line just returned so the next one starts empty."""

@@ -12,7 +12,7 @@
 import time
 from array import array
 from mixfw.gcode import Parser, GcodeError, WordsError, command_key
-from mixfw.intake import Intake, LINE_OK, LINE_CUT
+from mixfw.intake import Intake, LINE_OK, LINE_CUT, SCANNED
 
 _BUSY_EVERY_MS = const(2000)
 _REPORT_EVERY_MS = const(1000)  # temperatures while a heating wait runs, as Marlin
@@ -185,11 +185,13 @@ class Channel:
     def put(self, printer, n):
         """chunk[:n] into the ring; an emergency command acts as its line ends."""
         intake = self.intake
+        chunk = self.chunk
         at = 0
         while at < n:
-            at = intake.put(self.chunk, at, n)
-            if self.chunk[at - 1] == 10:
-                number = _emergency(intake.scan, intake.end_scan())
+            at = intake.put(chunk, at, n)
+            if at >= SCANNED:
+                number = _emergency(intake.scan, at // SCANNED)
+                at %= SCANNED
                 if number:
                     printer.emergency(number)
 
