@@ -207,3 +207,61 @@ def test_trace_check_fails_when_an_arc_went_elsewhere(arcs_trace, tmp_path):
         other.write_text(text.replace(old, new))
         report = tracecheck.check(vcd, other)
         assert not report["ok"], new
+
+
+def test_trace_check_follows_the_path_of_every_arc(arcs_trace):
+    gcode, vcd = arcs_trace
+    report = tracecheck.check(vcd, gcode)
+    path = [c for c in report["checks"] if c["name"] == "arc_path"]
+    assert len(path) == 1 and path[0]["ok"] is True, path
+    assert path[0]["expected"].startswith("13 arcs")
+
+
+def _printed(tmp_path, name, lines):
+    gcode = tmp_path / (name + ".gcode")
+    gcode.write_text("\n".join(["M302 P1", "G90", "M83", "G1 Z0.2 F600", "G1 X50 Y50 F6000"]
+                               + lines + ["M400"]) + "\n")
+    report = sim.run(gcode, trace_path=tmp_path / (name + ".vcd"))
+    assert not report.get("errors"), report.get("errors")
+    return gcode, tmp_path / (name + ".vcd")
+
+
+def test_trace_check_passes_arcs_after_g92_and_m92(tmp_path):
+    """The arcs' geometry is in G-code coordinates; the trace counts machine steps from
+    home: G92 moves the one against the other, M92 changes what a step is."""
+    gcode, vcd = _printed(tmp_path, "shifted", [
+        "G92 X10 Y-5", "G2 X10 Y-5 I6 J0 E0.5 F1800", "M92 X100 Y120",
+        "G3 X22 Y-5 I6 J0 E0.4", "G1 X30 Y0", "G2 X40 Y0 R5 E0.2"])
+    report = tracecheck.check(vcd, gcode)
+    assert report["ok"], [c for c in report["checks"] if c["ok"] is False]
+    assert [c["ok"] for c in report["checks"] if c["name"] == "arc_path"] == [True]
+
+
+# A trace of the first G-code checked against the second: both end in the same place
+# with the same E, so the net steps agree, but the way between differs.
+SAME_ENDS = {
+    "the other way round": (["G3 X60 Y50 I5 J0 E1 F1800"], ["G2 X60 Y50 I5 J0 E1 F1800"],
+                            "went another way round"),
+    "one turn more": (["G2 X50 Y50 I5 J0 E1 P1 F1800"], ["G2 X50 Y50 I5 J0 E1 F1800"],
+                      "fit no line of the G-code, the first at"),
+    "one turn less": (["G2 X50 Y50 I5 J0 E1 F1800"], ["G2 X50 Y50 I5 J0 E1 P1 F1800"],
+                      "stopped at 360.0 of its 720.0 degrees"),
+    "two lines for the arc": (["G1 X55 Y55 E0.5 F1800", "G1 X60 Y50 E0.5"],
+                              ["G2 X60 Y50 I5 J0 E1 F1800"], "off the arc of G-code line 6"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(SAME_ENDS))
+def test_trace_check_fails_a_path_that_left_the_arc(tmp_path, case):
+    printed, asked, message = SAME_ENDS[case]
+    _, vcd = _printed(tmp_path, "printed", printed)
+    gcode = tmp_path / "asked.gcode"
+    text = (tmp_path / "printed.gcode").read_text()
+    gcode.write_text(text.replace("\n".join(printed), "\n".join(asked)))
+    report = tracecheck.check(vcd, gcode)
+    checks = {c["name"]: c for c in report["checks"]}
+    assert all(checks[n]["ok"] for n in ("steps_x", "steps_y", "steps_e0"))
+    assert not report["ok"] and checks["arc_path"]["ok"] is False
+    assert message in checks["arc_path"]["detail"]
+    assert "G-code line 6" in checks["arc_path"]["detail"]
+    assert "FAIL arc_path" in tracecheck.format_report(report)

@@ -636,6 +636,7 @@ class _ArcPath:
         arc_of_line = {arc["line"]: k for k, arc in enumerate(arcs)}
         self.block_arc = np.array([arc_of_line.get(int(line), -1) for line in
                                    blocks[first, 0]] + [-1, -1], np.int64)
+        self.line_of = np.append(blocks[first, 0], [0, 0])  # [-1]: before any line
         # Per axis: the lines that step it, and its step count at the end of each.
         self.index, self.ends = [], []
         for i in range(3):
@@ -647,6 +648,8 @@ class _ArcPath:
         self.pending = None  # the edges at the last time of a chunk, which may go on
         self.stray = 0
         self.stray_at = None
+        self.stray_after = 0  # the line the steps last fitted before the first stray
+        self.last_line = 0
         k = len(arcs)
         g = {name: np.array([arc[name] for arc in arcs], np.float64)
              for name in ("radius_mm", "start_angle", "sweep", "segments", "start_c_mm",
@@ -718,10 +721,16 @@ class _ArcPath:
             lo = np.maximum(lo, a_lo)
             hi = np.minimum(hi, a_hi)
         stray = lo > hi
+        fits = np.flatnonzero(~stray)
         if stray.any():
             if self.stray_at is None:
-                self.stray_at = int(times[np.argmax(stray)])
+                bad = int(np.argmax(stray))
+                self.stray_at = int(times[bad])
+                self.stray_after = int(self.line_of[lo[fits[fits < bad][-1]]]) \
+                    if (fits < bad).any() else self.last_line
             self.stray += int(stray.sum())
+        if len(fits):
+            self.last_line = int(self.line_of[lo[fits[-1]]])
         arc = np.where(stray, -1, self.block_arc[np.clip(lo, -1, self.far)])
         arc = np.where(arc < 0, np.where(stray, -1, self.block_arc[np.clip(hi, -1, self.far)]), arc)
         on = np.flatnonzero(arc >= 0)
@@ -929,7 +938,8 @@ def _report_checks(ck, settings, expected, unit_us, pulse_us, setup_us, rate_mar
         failures = path.failures(unit_us)
         if path.stray:
             failures.insert(0, "%d moments of X Y Z steps fit no line of the G-code, the "
-                            "first at %s" % (path.stray, _at(path.stray_at, unit_us)))
+                            "first at %s, after G-code line %d" % (
+                                path.stray, _at(path.stray_at, unit_us), path.stray_after))
         add("arc_path", "%d arcs within a segment's sagitta + %g steps"
             % (len(path.arcs), _ArcPath.STEP_SLACK), len(failures), not failures,
             "; ".join(failures[:3]) + ("; ..." if len(failures) > 3 else "") if failures
