@@ -38,6 +38,10 @@ Checks
                    drive within about a step of its share at any point, so 2 is a
                    margin. A replayed retraction (retract_policy 2) has no one mix and
                    no windows: its exact counts are checked by `moves`.
+    arc_path       over every G2/G3, the X Y Z position at each moment of the trace
+                   keeps within a segment's sagitta and a step of each axis of the arc,
+                   goes its way round and reaches its end (see _ArcPath). Only prints
+                   with arcs have it.
     pulse_high_us, step_low_us
                    the shortest STEP high and low times, at least `step_pulse_us`.
     dir_setup_us   the shortest time from a DIR change to the next rising STEP on that
