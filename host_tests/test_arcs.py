@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from mixstep import sim, tracecheck
+from mixstep import paths, sim, tracecheck
 
 SPM = 80  # the simulated board's X and Y steps/mm
 Z_SPM = 400
@@ -265,3 +265,16 @@ def test_trace_check_fails_a_path_that_left_the_arc(tmp_path, case):
     assert message in checks["arc_path"]["detail"]
     assert "G-code line 6" in checks["arc_path"]["detail"]
     assert "FAIL arc_path" in tracecheck.format_report(report)
+
+
+def test_real_arc_fitted_slicer_output_passes_trace_check(tmp_path):
+    """BambuStudio's arc fitting (testdata/tc_top_bambustudio_arcs.txt): walls, wipes,
+    bridges and infill with arcs of every size, each followed by the path check."""
+    gcode = paths.ROOT / "testdata" / "tc_top_bambustudio_arcs.gcode"
+    report = sim.run(gcode, trace_path=tmp_path / "tc_top.vcd")
+    assert report["errors"] == [], report["errors"][:3]
+    checked = tracecheck.check(tmp_path / "tc_top.vcd", gcode)
+    assert checked["ok"], [c for c in checked["checks"] if c["ok"] is False]
+    assert checked["refused_lines"] == 0
+    path = [c for c in checked["checks"] if c["name"] == "arc_path"]
+    assert path and path[0]["ok"] and path[0]["expected"].startswith("254 arcs")
