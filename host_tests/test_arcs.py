@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from mixstep import paths, sim, tracecheck
+from mixstep import cli, paths, sim, tracecheck
 
 SPM = 80  # the simulated board's X and Y steps/mm
 Z_SPM = 400
@@ -278,3 +278,61 @@ def test_real_arc_fitted_slicer_output_passes_trace_check(tmp_path):
     assert checked["refused_lines"] == 0
     path = [c for c in checked["checks"] if c["name"] == "arc_path"]
     assert path and path[0]["ok"] and path[0]["expected"].startswith("254 arcs")
+
+
+def test_advance_moves_tool_changes_into_arcs_and_the_print_checks(tmp_path):
+    """`mixstep advance` on a print of arcs with tool changes: each change, moved back
+    by the purge, lands inside the arc before it where the geometry says, and the
+    advanced file prints in the simulation and passes trace check, arcs' path and all."""
+    src = tmp_path / "arcs_tools.gcode"
+    src.write_text("\n".join([
+        "M302 P1", "G90", "M83", "G1 Z0.2 F600", "T0", "G1 X40 Y50 F6000",
+        "G2 X60 Y50 I10 J0 E2.0 F1800",  # half a turn round (50, 50), over the top
+        "G3 X80 Y50 I10 J0 E2.0",        # half a turn round (70, 50), under it
+        "T1", "G1 X90 Y50 E0.6",
+        "G2 X90 Y50 I5 J0 E1.5",         # a whole turn round (95, 50)
+        "T2", "G1 X100 Y60 E0.5", "M400"]) + "\n")
+    out = tmp_path / "advanced.gcode"
+    assert cli.main(["advance", str(src), "-o", str(out), "--purge-mm", "1"]) == 0
+    lines = out.read_text().splitlines()
+
+    def around(tool):
+        at = lines.index(tool)
+        return [dict((w[0], float(w[1:])) for w in lines[k].split()[1:]) | {"G": lines[k][:2]}
+                for k in (at - 1, at + 1)]
+
+    # T1 was after 4 mm of printing: at 3 mm, halfway along the G3 (E 1 of its 2), at
+    # 270 degrees round (70, 50).
+    before, after = around("T1")
+    assert before["G"] == after["G"] == "G3"
+    assert (before["X"], before["Y"]) == pytest.approx((70, 40), abs=1e-4)
+    assert before["E"] == pytest.approx(1.0) and after["E"] == pytest.approx(1.0)
+    assert (after["X"], after["Y"]) == (80, 50)
+    # T2 was after 6.1 mm: at 5.1, a third of the way round the whole turn (E 0.5 of
+    # 1.5), clockwise from 180 to 60 degrees round (95, 50).
+    before, after = around("T2")
+    assert before["G"] == after["G"] == "G2"
+    assert (before["X"], before["Y"]) == pytest.approx((97.5, 50 + 5 * math.sin(math.pi / 3)),
+                                                       abs=1e-4)
+    assert before["E"] == pytest.approx(0.5) and after["E"] == pytest.approx(1.0)
+    assert (after["X"], after["Y"]) == (90, 50)
+
+    printed = {}
+    for name, gcode in (("original", src), ("advanced", out)):
+        report = sim.run(gcode, trace_path=tmp_path / (name + ".vcd"))
+        assert report["errors"] == [], report["errors"][:3]
+        printed[name] = report["steps"]
+        checked = tracecheck.check(tmp_path / (name + ".vcd"), gcode)
+        assert checked["ok"], [c for c in checked["checks"] if c["ok"] is False]
+        assert [c["ok"] for c in checked["checks"] if c["name"] == "arc_path"] == [True]
+    # The same path and filament; only which drive gives it moved.
+    original, advanced = printed["original"], printed["advanced"]
+    assert all(original[a] == advanced[a] for a in "xyz")
+    drives = ["e%d" % d for d in range(6)]
+    assert abs(sum(original[d] for d in drives) - sum(advanced[d] for d in drives)) <= 2
+    # A purge's worth of filament goes from T0's drive to T2's; T1 gains as much at its
+    # start as it gives up at its end.
+    e_spm = paths.load_board("sim")["SETTINGS"]["steps_per_mm"][3]
+    assert abs(original["e0"] - advanced["e0"] - e_spm) <= 1
+    assert abs(advanced["e2"] - original["e2"] - e_spm) <= 1
+    assert abs(advanced["e1"] - original["e1"]) <= 1
