@@ -226,12 +226,15 @@ def _printed(tmp_path, name, lines):
     return gcode, tmp_path / (name + ".vcd")
 
 
-def test_trace_check_passes_arcs_after_g92_and_m92(tmp_path):
+def test_trace_check_passes_arcs_after_g92_m92_and_g28(tmp_path):
     """The arcs' geometry is in G-code coordinates; the trace counts machine steps from
-    home: G92 moves the one against the other, M92 changes what a step is."""
+    home: G92 moves the one against the other, M92 changes what a step is, and homing
+    steps back to 0 between arcs."""
     gcode, vcd = _printed(tmp_path, "shifted", [
         "G92 X10 Y-5", "G2 X10 Y-5 I6 J0 E0.5 F1800", "M92 X100 Y120",
-        "G3 X22 Y-5 I6 J0 E0.4", "G1 X30 Y0", "G2 X40 Y0 R5 E0.2"])
+        "G3 X22 Y-5 I6 J0 E0.4", "G1 X30 Y0", "G2 X40 Y0 R5 E0.2", "G28 X",
+        "G1 X30 Y40 F6000", "G3 X30 Y40 I5 J0 E0.5", "G28", "G1 X20 Y20 Z0.4",
+        "G2 X30 Y20 R5 E0.3"])
     report = tracecheck.check(vcd, gcode)
     assert report["ok"], [c for c in report["checks"] if c["ok"] is False]
     assert [c["ok"] for c in report["checks"] if c["name"] == "arc_path"] == [True]

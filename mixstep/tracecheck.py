@@ -615,14 +615,14 @@ class _ArcPath:
 
     Over an arc, every position must lie within `tolerance` of the circle: the sagitta
     r (1 - cos(theta / 2)) of one segment (theta = sweep / segments) plus one step of
-    each of the plane's axes, the diagonal of a step of each (half a step where a
-    segment's end is rounded to a step, half for the step loop taking one axis's step
-    before the other's). Its angle from the centre, unwrapped from
-    the start the arc's way round, must not fall behind the start, run past the end or
-    go back by more than that tolerance seen from the centre, and must reach the end;
-    the third axis (a helix) must stay within one segment's share and a step of where
-    the angle puts it. Arcs whose tolerance is over half their radius (a few
-    steps across) get the distance check only: their angles say nothing."""
+    each of the plane's axes, i.e. their diagonal (half a step where a segment's end is
+    rounded to a step, half for the step loop taking one axis's step before the
+    other's). Its angle from the centre, unwrapped from the start the arc's way round,
+    must not fall behind the start, run past the end or go back by more than that
+    tolerance seen from the centre, and must reach the end; the third axis (a helix)
+    must stay within one segment's share and a step of where the angle puts it. Arcs
+    whose tolerance is over half their radius (a few steps across) get the distance
+    check only: their angles say nothing."""
 
     STEP_SLACK = 1.0
 
