@@ -960,14 +960,15 @@ class Machine:
         axes = [i for i in range(3) if ln.has("XYZ"[i])] or [0, 1, 2]
         for i in axes:
             self.synchronize()
-            # The axis runs to its min endstop, which the trace's start is at.
-            if self.axis_steps[i]:
+            # The axis runs to its min endstop, which the trace's start is at: back by
+            # the steps the trace counts, which an M92 since leaves apart from the
+            # planned ones.
+            if self.axis_net[i]:
                 self.moved.add("xyz"[i])
                 back = [0, 0, 0]
-                back[i] = -self.axis_steps[i]
+                back[i] = -self.axis_net[i]
                 self.axis_blocks.extend([self.line] + back)
-            self.axis_net[i] -= self.axis_steps[i]
-            self.axis_steps[i] = 0
+            self.axis_net[i] = self.axis_steps[i] = self.step_shift[i] = 0
             self.pos_nm[i] = self.offset_nm[i] = 0
 
     def g92(self, ln):
