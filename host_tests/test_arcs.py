@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from mixstep import sim, tracecheck
+from mixstep import cli, paths, sim, tracecheck
 
 SPM = 80  # the simulated board's X and Y steps/mm
 Z_SPM = 400
@@ -207,3 +207,135 @@ def test_trace_check_fails_when_an_arc_went_elsewhere(arcs_trace, tmp_path):
         other.write_text(text.replace(old, new))
         report = tracecheck.check(vcd, other)
         assert not report["ok"], new
+
+
+def test_trace_check_follows_the_path_of_every_arc(arcs_trace):
+    gcode, vcd = arcs_trace
+    report = tracecheck.check(vcd, gcode)
+    path = [c for c in report["checks"] if c["name"] == "arc_path"]
+    assert len(path) == 1 and path[0]["ok"] is True, path
+    assert path[0]["expected"].startswith("13 arcs")
+
+
+def _printed(tmp_path, name, lines):
+    gcode = tmp_path / (name + ".gcode")
+    gcode.write_text("\n".join(["M302 P1", "G90", "M83", "G1 Z0.2 F600", "G1 X50 Y50 F6000"]
+                               + lines + ["M400"]) + "\n")
+    report = sim.run(gcode, trace_path=tmp_path / (name + ".vcd"))
+    assert not report.get("errors"), report.get("errors")
+    return gcode, tmp_path / (name + ".vcd")
+
+
+def test_trace_check_passes_arcs_after_g92_m92_and_g28(tmp_path):
+    """The arcs' geometry is in G-code coordinates; the trace counts machine steps from
+    home: G92 moves the one against the other, M92 changes what a step is, and homing
+    steps back to 0 between arcs."""
+    gcode, vcd = _printed(tmp_path, "shifted", [
+        "G92 X10 Y-5", "G2 X10 Y-5 I6 J0 E0.5 F1800", "M92 X100 Y120",
+        "G3 X22 Y-5 I6 J0 E0.4", "G1 X30 Y0", "G2 X40 Y0 R5 E0.2", "G28 X",
+        "G1 X30 Y40 F6000", "G3 X30 Y40 I5 J0 E0.5", "G28", "G1 X20 Y20 Z0.4",
+        "G2 X30 Y20 R5 E0.3"])
+    report = tracecheck.check(vcd, gcode)
+    assert report["ok"], [c for c in report["checks"] if c["ok"] is False]
+    assert [c["ok"] for c in report["checks"] if c["name"] == "arc_path"] == [True]
+
+
+# A trace of the first G-code checked against the second: both end in the same place
+# with the same E, so the net steps agree, but the way between differs.
+SAME_ENDS = {
+    "the other way round": (["G3 X60 Y50 I5 J0 E1 F1800"], ["G2 X60 Y50 I5 J0 E1 F1800"],
+                            "went another way round"),
+    "one turn more": (["G2 X50 Y50 I5 J0 E1 P1 F1800"], ["G2 X50 Y50 I5 J0 E1 F1800"],
+                      "fit no line of the G-code, the first at"),
+    "one turn less": (["G2 X50 Y50 I5 J0 E1 F1800"], ["G2 X50 Y50 I5 J0 E1 P1 F1800"],
+                      "stopped at 360.0 of its 720.0 degrees"),
+    "two lines for the arc": (["G1 X55 Y55 E0.5 F1800", "G1 X60 Y50 E0.5"],
+                              ["G2 X60 Y50 I5 J0 E1 F1800"], "off the arc of G-code line 6"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(SAME_ENDS))
+def test_trace_check_fails_a_path_that_left_the_arc(tmp_path, case):
+    printed, asked, message = SAME_ENDS[case]
+    _, vcd = _printed(tmp_path, "printed", printed)
+    gcode = tmp_path / "asked.gcode"
+    text = (tmp_path / "printed.gcode").read_text()
+    gcode.write_text(text.replace("\n".join(printed), "\n".join(asked)))
+    report = tracecheck.check(vcd, gcode)
+    checks = {c["name"]: c for c in report["checks"]}
+    assert all(checks[n]["ok"] for n in ("steps_x", "steps_y", "steps_e0"))
+    assert not report["ok"] and checks["arc_path"]["ok"] is False
+    assert message in checks["arc_path"]["detail"]
+    assert "G-code line 6" in checks["arc_path"]["detail"]
+    assert "FAIL arc_path" in tracecheck.format_report(report)
+
+
+def test_real_arc_fitted_slicer_output_passes_trace_check(tmp_path):
+    """BambuStudio's arc fitting (testdata/tc_top_bambustudio_arcs.txt): walls, wipes,
+    bridges and infill with arcs of every size, each followed by the path check."""
+    gcode = paths.ROOT / "testdata" / "tc_top_bambustudio_arcs.gcode"
+    report = sim.run(gcode, trace_path=tmp_path / "tc_top.vcd")
+    assert report["errors"] == [], report["errors"][:3]
+    checked = tracecheck.check(tmp_path / "tc_top.vcd", gcode)
+    assert checked["ok"], [c for c in checked["checks"] if c["ok"] is False]
+    assert checked["refused_lines"] == 0
+    path = [c for c in checked["checks"] if c["name"] == "arc_path"]
+    assert path and path[0]["ok"] and path[0]["expected"].startswith("254 arcs")
+
+
+def test_advance_moves_tool_changes_into_arcs_and_the_print_checks(tmp_path):
+    """`mixstep advance` on a print of arcs with tool changes: each change, moved back
+    by the purge, lands inside the arc before it where the geometry says, and the
+    advanced file prints in the simulation and passes trace check, arcs' path and all."""
+    src = tmp_path / "arcs_tools.gcode"
+    src.write_text("\n".join([
+        "M302 P1", "G90", "M83", "G1 Z0.2 F600", "T0", "G1 X40 Y50 F6000",
+        "G2 X60 Y50 I10 J0 E2.0 F1800",  # half a turn round (50, 50), over the top
+        "G3 X80 Y50 I10 J0 E2.0",        # half a turn round (70, 50), under it
+        "T1", "G1 X90 Y50 E0.6",
+        "G2 X90 Y50 I5 J0 E1.5",         # a whole turn round (95, 50)
+        "T2", "G1 X100 Y60 E0.5", "M400"]) + "\n")
+    out = tmp_path / "advanced.gcode"
+    assert cli.main(["advance", str(src), "-o", str(out), "--purge-mm", "1"]) == 0
+    lines = out.read_text().splitlines()
+
+    def around(tool):
+        at = lines.index(tool)
+        return [dict((w[0], float(w[1:])) for w in lines[k].split()[1:]) | {"G": lines[k][:2]}
+                for k in (at - 1, at + 1)]
+
+    # T1 was after 4 mm of printing: at 3 mm, halfway along the G3 (E 1 of its 2), at
+    # 270 degrees round (70, 50).
+    before, after = around("T1")
+    assert before["G"] == after["G"] == "G3"
+    assert (before["X"], before["Y"]) == pytest.approx((70, 40), abs=1e-4)
+    assert before["E"] == pytest.approx(1.0) and after["E"] == pytest.approx(1.0)
+    assert (after["X"], after["Y"]) == (80, 50)
+    # T2 was after 6.1 mm: at 5.1, a third of the way round the whole turn (E 0.5 of
+    # 1.5), clockwise from 180 to 60 degrees round (95, 50).
+    before, after = around("T2")
+    assert before["G"] == after["G"] == "G2"
+    assert (before["X"], before["Y"]) == pytest.approx((97.5, 50 + 5 * math.sin(math.pi / 3)),
+                                                       abs=1e-4)
+    assert before["E"] == pytest.approx(0.5) and after["E"] == pytest.approx(1.0)
+    assert (after["X"], after["Y"]) == (90, 50)
+
+    printed = {}
+    for name, gcode in (("original", src), ("advanced", out)):
+        report = sim.run(gcode, trace_path=tmp_path / (name + ".vcd"))
+        assert report["errors"] == [], report["errors"][:3]
+        printed[name] = report["steps"]
+        checked = tracecheck.check(tmp_path / (name + ".vcd"), gcode)
+        assert checked["ok"], [c for c in checked["checks"] if c["ok"] is False]
+        assert [c["ok"] for c in checked["checks"] if c["name"] == "arc_path"] == [True]
+    # The same path and filament; only which drive gives it moved.
+    original, advanced = printed["original"], printed["advanced"]
+    assert all(original[a] == advanced[a] for a in "xyz")
+    drives = ["e%d" % d for d in range(6)]
+    assert abs(sum(original[d] for d in drives) - sum(advanced[d] for d in drives)) <= 2
+    # A purge's worth of filament goes from T0's drive to T2's; T1 gains as much at its
+    # start as it gives up at its end.
+    e_spm = paths.load_board("sim")["SETTINGS"]["steps_per_mm"][3]
+    assert abs(original["e0"] - advanced["e0"] - e_spm) <= 1
+    assert abs(advanced["e2"] - original["e2"] - e_spm) <= 1
+    assert abs(advanced["e1"] - original["e1"]) <= 1

@@ -37,7 +37,8 @@ def part(tmp_path):
 
 
 @pytest.mark.parametrize("tool", [["advance", "--purge-mm", "2.5"],
-                                  ["detool", "--matrix", MATRIX]])
+                                  ["detool", "--matrix", MATRIX],
+                                  ["arcfit", "--tolerance-mm", "0.01"]])
 def test_an_output_that_is_the_input_is_refused_and_the_input_kept(capsys, part, tool):
     before = part.read_bytes()
     # The same file, also by another spelling of its path.
@@ -62,6 +63,7 @@ def test_a_failed_run_leaves_the_old_output_and_no_temporary_file(capsys, part, 
     ["preview", "missing.gcode", "-o", "p.png"],
     ["advance", "missing.gcode", "-o", "a.gcode", "--purge-mm", "1"],
     ["detool", "missing.gcode", "-o", "d.gcode", "--matrix", MATRIX],
+    ["arcfit", "missing.gcode", "-o", "f.gcode"],
     ["trace", "check", "missing.vcd", "--gcode", str(SHORT)],
 ])
 def test_a_missing_input_is_one_line_and_status_2(capsys, tmp_path, monkeypatch, argv):
@@ -82,6 +84,8 @@ def test_a_missing_input_is_one_line_and_status_2(capsys, tmp_path, monkeypatch,
       "--filament-mm", "1.75", "--drive", "9"], "drives are 0 to 5"),
     (["advance", str(SHORT), "-o", "a.gcode", "--l1-mm", "-1", "--l2-mm", "4"], ">= 0"),
     (["preview", str(SHORT), "-o", "p.png", "--l2-mm", "-1"], ">= 0"),
+    (["arcfit", str(SHORT), "-o", "f.gcode", "--tolerance-mm", "0"], "tolerance must be > 0"),
+    (["arcfit", str(SHORT), "-o", "f.gcode", "--max-radius-mm", "-5"], "radius must be > 0"),
     (["preview", str(SHORT), "-o", "p.png", "--layer", "999"], "has no layer 999"),
     (["preview", str(SHORT), "-o", "p.png", "--colors", "#ff0000"], "colours are given"),
     (["emu", "print", "--set", "step_backend=pio"], "--set tick_us=50"),

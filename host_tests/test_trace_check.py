@@ -932,3 +932,17 @@ def test_the_model_refuses_a_number_the_firmware_refuses(line):
     (test_gcode): the model must not take a part of the number either."""
     with pytest.raises(tracemodel.Refused, match="malformed number"):
         tracemodel.parse_words(line)
+
+
+def test_homing_after_m92_goes_back_by_the_steps_the_trace_counted(tmp_path):
+    """M92 counts the axes' planned steps anew where they stand; the trace's count is
+    unchanged, and homing takes the axis back by that count, not by the new one."""
+    gcode = tmp_path / "m92_home.gcode"
+    gcode.write_text("\n".join(["G90", "G1 X50 Y50 F6000", "M92 X100 Y120", "G28 X",
+                                "G1 X20 Y30", "G28", "G1 X10 Y10", "M400"]) + "\n")
+    report = sim.run(gcode, trace_path=tmp_path / "m92_home.vcd")
+    assert report["errors"] == []
+    checked = tracecheck.check(tmp_path / "m92_home.vcd", gcode)
+    assert checked["ok"], _failed(checked)
+    steps = {c["name"]: c["expected"] for c in checked["checks"]}
+    assert steps["steps_x"] == 10 * 100 and steps["steps_y"] == 10 * 120

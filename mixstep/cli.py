@@ -81,6 +81,8 @@ def parser():
         tool.add_parser(sub)
     from mixstep import advance  # `mixstep advance`: tool changes moved earlier by the purge
     advance.add_parser(sub)
+    from mixstep import arcfit  # `mixstep arcfit`: runs of short moves on a circle -> G2/G3
+    arcfit.add_parser(sub)
     from mixstep import tracecheck, tracepull  # `mixstep trace check|pull`
     p = sub.add_parser("trace", help="check a STEP/DIR trace against G-code; pull a board's capture")
     tsub = p.add_subparsers(dest="trace_command", required=True)

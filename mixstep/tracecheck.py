@@ -38,6 +38,10 @@ Checks
                    drive within about a step of its share at any point, so 2 is a
                    margin. A replayed retraction (retract_policy 2) has no one mix and
                    no windows: its exact counts are checked by `moves`.
+    arc_path       over every G2/G3, the X Y Z position at each moment of the trace
+                   keeps within a segment's sagitta and a step of each axis of the arc,
+                   goes its way round and reaches its end (see _ArcPath). Only prints
+                   with arcs have it.
     pulse_high_us, step_low_us
                    the shortest STEP high and low times, at least `step_pulse_us`.
     dir_setup_us   the shortest time from a DIR change to the next rising STEP on that
@@ -61,6 +65,7 @@ The trace is streamed in chunks parsed with numpy, so memory stays bounded whate
 its size; the expected moves are held in memory (they grow with the G-code only).
 """
 import json
+import math
 import os
 import re
 import subprocess
@@ -438,9 +443,14 @@ class Checker:
                         if name + kind not in index]
         self.walk = None if any(n.rsplit("_", 1)[0] in self.drives for n in self.missing) \
             else _MoveWalk(expected["moves"], settings["drives"], window, mix_tolerance, unit_us)
+        # Only a print with arcs pays for following X Y Z position by position.
+        self.path = None
+        if expected.get("arcs") and not any(n[0] in "xyz" for n in self.missing):
+            self.path = _ArcPath(expected["arcs"], expected["axis_blocks"])
 
     def feed(self, times, sig, vals):
         e_events = []
+        xyz_events = []
         for name, ax in self.axes.items():
             step, dirs = self.sig[name]
             sel = np.flatnonzero((sig == step) | (sig == dirs))
@@ -492,6 +502,13 @@ class Checker:
             ax.recent = run[-RATE_RUN:]
             if self.walk and name in self.drives:
                 e_events.append((sel[rise], np.full(len(rt), self.drives.index(name)), sign, rt))
+            if self.path and name in AXES:
+                xyz_events.append((sel[rise], np.full(len(rt), AXES.index(name)), sign, rt))
+        if xyz_events:
+            order = np.argsort(np.concatenate([e[0] for e in xyz_events]), kind="stable")
+            self.path.feed(np.concatenate([e[3] for e in xyz_events])[order],
+                           np.concatenate([e[1] for e in xyz_events])[order],
+                           np.concatenate([e[2] for e in xyz_events])[order])
         if self.walk and e_events:
             order_in_chunk = np.concatenate([e[0] for e in e_events])
             order = np.argsort(order_in_chunk, kind="stable")
@@ -583,6 +600,250 @@ class _MoveWalk:
         return self.error is None and self.left == 0 and self.m + 1 >= len(self.moves)
 
 
+class _ArcPath:
+    """Follows the X Y Z steps over every G2/G3 and checks that they keep to the arc,
+    with this checker's own geometry (the model's centre, radius and sweep; nothing of
+    the firmware's).
+
+    Which steps belong to which arc: the model lists every block that steps an axis,
+    with its G-code line, so the n-th step of X falls in a known line, and so for Y
+    and Z. After each moment of the trace (all its edges at one time), each axis's
+    count of steps says which lines it can be in (inside one, or between one and the
+    next that moves it); the position is in the line all three agree on. A position
+    they cannot agree on fits no line of the G-code: an axis stepped more, or less,
+    than the lines before it ask.
+
+    Over an arc, every position must lie within `tolerance` of the circle: the sagitta
+    r (1 - cos(theta / 2)) of one segment (theta = sweep / segments) plus one step of
+    each of the plane's axes, i.e. their diagonal (half a step where a segment's end is
+    rounded to a step, half for the step loop taking one axis's step before the
+    other's). Its angle from the centre, unwrapped from the start the arc's way round,
+    must not fall behind the start, run past the end or go back by more than that
+    tolerance seen from the centre, and must reach the end; the third axis (a helix)
+    must stay within one segment's share and a step of where the angle puts it. Arcs
+    whose tolerance is over half their radius (a few steps across) get the distance
+    check only: their angles say nothing."""
+
+    STEP_SLACK = 1.0
+
+    def __init__(self, arcs, axis_blocks):
+        self.arcs = arcs
+        blocks = np.array(axis_blocks, np.int64).reshape(-1, 4)
+        # A line's blocks count as one: the firmware works out an arc's segment ends in
+        # its own arithmetic, which may put one a step from the model's, but its ends,
+        # and a line's, are exact.
+        first = np.flatnonzero(np.append(True, blocks[1:, 0] != blocks[:-1, 0])) \
+            if len(blocks) else np.zeros(0, np.int64)
+        travel = np.add.reduceat(np.abs(blocks[:, 1:]), first, axis=0) if len(first) \
+            else np.zeros((0, 3), np.int64)
+        self.far = len(first) + 1  # past every line
+        arc_of_line = {arc["line"]: k for k, arc in enumerate(arcs)}
+        self.block_arc = np.array([arc_of_line.get(int(line), -1) for line in
+                                   blocks[first, 0]] + [-1, -1], np.int64)
+        self.line_of = np.append(blocks[first, 0], [0, 0])  # [-1]: before any line
+        # Per axis: the lines that step it, and its step count at the end of each.
+        self.index, self.ends = [], []
+        for i in range(3):
+            moving = np.flatnonzero(travel[:, i])
+            self.index.append(moving)
+            self.ends.append(np.cumsum(travel[moving, i]))
+        self.count = np.zeros(3, np.int64)  # rising STEP edges so far
+        self.pos = np.zeros(3, np.int64)  # net steps so far
+        self.pending = None  # the edges at the last time of a chunk, which may go on
+        self.stray = 0
+        self.stray_at = None
+        self.stray_after = 0  # the line the steps last fitted before the first stray
+        self.last_line = 0
+        k = len(arcs)
+        g = {name: np.array([arc[name] for arc in arcs], np.float64)
+             for name in ("radius_mm", "start_angle", "sweep", "segments", "start_c_mm",
+                          "along_mm")}
+        self.axes = np.array([arc["axes"] for arc in arcs], np.int64).reshape(k, 3)
+        self.centre = np.array([arc["centre_mm"] for arc in arcs], np.float64).reshape(k, 2)
+        self.spm = np.array([[arc["steps_per_mm"][a] for a in arc["axes"]] for arc in arcs],
+                            np.float64).reshape(k, 3)
+        self.shift = np.array([[arc["step_shift"][a] for a in arc["axes"]] for arc in arcs],
+                              np.float64).reshape(k, 3)
+        self.radius = g["radius_mm"]
+        self.start_angle = g["start_angle"]
+        self.way = np.where(g["sweep"] < 0, -1.0, 1.0)
+        self.total = np.abs(g["sweep"])
+        self.start_c = g["start_c_mm"]
+        self.along = g["along_mm"]
+        theta = self.total / g["segments"]
+        self.tolerance = (self.radius * (1 - np.cos(theta / 2)) + self.STEP_SLACK
+                          * np.hypot(1 / self.spm[:, 0], 1 / self.spm[:, 1]) + 1e-6)
+        self.c_tolerance = np.abs(self.along) / g["segments"] + self.STEP_SLACK / self.spm[:, 2]
+        self.turn_tolerance = self.tolerance / self.radius
+        self.angles_count = self.tolerance <= self.radius / 2
+        # What each arc's positions did: the worst distance off (as a share of the
+        # tolerance), where; the unwrapped angle so far, the furthest and the last.
+        self.worst = np.zeros(k)
+        self.worst_t = np.zeros(k, np.int64)
+        self.worst_mm = np.zeros((k, 2))
+        self.seen = np.zeros(k, bool)
+        self.last_raw = np.zeros(k)
+        self.progress = np.zeros(k)
+        self.reached = np.full(k, -np.inf)
+        # The first position that went the wrong way (or off the helix): time, angle, Z.
+        self.fault_t = np.full(k, -1, np.int64)
+        self.fault_turn = np.zeros(k)
+        self.fault_c = np.zeros(k)
+
+    def feed(self, times, axis, sign):
+        """The X Y Z rising STEP edges of a chunk in trace order: times, axis (0 1 2),
+        sign (+1 forward, -1 back)."""
+        if self.pending is not None:
+            times = np.concatenate((self.pending[0], times))
+            axis = np.concatenate((self.pending[1], axis))
+            sign = np.concatenate((self.pending[2], sign))
+        if not len(times):
+            return
+        cut = int(np.searchsorted(times, times[-1]))  # the last moment may go on
+        self.pending = (times[cut:], axis[cut:], sign[cut:])
+        if cut:
+            self._walk(times[:cut], axis[:cut], sign[:cut])
+
+    def finish(self):
+        if self.pending is not None and len(self.pending[0]):
+            self._walk(*self.pending)
+        self.pending = None
+
+    def _walk(self, times, axis, sign):
+        one = (axis[:, None] == np.arange(3)).astype(np.int64)
+        count = self.count + np.cumsum(one, axis=0)
+        pos = self.pos + np.cumsum(one * sign[:, None].astype(np.int64), axis=0)
+        self.count, self.pos = count[-1].copy(), pos[-1].copy()
+        moment = np.flatnonzero(np.append(times[1:] != times[:-1], True))
+        times, count, pos = times[moment], count[moment], pos[moment]
+        lo = np.full(len(times), -1, np.int64)
+        hi = np.full(len(times), self.far, np.int64)
+        for i in range(3):
+            if not len(self.index[i]):
+                continue
+            a_lo, a_hi = self._blocks_of(count[:, i], self.index[i], self.ends[i])
+            lo = np.maximum(lo, a_lo)
+            hi = np.minimum(hi, a_hi)
+        stray = lo > hi
+        fits = np.flatnonzero(~stray)
+        if stray.any():
+            if self.stray_at is None:
+                bad = int(np.argmax(stray))
+                self.stray_at = int(times[bad])
+                self.stray_after = int(self.line_of[lo[fits[fits < bad][-1]]]) \
+                    if (fits < bad).any() else self.last_line
+            self.stray += int(stray.sum())
+        if len(fits):
+            self.last_line = int(self.line_of[lo[fits[-1]]])
+        arc = np.where(stray, -1, self.block_arc[np.clip(lo, -1, self.far)])
+        arc = np.where(arc < 0, np.where(stray, -1, self.block_arc[np.clip(hi, -1, self.far)]), arc)
+        on = np.flatnonzero(arc >= 0)
+        if len(on):
+            self._check(times[on], pos[on], arc[on])
+
+    def _blocks_of(self, k, index, ends):
+        """The lines an axis with k steps done can be in: (lo, hi), the first and last."""
+        j = np.searchsorted(ends, k)
+        jj = np.minimum(j, len(ends) - 1)
+        inside = (j < len(ends)) & (ends[jj] > k) & (k > 0)
+        at_end = (j < len(ends)) & (ends[jj] == k)
+        after = np.append(index[1:], self.far)
+        lo = np.where(k == 0, -1, np.where(inside | at_end, index[jj], self.far))
+        hi = np.where(k == 0, index[0], np.where(inside, index[jj],
+                                                 np.where(at_end, after[jj], -1)))
+        return lo, hi
+
+    def _check(self, times, pos, arc):
+        rows = np.arange(len(arc))
+        ax = self.axes[arc]
+        mm = (pos[rows[:, None], ax] + self.shift[arc]) / self.spm[arc]
+        da = mm[:, 0] - self.centre[arc, 0]
+        db = mm[:, 1] - self.centre[arc, 1]
+        off = np.abs(np.hypot(da, db) - self.radius[arc]) / self.tolerance[arc]
+        # Runs of one arc; an arc's positions are one run (a chunk may cut it in two).
+        first = np.flatnonzero(np.append(True, arc[1:] != arc[:-1]))
+        last = np.append(first[1:], len(arc)) - 1
+        run = np.cumsum(np.isin(rows, first)) - 1
+        k = arc[first]
+        # The angle gone the arc's way, unwrapped position by position from the start
+        # (or from its last position in the chunk before).
+        raw = np.arctan2(db, da)
+        prev = np.append(0.0, raw[:-1])
+        prev[first] = np.where(self.seen[k], self.last_raw[k], self.start_angle[k])
+        turn = _wrap(self.way[arc] * (raw - prev))
+        total = np.cumsum(turn)
+        base = np.where(self.seen[k], self.progress[k], 0.0) - (total - turn)[first]
+        progress = total + base[run]
+        lift = run * 1e5  # more than any sweep: keeps the running maximum within a run
+        furthest = np.maximum(np.maximum.accumulate(progress + lift) - lift,
+                              self.reached[arc])
+        share = np.clip(progress / np.maximum(self.total[arc], 1e-12), 0, 1)
+        c_off = np.abs(mm[:, 2] - (self.start_c[arc] + self.along[arc] * share))
+        # The worst distance off in each run, and where.
+        worst = np.maximum.reduceat(off, first)
+        at = _first_where(off == worst[run], run, len(first))
+        better = worst > self.worst[k]
+        self.worst[k[better]] = worst[better]
+        self.worst_t[k[better]] = times[at[better]]
+        self.worst_mm[k[better]] = mm[at[better], :2]
+        # Going the other way, back, past either end, or the third axis off.
+        tol = self.turn_tolerance[arc]
+        wrong = self.angles_count[arc] & ((furthest - progress > tol) | (progress < -tol)
+                                          | (progress > self.total[arc] + tol))
+        wrong |= c_off > self.c_tolerance[arc]
+        at = _first_where(wrong, run, len(first))
+        new = (at >= 0) & (self.fault_t[k] < 0)
+        self.fault_t[k[new]] = times[at[new]]
+        self.fault_turn[k[new]] = progress[at[new]]
+        self.fault_c[k[new]] = c_off[at[new]]
+        self.seen[k] = True
+        self.last_raw[k] = raw[last]
+        self.progress[k] = progress[last]
+        self.reached[k] = furthest[last]
+
+    def failures(self, unit_us):
+        """A message for every arc the steps left, in order."""
+        out = []
+        for k in np.flatnonzero((self.worst > 1) | (self.fault_t >= 0) | (
+                self.seen & self.angles_count
+                & (self.reached < self.total - self.turn_tolerance))).tolist():
+            line = self.arcs[k]["line"]
+            names = "".join("XYZ"[a] for a in self.arcs[k]["axes"][:2])
+            if self.worst[k] > 1:
+                out.append("%s at (%.3f, %.3f) mm, %s, is %.3f mm off the arc of G-code "
+                           "line %d (tolerance %.3f mm)" % (
+                               names, self.worst_mm[k][0], self.worst_mm[k][1],
+                               _at(self.worst_t[k], unit_us),
+                               self.worst[k] * self.tolerance[k], line, self.tolerance[k]))
+            elif self.fault_t[k] >= 0 and self.fault_c[k] > self.c_tolerance[k]:
+                out.append("the arc of G-code line %d left its helix: %s %.3f mm off, %s" % (
+                    line, "XYZ"[self.arcs[k]["axes"][2]], self.fault_c[k],
+                    _at(self.fault_t[k], unit_us)))
+            elif self.fault_t[k] >= 0:
+                out.append("the arc of G-code line %d went another way round: at %.1f of "
+                           "its %.1f degrees, %s" % (
+                               line, math.degrees(self.fault_turn[k]),
+                               math.degrees(self.total[k]), _at(self.fault_t[k], unit_us)))
+            else:
+                out.append("the arc of G-code line %d stopped at %.1f of its %.1f degrees"
+                           % (line, math.degrees(self.reached[k]), math.degrees(self.total[k])))
+        return out
+
+
+def _first_where(mask, run, runs):
+    """Per run, the index of the first True of mask in it, or -1."""
+    at = np.full(runs, -1, np.int64)
+    hits = np.flatnonzero(mask)
+    found, first = np.unique(run[hits], return_index=True)
+    at[found] = hits[first]
+    return at
+
+
+def _wrap(angle):
+    """An angle in radians to [-pi, pi)."""
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
 def check(trace_path, gcode_path, board="sim", mapping=None, step_pulse_us=None,
           dir_setup_us=None, rate_margin=0.02, window=100, mix_tolerance=2.0,
           chunk_bytes=CHUNK_BYTES, settings=None, config=None):
@@ -610,6 +871,8 @@ def check(trace_path, gcode_path, board="sim", mapping=None, step_pulse_us=None,
                           reader.timescale_s * 1e6)
         for times, sig, vals in reader.chunks():
             checker.feed(times, sig, vals)
+        if checker.path:
+            checker.path.finish()
         reader.close()
     finally:
         if tmp:
@@ -673,6 +936,22 @@ def _report_checks(ck, settings, expected, unit_us, pulse_us, setup_us, rate_mar
                 walk.windows, window, walk.bad_windows,
                 "e%d at %s" % (walk.worst_at[1], _at(walk.worst_at[0], unit_us))
                 if walk.worst_at else "-"))
+
+    path = ck.path
+    if path is not None:
+        failures = path.failures(unit_us)
+        if path.stray:
+            failures.insert(0, "%d moments of X Y Z steps fit no line of the G-code, the "
+                            "first at %s, after G-code line %d" % (
+                                path.stray, _at(path.stray_at, unit_us), path.stray_after))
+        add("arc_path", "%d arcs within a segment's sagitta + %g steps"
+            % (len(path.arcs), _ArcPath.STEP_SLACK), len(failures), not failures,
+            "; ".join(failures[:3]) + ("; ..." if len(failures) > 3 else "") if failures
+            else "worst %.0f%% of its tolerance" % (100 * path.worst.max() if len(path.arcs)
+                                                    else 0))
+    elif expected.get("arcs"):
+        add("arc_path", "%d arcs" % len(expected["arcs"]), None, None,
+            "not checked: an axis that moves is not in the trace")
 
     def worst(field):
         best = None

@@ -57,6 +57,7 @@ max_extrude_mm, all-zero mixes.
 """
 import math
 import re
+from array import array
 from fractions import Fraction
 
 NM_PER_MM = 10 ** 6
@@ -689,7 +690,11 @@ class Machine:
         self.fw_retracted = False
         self.blocks = []  # (line, weights, drive targets) of every block that steps E
         self.plane = 0  # G17, G18, G19
-        self.arcs = []  # (line, centre, radius nm, plane axes, segments, sweep) per arc
+        self.arcs = []  # every arc's geometry in machine mm (see arc)
+        # line, then X Y Z steps, of every block that steps an axis (homing too), in the
+        # order the trace steps them: the trace check follows the arcs' steps by them.
+        self.axis_blocks = array("q")
+        self.step_shift = [0, 0, 0]  # planned machine steps less the trace's, since M92
         self.moved = set()
         self.line = 0
         self.planner = Planner(drives, [fixed_spm(v) for v in drive_spm], self.policy == 2,
@@ -716,6 +721,9 @@ class Machine:
 
     # --- the planner's side -------------------------------------------------------
     def _block(self, line, weights, targets, start, target):
+        if list(target) != list(start):
+            self.axis_blocks.extend((line, target[0] - start[0], target[1] - start[1],
+                                     target[2] - start[2]))
         for i in range(3):
             if target[i] != start[i]:
                 self.axis_net[i] += target[i] - start[i]
@@ -904,7 +912,8 @@ class Machine:
                 for i in range(3):
                     if not -1 <= point[i] + self.offset_nm[i] <= self.travel_nm[i] + 1:
                         raise Refused("outside the soft limits")
-        self.arcs.append((self.line, [centre[0], centre[1]], radius, (a, b), n, sweep))
+        self.arcs.append(self._arc_record((a, b, c), centre, radius, start_angle, sweep, n,
+                                          start[c], along))
         e_done = 0
         for i, point in enumerate(points, 1):
             e = e_nm * i // n - e_done
@@ -918,6 +927,24 @@ class Machine:
             self.pos_nm = point
         self.e_nm = target_e
         self.pos_nm = list(target)
+
+    def _arc_record(self, axes, centre_nm, radius_nm, start_angle, sweep, segments,
+                    start_c_nm, along_nm):
+        """An arc as the trace check follows it, in machine mm (G92's offset in): the
+        plane's axes a b and the third c, the centre in a b, the radius, the start's
+        angle and the sweep (radians, counter-clockwise in a b positive), the segment
+        count, the third axis's start and travel, and for each axis its steps/mm and
+        the steps the trace is short of the planned ones (step_shift, after M92)."""
+        a, b, c = axes
+        off = self.offset_nm
+        return {"line": self.line, "axes": axes,
+                "centre_mm": ((centre_nm[0] + off[a]) / NM_PER_MM,
+                              (centre_nm[1] + off[b]) / NM_PER_MM),
+                "radius_mm": radius_nm / NM_PER_MM, "start_angle": start_angle,
+                "sweep": sweep, "segments": segments,
+                "start_c_mm": (start_c_nm + off[c]) / NM_PER_MM, "along_mm": along_nm / NM_PER_MM,
+                "steps_per_mm": tuple(float(v) for v in self.spm),
+                "step_shift": tuple(self.step_shift)}
 
     def g10(self, ln):
         if not self.fw_retracted:
@@ -933,11 +960,15 @@ class Machine:
         axes = [i for i in range(3) if ln.has("XYZ"[i])] or [0, 1, 2]
         for i in axes:
             self.synchronize()
-            # The axis runs to its min endstop, which the trace's start is at.
-            if self.axis_steps[i]:
+            # The axis runs to its min endstop, which the trace's start is at: back by
+            # the steps the trace counts, which an M92 since leaves apart from the
+            # planned ones.
+            if self.axis_net[i]:
                 self.moved.add("xyz"[i])
-            self.axis_net[i] -= self.axis_steps[i]
-            self.axis_steps[i] = 0
+                back = [0, 0, 0]
+                back[i] = -self.axis_net[i]
+                self.axis_blocks.extend([self.line] + back)
+            self.axis_net[i] = self.axis_steps[i] = self.step_shift[i] = 0
             self.pos_nm[i] = self.offset_nm[i] = 0
 
     def g92(self, ln):
@@ -962,7 +993,9 @@ class Machine:
             if ch in values:
                 self.spm[i] = fixed_spm(values[ch])
         # The axes stay where they are in mm: their steps are counted anew, unmoved.
+        was = self.axis_steps
         self.axis_steps = self._steps(self.pos_nm)
+        self.step_shift = [self.step_shift[i] + self.axis_steps[i] - was[i] for i in range(3)]
         if "E" in values:
             self.planner.set_drive_spm([fixed_spm(values["E"])] * self.drives)
 
@@ -1129,7 +1162,9 @@ def expected(gcode_path, settings):
     steps a drive (weights: its mix in steps, each drive's weight times its steps/mm;
     None for a replayed retraction), "moved": {axes and drives
     some block steps}, "unmodelled":
-    {command: first line}, "refused": [(line, reason)]}."""
+    {command: first line}, "refused": [(line, reason)], "arcs": [every arc's geometry,
+    see Machine._arc_record], "axis_blocks": array('q') of line, X, Y, Z steps of every
+    block that steps an axis, in order}."""
     m = Machine(settings)
     intake = Intake(int(m.settings["line_buffer_bytes"]))
     unmodelled = {}
@@ -1156,4 +1191,4 @@ def expected(gcode_path, settings):
                 refused.append((number, str(e)))
     steps = m.finish()
     return {"steps": steps, "moves": m.blocks, "moved": m.moved, "unmodelled": unmodelled,
-            "refused": refused, "arcs": m.arcs}
+            "refused": refused, "arcs": m.arcs, "axis_blocks": m.axis_blocks}
