@@ -1,9 +1,10 @@
 """Whole prints on the emulated Pico against the time the same file takes in `mixstep
 sim` on the same board (where planning costs no simulated time): the rows
-chip_print_ratio_usb, chip_print_ratio_flash and chip_print_cpu_busy of `make bench`,
+chip_print_ratio_usb, chip_print_ratio_flash, chip_print_cpu_busy and
+chip_arc_print_ratio_usb of `make bench`,
 and the sim's own speed on the circles print (sim_circles_speed_ratio).
 
-    python bench/chip_print.py [circles|FILE ...] [--usb] [--flash] [--board B]
+    python bench/chip_print.py [circles|vase|arcs|FILE ...] [--usb] [--flash] [--board B]
                                                      [--set K=V ...] [--profile DIR]
 
 Prints JSON. Estimates from the emulator, and optimistic ones (see chip_rows.CAVEAT).
@@ -23,7 +24,9 @@ from mixstep import boards, emu, paths, sim, trace  # noqa: E402
 ROOT = paths.ROOT
 CIRCLES = ROOT / "testdata" / "circles_tube_emu_excerpt.gcode"
 VASE = ROOT / "testdata" / "vase_3mix_emu_excerpt.gcode"
-FILES = {"circles": CIRCLES, "vase": VASE}
+# The circles print with its circles as G2/G3 (mixstep arcfit, see its .txt).
+CIRCLES_ARCS = ROOT / "testdata" / "circles_tube_arcs_emu_excerpt.gcode"
+FILES = {"circles": CIRCLES, "vase": VASE, "arcs": CIRCLES_ARCS}
 BOARD = "pico_6drives"
 
 

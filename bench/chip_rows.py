@@ -196,6 +196,9 @@ NOTES = {
         "answers at once; _flash: printed from the emulated flash, from M24 to the ok "
         "of an M400 after 'Done printing file'. chip_print_cpu_busy: the share of the "
         "flash print's emulated time the CPU was not asleep (WFI), the worse file's. "
+        "chip_arc_print_ratio_usb: the same over USB for testdata/circles_tube_arcs_"
+        "emu_excerpt.gcode, the circles print with its circles fitted as G2/G3 "
+        "(mixstep arcfit), which the firmware cuts into segments. "
         "bench/chip_print.py. " % (BOARD, BOARD)),
     "chip_mixer_forward_new_us": (
         "Microseconds per E step on the emulated Pico (board %s) of E-only blocks of "
@@ -698,7 +701,10 @@ def chip_prints(res, work):
     for way in ("usb", "flash"):
         res["chip_print_ratio_" + way] = max(g[way + "_ratio"] for g in got)
     res["chip_print_cpu_busy"] = max(g["flash_busy"] for g in got)
-    res["chip_print_files"] = got
+    arcs = whole.ratios(whole.CIRCLES_ARCS, flash=False, board=BOARD,
+                        settings=OVERRIDES or None)
+    res["chip_arc_print_ratio_usb"] = arcs["usb_ratio"]
+    res["chip_print_files"] = got + [arcs]
 
 
 PARTS = (("planner", chip_planner), ("stepping", chip_stepping), ("print", chip_print),

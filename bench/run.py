@@ -81,6 +81,7 @@ TARGETS = {
     "chip_print_ratio_usb": ("<=", 1.05),
     "chip_print_ratio_flash": ("<=", 1.05),
     "chip_print_cpu_busy": ("<=", 0.70),
+    "chip_arc_print_ratio_usb": ("<=", 1.02),
     "sim_circles_speed_ratio": (">=", 0.95),
 }
 

@@ -162,6 +162,40 @@ def test_a_mix_gives_every_drive_the_same_steps_as_the_same_path_in_lines(sim_pr
     assert by_arc["x"] == 50 * SPM and sum(by_arc["e%d" % d] for d in range(3)) > 0
 
 
+def _helix_as_lines(start_lines, z0_mm, z1_mm, e_nm, n, end):
+    """A helix round (57, 50) of radius 7 from (50, 50, z0) to `end` as G1 lines
+    through the arc's segment ends (absolute E, split as the firmware splits it)."""
+    lines = list(start_lines)
+    z_nm = round((z1_mm - z0_mm) * MM)
+    for i in range(1, n + 1):
+        a = math.pi + 2 * math.pi * i / n
+        x, y = (57 + 7 * math.cos(a), 50 + 7 * math.sin(a)) if i < n else end
+        z = z0_mm + (z_nm * i // n) / MM
+        lines.append("G1 X%.6f Y%.6f Z%.6f E%.6f" % (x, y, z, (e_nm * i // n) / MM))
+    return lines
+
+
+@pytest.mark.parametrize("settings", [{}, {"retract_policy": 2}], ids=["equal", "replay"])
+def test_a_gradient_and_a_retraction_work_on_a_helix_as_on_its_lines(sim_printer, settings):
+    """A gradient along Z mixes each segment by its height, and a retraction after it
+    (then an unretraction) pulls and pushes each drive back exactly: as the same path
+    sent as G1 lines does, drive by drive."""
+    start = ["M302 P1", "M211 S0", "M163 S0 P1", "M164 S0", "M163 S1 P1", "M164 S1",
+             "T0", "G1 X50 Y50 Z1 F3000", "M166 A1 Z2 I0 J1 S1"]
+    after = ["G1 E2.2 F1800", "G1 E2.5"]
+    arc = start + ["G3 X50 Y50 Z2 I7 J0 E2.5"] + after
+    lines = _helix_as_lines(start, 1, 2, 2500000, 72, (50, 50)) + after
+    counts = []
+    for gcode in (arc, lines):
+        p = sim_printer(settings=settings)
+        for line in gcode:
+            assert p.send(line)[-1] == "ok", line
+        counts.append(p.finish()["steps"])
+    assert counts[0] == counts[1]
+    e = [counts[0]["e%d" % d] for d in range(2)]
+    assert e[0] > 0 and e[1] > 0  # the gradient's two tools both printed
+
+
 def arcs_gcode(path):
     """A print of arcs from known geometry: circles, halves by R, a helix, G18/G19
     turns, relative E, a retraction."""
