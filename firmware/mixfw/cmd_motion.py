@@ -2,7 +2,6 @@
 # M400, M17/M18/M84.
 # Handlers parse and check; the planner does the work.
 from array import array
-from math import atan2, pi, sqrt
 from mixfw.gcode import GcodeError, letter_index
 from mixfw.filament import nm_from_mm, scaled_round, spm_digits, steps_per_nm, NM_PER_MM
 from mixfw.ramp import array_offsets
@@ -74,9 +73,9 @@ _R_INDEX = const(17)
 # an I J K centre may be this much further from the end than from the start: what a
 # slicer's 3 decimals lose. Beyond it the arc is refused.
 _ARC_SLACK_NM = const(10000)
-# Segments are figured in floats: a segment count within this of a whole number
-# counts as that number, so a quarter circle in 72 a circle is 18 on every port.
-_ARC_SLACK = 0.001
+# Segments are figured in floats: a segment count within 0.001 of a
+# whole number counts as that number, so a quarter circle in 72 a circle is 18 on
+# every port.
 # The CORDIC gain of _ARC_ITERATIONS turns, times 2**30.
 _ARC_K30 = const(652032874)
 _ARC_ITERATIONS = const(28)
@@ -545,6 +544,9 @@ class Motion:
     # Bytecode, unlike g1: native code would take the chips' heap about 7 kB more, and
     # an arc's segments are long enough (a few ms each) for its loop's cost.
     def g2(self, line):
+        # Imported here: names in the module's globals would slow every G1 line's
+        # lookups of the others.
+        from math import atan2, pi, sqrt
         present = line.present
         if (present >> _F_INDEX) & 1:
             f = line.float_at(_F_INDEX, -1.0)
@@ -646,11 +648,11 @@ class Motion:
         least_mm, most_mm, per_turn = self._arc_mm
         turned = abs(angle) / _ARC_TURN
         length_mm = sqrt((2 * pi * r_nm * turned) ** 2 + float(along) * along) / NM_PER_MM
-        x = length_mm / most_mm - _ARC_SLACK
+        x = length_mm / most_mm - 0.001
         n = int(x) + (x > int(x))
-        x = turned * per_turn - _ARC_SLACK
+        x = turned * per_turn - 0.001
         n = max(n, int(x) + (x > int(x)), 1)
-        n = max(1, min(n, int(length_mm / least_mm + _ARC_SLACK)))
+        n = max(1, min(n, int(length_mm / least_mm + 0.001)))
         arc = self._arc
         if n > 1:
             # The start's vector from the centre, in units of 2**shift nm below 2**29,

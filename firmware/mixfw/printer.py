@@ -185,10 +185,9 @@ class Channel:
     def put(self, printer, n):
         """chunk[:n] into the ring; an emergency command acts as its line ends."""
         intake = self.intake
-        chunk = self.chunk
         at = 0
         while at < n:
-            at = intake.put(chunk, at, n)
+            at = intake.put(self.chunk, at, n)
             if at >= SCANNED:
                 number = _emergency(intake.scan, at // SCANNED)
                 at %= SCANNED
@@ -420,16 +419,16 @@ class Printer:
     def _check_numbered(self, ch, buf, n, f):
         """_check_protocol's lines with an N word or a checksum (f: _frame's answer),
         as hosts send every line of a print."""
-        at = f[_STAR]
-        if at >= 0:
+        # Locals and stack within 11 words, or the frame comes from the heap.
+        if f[_STAR] >= 0:
             if not f[_SUM_OK]:
                 raise Resend("checksum mismatch, Last Line: %d" % ch.last_n)
-            n = at  # the words end at the *
+            n = f[_STAR]  # the words end at the *
         if not f[_N_WORD]:
             raise Resend("No Line Number with checksum, Last Line: %d" % ch.last_n)
         if f[_M_NUMBER] == 110:  # M110 sets the number: its own N is not checked
             return self.parser.parse(buf, n)
-        if at < 0:
+        if f[_STAR] < 0:
             raise Resend("No Checksum with line number, Last Line: %d" % ch.last_n)
         if f[_N_WORD] != 1:
             raise Resend("malformed line number, Last Line: %d" % ch.last_n)
