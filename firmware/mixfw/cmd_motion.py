@@ -1,5 +1,6 @@
 # Motion commands: G0/G1, G2/G3, G4, G17/G18/G19, G28, G90/G91, G92, G20/G21, M82/M83,
 # M400, M17/M18/M84.
+from math import atan2, pi, sqrt
 # Handlers parse and check; the planner does the work.
 from array import array
 from mixfw.gcode import GcodeError, letter_index
@@ -544,9 +545,6 @@ class Motion:
     # Bytecode, unlike g1: native code would take the chips' heap about 7 kB more, and
     # an arc's segments are long enough (a few ms each) for its loop's cost.
     def g2(self, line):
-        # Imported here: names in the module's globals would slow every G1 line's
-        # lookups of the others.
-        from math import atan2, pi, sqrt
         present = line.present
         if (present >> _F_INDEX) & 1:
             f = line.float_at(_F_INDEX, -1.0)
