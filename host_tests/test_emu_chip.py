@@ -282,7 +282,8 @@ def test_print_from_the_emulated_flash(chip, tmp_path):
     assert c.command("M24") == ["ok"]
     c.run(match="Done printing file", max_s=20)
     assert c.command("M27")[0] == "SD printing byte %d/%d" % ((part.stat().st_size,) * 2)
-    assert c.command("M400") == ["ok"]
+    # The queue's last moves may outlast M113's 2 s: busy lines, then ok.
+    assert set(c.command("M400", max_s=30)) <= {"busy: processing", "ok"}
     errors = [t for t in c.lines_since(0) if t.startswith("Error:")]
     assert errors == []
     c.close()
@@ -322,12 +323,13 @@ def test_the_six_drive_board_boots_with_room_in_its_heap(settings):
     """The imports leave the Pico's heap in pieces; the step loop's memory and, with
     pio_dma, its DMA ring need whole blocks of a few kB (the board's 10 us ticks need
     the largest ring). Booted as deployed, and with the timer fallback, the firmware
-    answers and keeps 40 kB free after a collection for printing."""
+    answers and keeps 32 kB free after a collection for printing (with its 48-block
+    queue and the arc code: about 34 kB)."""
     _emulator_or_skip()
     with emu.Chip("pico_6drives", settings=settings, max_emu_s=30, max_wall_s=600) as c:
         diag = [t for t in c.command("M122") if t.startswith("echo:underruns")]
     free = int(diag[0].split("mem_free_collected:")[1].split()[0])
-    assert free >= 40000, diag
+    assert free >= 32000, diag
 
 
 def test_the_program_counters_profile_adds_up_to_the_planners_time(tmp_path):
