@@ -805,9 +805,9 @@ class Machine:
             q.add_move(start, target_steps, e_nm, self.line)
         self.axis_steps = list(target_steps)
 
-    def g1(self, ln):
-        if ln.has("F") and ln.value("F", -1) <= 0:
-            raise Refused("feed rate must be > 0")
+    def _end(self, ln):
+        """A move's X Y Z target (nm), the bits of the axes it names, and its E target
+        (nm), as G90/G91 and M82/M83 read them."""
         target = list(self.pos_nm)
         moved = 0
         for i, ch in enumerate("XYZ"):
@@ -819,6 +819,12 @@ class Machine:
         if ln.has("E"):
             v = nm(ln.value("E"))
             target_e = v if self.absolute_e else target_e + v
+        return target, moved, target_e
+
+    def g1(self, ln):
+        if ln.has("F") and ln.value("F", -1) <= 0:
+            raise Refused("feed rate must be > 0")
+        target, moved, target_e = self._end(ln)
         if not moved and not ln.has("E"):
             return
         if self.soft_limits:
@@ -853,17 +859,7 @@ class Machine:
         if ln.has("R") == centred:
             raise Refused("an arc needs R or I J K, not both or neither")
         turns = ln.int("P", 0, lo=0, hi=1000)
-        target = list(self.pos_nm)
-        moved = 0
-        for i, ch in enumerate("XYZ"):
-            if ln.has(ch):
-                v = nm(ln.value(ch))
-                target[i] = v if self.absolute else target[i] + v
-                moved |= 1 << i
-        target_e = self.e_nm
-        if ln.has("E"):
-            v = nm(ln.value("E"))
-            target_e = v if self.absolute_e else target_e + v
+        target, moved, target_e = self._end(ln)
         e_nm = target_e - self.e_nm
         if e_nm and not -self.max_extrude_nm <= e_nm <= self.max_extrude_nm:
             raise Refused("extrusion over max_extrude_mm")
