@@ -28,10 +28,28 @@ def letter_index(ch):
     return (ord(ch) & 0x1F) - 1
 
 
+# What _scan leaves in its result words besides the parameter words.
+_R_PRESENT = const(0)
+_R_VALUED = const(1)
+_R_LETTER = const(2)  # command letter's code (G, M or T), 0 for none
+_R_NUMBER = const(3)
+_R_KEY = const(11)  # command_key of the command, 0 for none
+_R_HELD = const(12)  # 1 while the Line holds text arguments (see parse)
+_R_HAS_N = const(4)
+_R_N = const(5)
+_R_ARGS = const(6)  # raw-argument commands: index of the text after the command; else -1
+_R_AT = const(7)  # the letter or character an error is about
+_R_NEG = const(8)  # an unsupported command's sign, mantissa and decimals
+_R_M = const(9)
+_R_D = const(10)
+_R_WORDS = const(13)
+
+
 class Line:
     """The parsed words of one line. Owned by the parser and reused for every line."""
 
-    def __init__(self):
+    def __init__(self, result):
+        self._result = result  # the parser's result words: the N word's
         self.mant = array("i", bytes(4 * 26))
         self.decimals = array("b", bytes(26))
         self.present = 0  # bit per letter A..Z
@@ -39,9 +57,18 @@ class Line:
         self.letter = ""  # command letter G, M or T; "" for a blank line
         self.number = 0
         self.key = 0  # command_key(letter, number); 0 for a blank line
-        self.has_line_number = False
-        self.line_number = 0  # the leading N word (hosts send N-1 with M110)
         self.args_text = ""  # for raw-argument commands: the text after the command
+
+    # The leading N word is read from the parser's result words when asked (only M110
+    # asks): hosts number every line, and storing it would cost each one a call.
+    @property
+    def has_line_number(self):
+        return self._result[_R_HAS_N] == 1
+
+    @property
+    def line_number(self):
+        """The leading N word's number (hosts send N-1 with M110), 0 if none."""
+        return self._result[_R_N]
 
     def has(self, ch):
         return (self.present >> letter_index(ch)) & 1
@@ -95,21 +122,6 @@ class Line:
             raise GcodeError("missing parameter %s" % ch)
 
 
-# What _scan leaves in its result words besides the parameter words.
-_R_PRESENT = const(0)
-_R_VALUED = const(1)
-_R_LETTER = const(2)  # command letter's code (G, M or T), 0 for none
-_R_NUMBER = const(3)
-_R_KEY = const(11)  # command_key of the command, 0 for none
-_R_HELD = const(12)  # 1 while the Line holds an N word or text arguments (see parse)
-_R_HAS_N = const(4)
-_R_N = const(5)
-_R_ARGS = const(6)  # raw-argument commands: index of the text after the command; else -1
-_R_AT = const(7)  # the letter or character an error is about
-_R_NEG = const(8)  # an unsupported command's sign, mantissa and decimals
-_R_M = const(9)
-_R_D = const(10)
-_R_WORDS = const(13)
 
 # _scan's verdicts on bad input.
 _E_UNCLOSED = const(1)
@@ -121,8 +133,8 @@ _E_NEEDS_NUMBER = const(6)
 _E_UNSUPPORTED = const(7)
 _E_FIRST = const(8)
 _E_TWICE = const(9)
-# Not bad input: the line has an N word or text arguments, or the line before had
-# them (parse stores them then).
+# Not bad input: the line has text arguments, or the line before had them (parse
+# stores them then).
 _RARE = const(16)
 
 
@@ -222,7 +234,6 @@ def _scan(buf: ptr8, n: int, words) -> int:
                 if not has_number or d:
                     return _E_LINE_NUMBER
                 r[_R_HAS_N] = 1
-                rare = 1
                 r[_R_N] = -m if neg else m
                 first = 1
                 continue
@@ -279,10 +290,10 @@ class Parser:
         """raw_commands: (letter, number) pairs whose arguments are text, such as file
         names (M23 name.gcode) or option names (M926 Isteps_per_mm_x V80); for those
         the words after the command are not parsed and line.args_text holds them."""
-        self.line = Line()
+        self.result = array("i", bytes(4 * _R_WORDS))
+        self.line = Line(self.result)
         keys = [command_key(l, n) for l, n in raw_commands]
         self.raw = array("i", [len(keys)] + keys)
-        self.result = array("i", bytes(4 * _R_WORDS))
         self._words = (self.line.mant, self.line.decimals, self.raw, self.result)
 
     def parse(self, buf, n):
@@ -312,15 +323,12 @@ class Parser:
         return ln
 
     def _rare_words(self, buf, n):
-        """The N word and the text arguments, which are rare: stored only where a line
-        has them or the line before had them (_scan answers _RARE then)."""
-        ln = self.line
+        """The text arguments, which are rare: stored only where a line has them or
+        the line before had them (_scan answers _RARE then)."""
         r = self.result
-        ln.has_line_number = r[_R_HAS_N] == 1
-        ln.line_number = r[_R_N]
-        r[_R_HELD] = 1  # stays so if the text is refused: the next line clears them
+        r[_R_HELD] = 1  # stays so if the text is refused: the next line clears it
         self.args_text(buf, n)
-        r[_R_HELD] = 1 if ln.has_line_number or ln.args_text else 0
+        r[_R_HELD] = 1 if self.line.args_text else 0
 
     def args_text(self, buf, n):
         """The text after a raw-argument command, up to a comment or checksum."""

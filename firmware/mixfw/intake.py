@@ -33,16 +33,16 @@ SCANNED = const(0x10000)  # _put's answer: at + scanned bytes * SCANNED
 
 
 @micropython.viper
-def _put(ring_buf, st_buf, src_buf, at: int, end: int, scan_buf) -> int:
+def ring_put(rings, src_buf, at: int, end: int) -> int:
     """src[at:end] into the ring, up to and including the first newline; the first
-    SCAN_BYTES of the line also into scan. Returns where it stopped, plus, where a line
+    SCAN_BYTES of the line also into scan. rings: an Intake's (ring, st, scan). Returns where it stopped, plus, where a line
     ended there and an M (or m) is among its scanned bytes, their count times
     SCANNED: only such a line can be an emergency command, and most lines are G1, told
     here without a call. The caller leaves room for the bytes."""
-    ring = ptr8(ring_buf)
-    st = ptr32(st_buf)
+    ring = ptr8(rings[0])
+    st = ptr32(rings[1])
     src = ptr8(src_buf)
-    scan = ptr8(scan_buf)
+    scan = ptr8(rings[2])
     tail = st[_HEAD] + st[_COUNT]
     scan_n = st[_SCAN_N]
     m_seen = st[_SCAN_M]
@@ -116,6 +116,7 @@ class Intake:
         self.ring = bytearray(_RX_BYTES)
         self.scan = bytearray(_SCAN_BYTES)
         self.st = array("i", [0] * _WORDS)
+        self.rings = (self.ring, self.st, self.scan)  # as ring_put takes them
 
     @property
     def n(self):
@@ -139,7 +140,7 @@ class Intake:
         first newline. Returns where it stopped (below SCANNED); if a line ended there
         that may be an emergency command, plus SCANNED times the count of its first
         bytes in scan."""
-        return _put(self.ring, self.st, src, at, end, self.scan)
+        return ring_put(self.rings, src, at, end)
 
     def fill_from(self, f):
         """For a file: its next bytes into the ring, which must be empty (next_line

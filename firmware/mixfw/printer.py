@@ -12,13 +12,19 @@
 import time
 from array import array
 from mixfw.gcode import Parser, GcodeError, WordsError, command_key
-from mixfw.intake import Intake, LINE_OK, LINE_CUT, SCANNED
+from mixfw.intake import Intake, LINE_OK, LINE_CUT, SCANNED, ring_put
 
 _BUSY_EVERY_MS = const(2000)
 _REPORT_EVERY_MS = const(1000)  # temperatures while a heating wait runs, as Marlin
 _BACKGROUND_EVERY_MS = const(10)  # background tasks at least this often, however busy
 _FILE_LINES_PER_READ = const(4)  # a file's lines between reads of the channels
 _ANY_TOOL = command_key("T", -1)  # the handler of every T<n>
+# intake.py's: its ring's size and the words of its state array read here.
+_RX_BYTES = const(256)
+_ST_COUNT = const(1)
+_ST_LEN = const(3)
+_ST_FAULT = const(4)
+_ST_IN_COMMENT = const(6)
 
 
 def run_each(hooks):
@@ -53,14 +59,19 @@ _N_VALUE = const(2)  # the N word's number
 _N_WORD = const(3)  # 0: no N word; 1: N and a number; 2: N and no number
 _M_NUMBER = const(4)  # the M command's number after the N word, or -1
 _FRAME_WORDS = const(5)
+# _frame's verdicts, besides where the * is of the line numbered next.
+_PLAIN = const(-1)  # no N word, no checksum: a person typing
+_OTHER = const(-2)  # anything else: see Printer._check_numbered
 
 
 @micropython.viper
-def _frame(buf: ptr8, n: int, out: ptr32) -> int:
+def _frame(buf: ptr8, n: int, out: ptr32, last_n: int) -> int:
     """A line's N word, its command's M number and its checksum, read in one pass: a
     host printing a file numbers and checks every line, and each helper called from
-    bytecode, or a loop there, costs the chip tens of us. Returns where the command
-    starts. Numbers of more than nine digits are not read as numbers."""
+    bytecode, or a loop there, costs the chip tens of us. For the line a host streams,
+    numbered last_n + 1 with its checksum right (not M110), returns where its * is
+    (where its words end); _PLAIN for a line with neither N nor *; else _OTHER. Numbers of more than nine digits are not
+    read as numbers."""
     i = 0
     while i < n and (buf[i] == 32 or buf[i] == 9):
         i += 1
@@ -87,7 +98,6 @@ def _frame(buf: ptr8, n: int, out: ptr32) -> int:
             out[_N_WORD] = 2
         while i < n and (buf[i] == 32 or buf[i] == 9):
             i += 1
-    start = i
     number = -1
     if i < n and (buf[i] == 77 or buf[i] == 109):
         i += 1
@@ -136,7 +146,11 @@ def _frame(buf: ptr8, n: int, out: ptr32) -> int:
             i += 1
         if ok and value == cs:
             out[_SUM_OK] = 1
-    return start
+            if out[_N_WORD] == 1 and number != 110 and out[_N_VALUE] == last_n + 1:
+                return star
+    elif out[_N_WORD] == 0:
+        return _PLAIN
+    return _OTHER
 
 
 _EMERGENCY = array("i", bytes(4 * _FRAME_WORDS))
@@ -147,7 +161,7 @@ def _emergency(scan, n):
     command, else 0: M112, M108, M410 and M876, acted on as soon as their line arrives,
     before the lines queued ahead of them (when their turn comes they do nothing
     more)."""
-    _frame(scan, n, _EMERGENCY)
+    _frame(scan, n, _EMERGENCY, 0)
     number = _EMERGENCY[_M_NUMBER]
     if number == 112 or number == 108 or number == 410 or number == 876:
         return number
@@ -165,12 +179,17 @@ class Channel:
         self.last_n = 0  # last line number accepted
         self.open = True
         self.lockstep = getattr(console, "blocking", False)
-        # The console's own write, one call less for every `ok`.
+        # The console's own write and the intake's own next_line: one call less for
+        # every line.
         self.write = console.write
+        self.next_line = self.intake.next_line
 
     def pump(self, printer, block=False):
         """Move waiting bytes into the ring. Returns the count read."""
-        free = self.intake.room()
+        # The ring's calls written out here: each bytecode call costs the chip about
+        # 25 us, and a host's line passes here every time. Locals and stack within 11
+        # words (see Printer.answer).
+        free = _RX_BYTES - self.intake.st[_ST_COUNT]
         if free <= 0 or not self.open:
             return 0
         n = self.console.readinto(self.chunk_mv if free >= 64 else self.chunk_mv[:free],
@@ -178,25 +197,16 @@ class Channel:
         if n < 0:
             self.open = False
             return 0
-        if n:
-            self.put(printer, n)
-        return n
-
-    def put(self, printer, n):
-        """chunk[:n] into the ring; an emergency command acts as its line ends."""
-        intake = self.intake
         at = 0
         while at < n:
-            at = intake.put(self.chunk, at, n)
+            at = ring_put(self.intake.rings, self.chunk, at, n)
             if at >= SCANNED:
-                number = _emergency(intake.scan, at // SCANNED)
+                # An emergency command acts as its line ends.
+                free = _emergency(self.intake.scan, at // SCANNED)  # its M number
                 at %= SCANNED
-                if number:
-                    printer.emergency(number)
-
-    def next_line(self):
-        """Feed ring bytes to the intake until a line ends: its status, or 0."""
-        return self.intake.next_line()
+                if free:
+                    printer.emergency(free)
+        return n
 
 
 class Printer:
@@ -410,15 +420,20 @@ class Printer:
     def _check_protocol(self, ch, buf, n):
         """Check a line's number and checksum before anything else looks at it.
         Returns the parsed line, or None for a repeat of a line already executed."""
-        f = self._framing
-        _frame(buf, n, f)
-        if f[_STAR] < 0 and not f[_N_WORD]:
+        # Locals and stack within 11 words (see answer).
+        end = _frame(buf, n, self._framing, ch.last_n)
+        if end >= 0:
+            # Taken now: a line that arrived intact uses up its number even if it is
+            # bad G-code, so the host does not send it again.
+            ch.last_n = self._framing[_N_VALUE]
+            return self.parser.parse(buf, end)
+        if end == _PLAIN:
             return self.parser.parse(buf, n)
-        return self._check_numbered(ch, buf, n, f)
+        return self._check_numbered(ch, buf, n, self._framing)
 
     def _check_numbered(self, ch, buf, n, f):
-        """_check_protocol's lines with an N word or a checksum (f: _frame's answer),
-        as hosts send every line of a print."""
+        """_check_protocol's other lines with an N word or a checksum (f: _frame's
+        answer): M110, repeats and transmission errors."""
         # Locals and stack within 11 words, or the frame comes from the heap.
         if f[_STAR] >= 0:
             if not f[_SUM_OK]:
@@ -491,18 +506,21 @@ class Printer:
         if status != LINE_OK and intake.cut_text(status) != LINE_OK:
             raise GcodeError(intake.error_text(status))
         if self.sink is not None:
-            suffix = self._to_sink(ch, intake.buf, intake.n)
+            suffix = self._to_sink(ch, intake.buf, intake.st[_ST_LEN])
         else:
             # The parsed line, then the text its handler gives: one local for both
             # keeps the frame within 11 words.
-            suffix = self._check_protocol(ch, intake.buf, intake.n)
+            suffix = self._check_protocol(ch, intake.buf, intake.st[_ST_LEN])
             if suffix is not None:
                 suffix = self.run_line(suffix)
         self.done(ch, suffix)
 
     def done(self, ch, text):
         """ch's line has run: `ok`, with text after it if any."""
-        ch.intake.take()
+        st = ch.intake.st  # intake.take(), written out: a call less every line
+        st[_ST_LEN] = 0
+        st[_ST_FAULT] = 0
+        st[_ST_IN_COMMENT] = 0
         if text:
             ch.write("ok " + text + "\n")
         else:
@@ -580,8 +598,12 @@ class Printer:
             # a line that waits for the planner reads them as it waits.
             if not printing or unpumped >= _FILE_LINES_PER_READ:
                 unpumped = 0
-                self.pump_all()
-                self._quick_stop_if_asked()
+                if self.listeners:  # pump_all(), written out: a call less every line
+                    self.accept()
+                for ch in self.channels:
+                    ch.pump(self)
+                if self._stop_pending:
+                    self._quick_stop_if_asked()
                 did = False
                 for ch in self.channels:
                     status = ch.next_line()
@@ -592,7 +614,9 @@ class Printer:
                             self.report(ch, err)
                         did = True
                 if did:
-                    self._background_if_due()
+                    if time.ticks_diff(time.ticks_ms(), self._background_at_ms) >= \
+                            _BACKGROUND_EVERY_MS:
+                        self._run_background()
                     continue
                 job = self.job  # an emergency command read may have stopped it
                 printing = job is not None and not job.paused
