@@ -85,6 +85,25 @@ def test_a_g1_line_takes_nothing_from_the_heap_not_even_a_frame(mp, tmp_path, wa
     assert [raw for raw, planned in plain if planned] == []
 
 
+def test_a_spiral_vase_line_takes_nothing_from_the_heap(mp, tmp_path):
+    """A spiral vase (PrusaSlicer's, the emulator's print bench file) moves Z on every
+    line at a speed past Z's own limits: Z's tiny share of the path binds nothing, and
+    its numbered lines, from their bytes' arrival to their `ok`, take nothing from the
+    heap (the first are left out while the queue fills)."""
+    vase = paths.ROOT / "testdata" / "vase_3mix_emu_excerpt.gcode"
+    lines = [raw for raw in vase.read_text().splitlines()[1000:1300]
+             if raw.split(";")[0].strip()]
+    assert sum(1 for raw in lines if raw.startswith("G1 Z")) > 150
+    got, errors, _ = mp.script_json(
+        "heap_g1_line", stdin=json.dumps(["numbered", str(tmp_path), numbered(lines)]).encode())
+    assert errors == 0
+    # A new feed rate works out its floats, and so does the line after it, whose
+    # SLOWDOWN starts from the floats the line before changed.
+    assert [raw for i, (raw, (parsed, planned)) in enumerate(zip(lines, got))
+            if i >= FILLED and (parsed or planned)
+            and " F" not in raw and " F" not in lines[i - 1]] == []
+
+
 def test_the_main_loops_background_takes_nothing_from_the_heap_between_control_periods(mp):
     """The background tasks run at every turn of the main loop and of every wait, and
     between lines at least every 10 ms: between two control periods they take
@@ -97,8 +116,8 @@ def test_the_main_loops_background_takes_nothing_from_the_heap_between_control_p
 # _limited_floats and what they call. Their floats take a block each from the heap,
 # found at once; a frame takes several, found only after a search through the heap's
 # holes (on the emulated Pico's fragmented heap, hundreds of microseconds a call).
-FEED_PATH = ("_base_floats", "_memo_load", "_work_base_floats", "_within", "_min_bits",
-             "_limited_floats", "_axis_limit", "_slowdown", "_set_floats", "_new_slot")
+FEED_PATH = ("_base_floats", "_memo_load", "_work_base_floats", "_within", "_shares",
+             "_min_bits", "_limited_floats", "_axis_limit", "_slowdown", "_set_floats", "_new_slot")
 
 def test_a_new_feed_rate_takes_no_frame_from_the_heap(mp):
     """The planner's functions a line runs when it brings a new feed rate or where a

@@ -147,7 +147,11 @@ _AT_XYZ = const(94)  # and Planner.target_steps
 # has its direction); 0 after a stop, which _plan_move's homing moves are too.
 _S_JOINS = const(95)
 _S_MEMO_NEXT = const(96)  # where the memo's oldest entry starts (see _work_base_floats)
-_S_WORDS = const(97)
+# X Y Z E: how much of the path an axis whose limits the speed is not within may take
+# and still not bind, 2**14 over the factor the speed or acceleration is past them (see
+# _shares).
+_S_SHARES = const(97)
+_S_WORDS = const(101)
 
 
 # _plan_move's answers besides 1 (queued) and 0 (shorter than a step: nothing to do),
@@ -184,8 +188,9 @@ _S_F_BASE = const(12)  # which floats hold _base_floats' own: _F_BASE_ACCEL the
 _F_BASE_ACCEL = const(2)  # acceleration's, _F_BASE_BOTH its speed's too
 _F_BASE_BOTH = const(3)
 _MEMO = const(8)  # pairs of speed and acceleration _base_floats keeps, each as
-_MEMO_WORDS = const(7)  # speed, accel, its _S_WITHIN, _S_MIN_BITS and the floats
-# _set_floats works out: _F_NOMINAL2, _F_ACCEL_TICK, _GF_ACCEL_JD
+_MEMO_WORDS = const(8)  # speed, accel, its _S_WITHIN, _S_MIN_BITS, the floats
+# _set_floats works out (_F_NOMINAL2, _F_ACCEL_TICK, _GF_ACCEL_JD) and _S_SHARES'
+_SHARE_ONE = const(0x4000)  # _S_SHARES' fixed point
 
 
 @micropython.viper
@@ -307,6 +312,15 @@ def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
             elif within & 16:
                 if (c3 << 3) <= dist:
                     over ^= 8
+        if over:
+            # Such an axis binds only if its share of the path, c / dist, is over its
+            # _S_SHARES word / _SHARE_ONE (a spiral vase's Z on every line): tested on
+            # the top bits, leaning to binding.
+            dist = geo[_G_DIST] >> 11
+            for i in range(4):
+                if (over >> i) & 1 and ((geo[_G_C + i] >> 11) + 1) * _SHARE_ONE <= \
+                        dist * words[_S_SHARES + i]:
+                    over ^= 1 << i
         slow = 0
         if words[_S_MIN_BITS] > dist_bits:
             # Marlin's bounds: 2 to half the queue's blocks waiting.
@@ -486,6 +500,13 @@ product = ramp.product
 
 class PlanError(ValueError):
     pass
+
+
+def _share(feed_ratio, accel_ratio):
+    """_SHARE_ONE over the factor by which a speed or acceleration is past an axis's
+    limits (each ratio to its limit), at most _SHARE_ONE."""
+    past = max(feed_ratio, accel_ratio)
+    return _SHARE_ONE if past <= 1 else int(_SHARE_ONE / past)
 
 
 def lk_words(queue_blocks):
@@ -825,6 +846,11 @@ class Planner:
         f[_F_NOMINAL2] = memo[at + 4]
         f[_F_ACCEL_TICK] = memo[at + 5]
         self._geo_f[_GF_ACCEL_JD] = memo[at + 6]
+        f = memo[at + 7]  # its _S_SHARES
+        words[_S_SHARES] = f[0]
+        words[_S_SHARES + 1] = f[1]
+        words[_S_SHARES + 2] = f[2]
+        words[_S_SHARES + 3] = f[3]
 
     def _work_base_floats(self, speed, accel):
         """_base_floats' words and floats for the pair, worked out into the memo's
@@ -841,6 +867,7 @@ class Planner:
         memo[at + 4] = self._plan_f[_F_NOMINAL2]
         memo[at + 5] = self._plan_f[_F_ACCEL_TICK]
         memo[at + 6] = self._geo_f[_GF_ACCEL_JD]
+        memo[at + 7] = Planner._shares(self, speed, accel)
         memo[at] = speed
         memo[at + 1] = accel
         return at
@@ -857,6 +884,18 @@ class Planner:
         if speed <= 8 * max_feed[3] and accel <= 8 * max_accel[3]:
             within |= 16
         return within
+
+    def _shares(self, speed, accel):
+        """_S_SHARES' words of speed and accel, for X Y Z E: the axis binds only where
+        its share of the path is over its word over _SHARE_ONE."""
+        out = array("i", bytes(16))
+        feed = self.max_feed_mm_s
+        most = self.max_accel_mm_s2
+        out[0] = _share(speed / feed[0], accel / most[0])
+        out[1] = _share(speed / feed[1], accel / most[1])
+        out[2] = _share(speed / feed[2], accel / most[2])
+        out[3] = _share(speed / feed[3], accel / most[3])
+        return out
 
     def _min_bits(self, speed):
         """SLOWDOWN's shortest length at speed, as geometry.lengths gives a length."""

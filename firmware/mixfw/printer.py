@@ -19,12 +19,12 @@ _REPORT_EVERY_MS = const(1000)  # temperatures while a heating wait runs, as Mar
 _BACKGROUND_EVERY_MS = const(10)  # background tasks at least this often, however busy
 _FILE_LINES_PER_READ = const(4)  # a file's lines between reads of the channels
 _ANY_TOOL = command_key("T", -1)  # the handler of every T<n>
-# intake.py's: its ring's size and the words of its state array read here.
+# intake.py's (copies): its ring's size and the words of its state array read here.
 _RX_BYTES = const(256)
-_ST_COUNT = const(1)
-_ST_LEN = const(3)
-_ST_FAULT = const(4)
-_ST_IN_COMMENT = const(6)
+_COUNT = const(1)
+_LEN = const(3)
+_FAULT = const(4)
+_IN_COMMENT = const(6)
 
 
 def run_each(hooks):
@@ -189,7 +189,7 @@ class Channel:
         # The ring's calls written out here: each bytecode call costs the chip about
         # 25 us, and a host's line passes here every time. Locals and stack within 11
         # words (see Printer.answer).
-        free = _RX_BYTES - self.intake.st[_ST_COUNT]
+        free = _RX_BYTES - self.intake.st[_COUNT]
         if free <= 0 or not self.open:
             return 0
         n = self.console.readinto(self.chunk_mv if free >= 64 else self.chunk_mv[:free],
@@ -506,11 +506,11 @@ class Printer:
         if status != LINE_OK and intake.cut_text(status) != LINE_OK:
             raise GcodeError(intake.error_text(status))
         if self.sink is not None:
-            suffix = self._to_sink(ch, intake.buf, intake.st[_ST_LEN])
+            suffix = self._to_sink(ch, intake.buf, intake.st[_LEN])
         else:
             # The parsed line, then the text its handler gives: one local for both
             # keeps the frame within 11 words.
-            suffix = self._check_protocol(ch, intake.buf, intake.st[_ST_LEN])
+            suffix = self._check_protocol(ch, intake.buf, intake.st[_LEN])
             if suffix is not None:
                 suffix = self.run_line(suffix)
         self.done(ch, suffix)
@@ -518,9 +518,9 @@ class Printer:
     def done(self, ch, text):
         """ch's line has run: `ok`, with text after it if any."""
         st = ch.intake.st  # intake.take(), written out: a call less every line
-        st[_ST_LEN] = 0
-        st[_ST_FAULT] = 0
-        st[_ST_IN_COMMENT] = 0
+        st[_LEN] = 0
+        st[_FAULT] = 0
+        st[_IN_COMMENT] = 0
         if text:
             ch.write("ok " + text + "\n")
         else:
