@@ -313,12 +313,6 @@ class Printer:
         for fn in self.background:
             fn(now)
 
-    def _background_if_due(self):
-        """Between lines that need no wait: heater control, the step-loop check and the
-        watchdog must not starve while a host streams such lines back to back."""
-        if time.ticks_diff(time.ticks_ms(), self._background_at_ms) >= _BACKGROUND_EVERY_MS:
-            self._run_background()
-
     def pump_all(self):
         if self.listeners:
             self.accept()
@@ -581,8 +575,11 @@ class Printer:
         intake = job.intake
         if status != LINE_OK and intake.cut_text(status) != LINE_OK:
             raise GcodeError(intake.error_text(status))
-        self.run_line(self.parser.parse(intake.buf, intake.n))
-        intake.take()
+        self.run_line(self.parser.parse(intake.buf, intake.st[_LEN]))
+        job = intake.st  # intake.take(), written out as in done()
+        job[_LEN] = 0
+        job[_FAULT] = 0
+        job[_IN_COMMENT] = 0
 
     # --- the main loop ---
     def serve(self):
@@ -613,14 +610,12 @@ class Printer:
                         except Exception as err:
                             self.report(ch, err)
                         did = True
-                if did:
-                    if time.ticks_diff(time.ticks_ms(), self._background_at_ms) >= \
-                            _BACKGROUND_EVERY_MS:
-                        self._run_background()
-                    continue
-                job = self.job  # an emergency command read may have stopped it
-                printing = job is not None and not job.paused
-            if printing:
+                if not did:
+                    job = self.job  # an emergency command read may have stopped it
+                    printing = job is not None and not job.paused
+            else:
+                did = False
+            if printing and not did:
                 unpumped += 1
                 try:
                     self.run_job_line()
@@ -629,7 +624,14 @@ class Printer:
                     if not isinstance(err, Halted):
                         self.broadcast("Error:%s (file %s, line %d)" % (err, job.name, job.line))
                         job.paused = True
-                self._background_if_due()
+                did = True
+            if did:
+                # Between lines that need no wait: heater control, the step-loop check
+                # and the watchdog must not starve while lines come back to back. (A
+                # call of its own would cost every line the chip's tens of us.)
+                if time.ticks_diff(time.ticks_ms(), self._background_at_ms) >= \
+                        _BACKGROUND_EVERY_MS:
+                    self._run_background()
                 continue
             # Plain loops, no list or generator to allocate: this runs on every idle
             # turn.
