@@ -49,7 +49,7 @@ class FileCommands:
         if job is None:
             self.printer.reply("Not SD printing")
         else:
-            self.printer.reply("SD printing byte %d/%d" % (job.pos, job.size))
+            self.printer.reply("SD printing byte %d/%d" % (job.pos(), job.size))
 
     # M32 <name>: select a file and start printing it. Example: M32 part.gcode
     def m32(self, line):

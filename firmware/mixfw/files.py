@@ -42,7 +42,8 @@ class Job:
         self.announce = announce
         self.intake = Intake(line_bytes)
 
-    @property
+    # A method, not a property: a class with properties has every attribute store
+    # looked up in the class first, and a line stores the line count.
     def pos(self):
         """The end of the line being run: what was read less what the ring holds."""
         return self.read - self.intake.waiting
@@ -116,7 +117,7 @@ class Files:
         job = self.selected
         if job is None:
             raise FileError("no file selected (M23 <name>)")
-        if job.pos >= job.size:
+        if job.pos() >= job.size:
             raise FileError("file %s has been printed; M26 rewinds it" % job.name)
         job.paused = False
         self.printer.job = job

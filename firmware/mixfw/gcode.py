@@ -48,8 +48,7 @@ _R_WORDS = const(13)
 class Line:
     """The parsed words of one line. Owned by the parser and reused for every line."""
 
-    def __init__(self, result):
-        self._result = result  # the parser's result words: the N word's
+    def __init__(self):
         self.mant = array("i", bytes(4 * 26))
         self.decimals = array("b", bytes(26))
         self.present = 0  # bit per letter A..Z
@@ -58,17 +57,9 @@ class Line:
         self.number = 0
         self.key = 0  # command_key(letter, number); 0 for a blank line
         self.args_text = ""  # for raw-argument commands: the text after the command
-
-    # The leading N word is read from the parser's result words when asked (only M110
-    # asks): hosts number every line, and storing it would cost each one a call.
-    @property
-    def has_line_number(self):
-        return self._result[_R_HAS_N] == 1
-
-    @property
-    def line_number(self):
-        """The leading N word's number (hosts send N-1 with M110), 0 if none."""
-        return self._result[_R_N]
+        # No properties on this class, nor on any other whose attributes a line stores:
+        # MicroPython then looks every store up in the class first, about 20 us each on
+        # the chips.
 
     def has(self, ch):
         return (self.present >> letter_index(ch)) & 1
@@ -291,7 +282,7 @@ class Parser:
         names (M23 name.gcode) or option names (M926 Isteps_per_mm_x V80); for those
         the words after the command are not parsed and line.args_text holds them."""
         self.result = array("i", bytes(4 * _R_WORDS))
-        self.line = Line(self.result)
+        self.line = Line()
         keys = [command_key(l, n) for l, n in raw_commands]
         self.raw = array("i", [len(keys)] + keys)
         self._words = (self.line.mant, self.line.decimals, self.raw, self.result)
@@ -321,6 +312,13 @@ class Parser:
             ln.number = r[_R_NUMBER]
             ln.key = key
         return ln
+
+    def line_number(self):
+        """The leading N word's number of the line parsed last (hosts send N-1 with
+        M110), or None. Read from the result words when asked (only M110 asks): hosts
+        number every line, and storing it would cost each one a call."""
+        r = self.result
+        return r[_R_N] if r[_R_HAS_N] == 1 else None
 
     def _rare_words(self, buf, n):
         """The text arguments, which are rare: stored only where a line has them or

@@ -148,10 +148,12 @@ _AT_XYZ = const(94)  # and Planner.target_steps
 _S_JOINS = const(95)
 _S_MEMO_NEXT = const(96)  # where the memo's oldest entry starts (see _work_base_floats)
 # X Y Z E: how much of the path an axis whose limits the speed is not within may take
-# and still not bind, 2**14 over the factor the speed or acceleration is past them (see
-# _shares).
+# and still not bind, _SHARE_ONE over the factor the speed or acceleration is past them
+# (see _shares): worked out on the first move at a speed where axes are past their
+# limits and none binds, and kept while _S_SHARES_SET is 1.
 _S_SHARES = const(97)
-_S_WORDS = const(101)
+_S_SHARES_SET = const(101)
+_S_WORDS = const(102)
 
 
 # _plan_move's answers besides 1 (queued) and 0 (shorter than a step: nothing to do),
@@ -188,8 +190,8 @@ _S_F_BASE = const(12)  # which floats hold _base_floats' own: _F_BASE_ACCEL the
 _F_BASE_ACCEL = const(2)  # acceleration's, _F_BASE_BOTH its speed's too
 _F_BASE_BOTH = const(3)
 _MEMO = const(8)  # pairs of speed and acceleration _base_floats keeps, each as
-_MEMO_WORDS = const(8)  # speed, accel, its _S_WITHIN, _S_MIN_BITS, the floats
-# _set_floats works out (_F_NOMINAL2, _F_ACCEL_TICK, _GF_ACCEL_JD) and _S_SHARES'
+_MEMO_WORDS = const(7)  # speed, accel, its _S_WITHIN, _S_MIN_BITS and the floats
+# _set_floats works out: _F_NOMINAL2, _F_ACCEL_TICK, _GF_ACCEL_JD
 _SHARE_ONE = const(0x4000)  # _S_SHARES' fixed point
 
 
@@ -312,7 +314,7 @@ def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
             elif within & 16:
                 if (c3 << 3) <= dist:
                     over ^= 8
-        if over:
+        if over and words[_S_SHARES_SET]:
             # Such an axis binds only if its share of the path, c / dist, is over its
             # _S_SHARES word / _SHARE_ONE (a spiral vase's Z on every line): tested on
             # the top bits, leaning to binding.
@@ -846,11 +848,7 @@ class Planner:
         f[_F_NOMINAL2] = memo[at + 4]
         f[_F_ACCEL_TICK] = memo[at + 5]
         self._geo_f[_GF_ACCEL_JD] = memo[at + 6]
-        f = memo[at + 7]  # its _S_SHARES
-        words[_S_SHARES] = f[0]
-        words[_S_SHARES + 1] = f[1]
-        words[_S_SHARES + 2] = f[2]
-        words[_S_SHARES + 3] = f[3]
+        words[_S_SHARES_SET] = 0  # another speed's
 
     def _work_base_floats(self, speed, accel):
         """_base_floats' words and floats for the pair, worked out into the memo's
@@ -867,7 +865,6 @@ class Planner:
         memo[at + 4] = self._plan_f[_F_NOMINAL2]
         memo[at + 5] = self._plan_f[_F_ACCEL_TICK]
         memo[at + 6] = self._geo_f[_GF_ACCEL_JD]
-        memo[at + 7] = Planner._shares(self, speed, accel)
         memo[at] = speed
         memo[at + 1] = accel
         return at
@@ -887,15 +884,16 @@ class Planner:
 
     def _shares(self, speed, accel):
         """_S_SHARES' words of speed and accel, for X Y Z E: the axis binds only where
-        its share of the path is over its word over _SHARE_ONE."""
-        out = array("i", bytes(16))
+        its share of the path is over its word over _SHARE_ONE. In the words until the
+        speed changes."""
+        words = self._abs_steps
         feed = self.max_feed_mm_s
         most = self.max_accel_mm_s2
-        out[0] = _share(speed / feed[0], accel / most[0])
-        out[1] = _share(speed / feed[1], accel / most[1])
-        out[2] = _share(speed / feed[2], accel / most[2])
-        out[3] = _share(speed / feed[3], accel / most[3])
-        return out
+        words[_S_SHARES] = _share(speed / feed[0], accel / most[0])
+        words[_S_SHARES + 1] = _share(speed / feed[1], accel / most[1])
+        words[_S_SHARES + 2] = _share(speed / feed[2], accel / most[2])
+        words[_S_SHARES + 3] = _share(speed / feed[3], accel / most[3])
+        words[_S_SHARES_SET] = 1
 
     def _min_bits(self, speed):
         """SLOWDOWN's shortest length at speed, as geometry.lengths gives a length."""
@@ -913,6 +911,12 @@ class Planner:
         if self._abs_steps[_S_OVER]:
             limited = Planner._axis_limit(self, speed, self.max_feed_mm_s)
             limited_accel = Planner._axis_limit(self, accel, self.max_accel_mm_s2)
+            if (limited is speed and limited_accel is accel
+                    and not self._abs_steps[_S_SHARES_SET]):
+                # Past their limits, and none bound: such an axis has a small share of
+                # the path (a spiral vase's Z). How much it may take at this speed, so
+                # that the next moves need no floats.
+                Planner._shares(self, speed, accel)
         if self.min_segment_s:
             limited = Planner._slowdown(self, limited, limited is speed)
         if (limited is not speed and limited_accel is accel

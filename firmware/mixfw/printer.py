@@ -660,7 +660,9 @@ class Printer:
     # --- protocol commands ---
     # M110 N<n>: the next line number expected is n+1. Example: N0 M110 N0*125
     def m110(self, line):
-        default = line.line_number if line.has_line_number else self.current.last_n
+        default = self.parser.line_number()
+        if default is None:
+            default = self.current.last_n
         self.current.last_n = line.int("N", default, lo=-1)
 
     # M112: emergency stop. The receive path acts on it before it is queued.

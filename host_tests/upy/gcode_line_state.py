@@ -10,6 +10,7 @@ out = []
 for s in json.loads(sys.stdin.read()):
     b = s.encode()
     line = p.parse(b, len(b))
-    out.append([line.letter, line.number, line.has_line_number, line.line_number,
+    number = p.line_number()
+    out.append([line.letter, line.number, number is not None, number or 0,
                 line.args_text, line.present])
 print(json.dumps(out))
