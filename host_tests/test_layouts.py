@@ -79,7 +79,7 @@ COPIES = {
                     "_S_LEVELS"],
     },
     "cmd_motion": {"ramp": ["_AT_BIAS"], "compat": ["_MASK30"]},
-    "printer": {"intake": ["_RX_BYTES", "_COUNT", "_LEN", "_FAULT", "_IN_COMMENT"]},
+    "printer": {"intake": ["_RX_BYTES", "_COUNT", "_LEN"]},
     "plan_only": {
         "stepper": ["_S_HEAD", "_S_TAIL", "_S_ACTIVE", "_S_HOME_STOP", "_S_QUEUE",
                     "_BLOCK_BASE", "_B_WORDS"],

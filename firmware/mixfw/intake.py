@@ -35,7 +35,8 @@ SCANNED = const(0x10000)  # _put's answer: at + scanned bytes * SCANNED
 @micropython.viper
 def ring_put(rings, src_buf, at: int, end: int) -> int:
     """src[at:end] into the ring, up to and including the first newline; the first
-    SCAN_BYTES of the line also into scan. rings: an Intake's (ring, st, scan). Returns where it stopped, plus, where a line
+    SCAN_BYTES of the line also into scan; rings: an Intake's (ring, st, scan). Returns
+    where it stopped, plus, where a line
     ended there and an M (or m) is among its scanned bytes, their count times
     SCANNED: only such a line can be an emergency command, and most lines are G1, told
     here without a call. The caller leaves room for the bytes."""
@@ -109,6 +110,16 @@ def _take(ring_buf, st_buf, line_buf, size: int) -> int:
     return status
 
 
+@micropython.viper
+def line_taken(st_buf):
+    """Intake.take() of the intake whose state array st_buf is: the printer calls it
+    for every line, where a method's bytecode call would cost the chip tens of us."""
+    st = ptr32(st_buf)
+    st[_LEN] = 0
+    st[_FAULT] = 0
+    st[_IN_COMMENT] = 0
+
+
 class Intake:
     def __init__(self, size):
         self.buf = bytearray(size)
@@ -167,10 +178,7 @@ class Intake:
 
     def take(self):
         """Forget the line just returned so the next one starts empty."""
-        st = self.st
-        st[_LEN] = 0
-        st[_FAULT] = 0
-        st[_IN_COMMENT] = 0
+        line_taken(self.st)
 
     def cut_text(self, status):
         """A line too long that shows a message (M117, M118, without a line number,

@@ -12,7 +12,7 @@
 import time
 from array import array
 from mixfw.gcode import Parser, GcodeError, WordsError, command_key
-from mixfw.intake import Intake, LINE_OK, LINE_CUT, SCANNED, ring_put
+from mixfw.intake import Intake, LINE_OK, LINE_CUT, SCANNED, line_taken, ring_put
 
 _BUSY_EVERY_MS = const(2000)
 _REPORT_EVERY_MS = const(1000)  # temperatures while a heating wait runs, as Marlin
@@ -23,8 +23,6 @@ _ANY_TOOL = command_key("T", -1)  # the handler of every T<n>
 _RX_BYTES = const(256)
 _COUNT = const(1)
 _LEN = const(3)
-_FAULT = const(4)
-_IN_COMMENT = const(6)
 
 
 def run_each(hooks):
@@ -70,8 +68,8 @@ def _frame(buf: ptr8, n: int, out: ptr32, last_n: int) -> int:
     host printing a file numbers and checks every line, and each helper called from
     bytecode, or a loop there, costs the chip tens of us. For the line a host streams,
     numbered last_n + 1 with its checksum right (not M110), returns where its * is
-    (where its words end); _PLAIN for a line with neither N nor *; else _OTHER. Numbers of more than nine digits are not
-    read as numbers."""
+    (where its words end); _PLAIN for a line with neither N nor *; else _OTHER.
+    Numbers of more than nine digits are not read as numbers."""
     i = 0
     while i < n and (buf[i] == 32 or buf[i] == 9):
         i += 1
@@ -511,10 +509,7 @@ class Printer:
 
     def done(self, ch, text):
         """ch's line has run: `ok`, with text after it if any."""
-        st = ch.intake.st  # intake.take(), written out: a call less every line
-        st[_LEN] = 0
-        st[_FAULT] = 0
-        st[_IN_COMMENT] = 0
+        line_taken(ch.intake.st)  # ch.intake.take(), a bytecode call less
         if text:
             ch.write("ok " + text + "\n")
         else:
@@ -576,10 +571,7 @@ class Printer:
         if status != LINE_OK and intake.cut_text(status) != LINE_OK:
             raise GcodeError(intake.error_text(status))
         self.run_line(self.parser.parse(intake.buf, intake.st[_LEN]))
-        job = intake.st  # intake.take(), written out as in done()
-        job[_LEN] = 0
-        job[_FAULT] = 0
-        job[_IN_COMMENT] = 0
+        line_taken(intake.st)  # intake.take(), a bytecode call less
 
     # --- the main loop ---
     def serve(self):
