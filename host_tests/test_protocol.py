@@ -240,6 +240,8 @@ def test_bad_lines_get_one_error_each_and_do_not_run():
         moves += 1
     for raw in (b"M9999", b"G9999", b"M9999 X1"):
         assert host.ask(raw) == ['echo:Unknown command: "%s"' % raw[:5].decode().strip(), "ok"]
+    # A number past 9999, whose key another letter's command shares, named as sent.
+    assert host.ask(b"G552250000 G0 G0") == ['echo:Unknown command: "G552250000"', "ok"]
     # Edges of what is fine: exactly 96 stored bytes, long comments (not stored), tabs,
     # CR LF, lower case, spaces inside words, blank and comment-only lines.
     fine = [b"G1 X1" + b" " * (LINE_BYTES - 5), b"G1 X1 ;" + b"c" * 300, b"G1\tX1\r",

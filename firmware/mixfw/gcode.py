@@ -347,6 +347,12 @@ class Parser:
         as unknown, not as bad words: its arguments may be text (M0 Click me)."""
         return self.result[_R_KEY]
 
+    def failed_command(self):
+        """After parse() raised, with command_of_failed() not 0: the command as text
+        (G70000 and M10000 share a key, so it is not taken apart)."""
+        r = self.result
+        return "%s%d" % (chr(r[_R_LETTER]), r[_R_NUMBER])
+
     def _reason(self, err):
         r = self.result
         at = chr(r[_R_AT])

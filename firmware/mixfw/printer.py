@@ -456,7 +456,7 @@ class Printer:
         if not key or key in self.commands or (
                 key // 10000 == 84 and _ANY_TOOL in self.commands):
             return False
-        self.reply('echo:Unknown command: "%s%d"' % (chr(key // 10000), key % 10000))
+        self.reply('echo:Unknown command: "%s"' % self.parser.failed_command())
         return True
 
     def run_line(self, line):
