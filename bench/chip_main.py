@@ -28,9 +28,11 @@ import machine
 import micropython
 from array import array
 
-# Constants and locals rather than globals where they can be: each global is a name,
-# and the names this and the firmware's modules make fill the rp2 port's name pools
-# to within a few of the next pool's 7.7 kB (see intern_names).
+# Constants and locals rather than globals where they can be, and the answer's keys
+# split from strings: each name takes a slot in the rp2 port's name pools, which this
+# and the firmware's modules fill to just below the next pool's 7.7 kB (see
+# intern_names). The heap the two printers leave has no room for that pool: a
+# firmware that needs it needs a lighter harness.
 # WATCHDOG SCRATCH0, free for programs: 1 while the lines are planned, for the
 # emulator's program counter profile (bench/chip_pcprofile.py, emu/harness.mjs).
 _PROFILED = const(0x4005800C)
@@ -109,7 +111,9 @@ def intern_names(path):
 
 
 intern_names("names.txt")
-LINES = {"plan.gcode": Lines("plan.gcode")}
+# What a session keeps: the lines by path, the printers, the spacers (one dict: each
+# global is a name).
+KEPT = {"plan.gcode": Lines("plan.gcode"), "spacers": []}
 # The firmware reserves the heap its printer's arrays take while its modules load
 # (mixfw/heap.py), and the stepping printer, built second, gets a reserve too. Each
 # printer is built once and kept: a request's garbage would split a later one's heap.
@@ -130,7 +134,7 @@ def stepping_printer():
     the step path busy with one long six-drive mixed move, as while printing. The
     planner measured is another printer whose queue is retired by hand, so what it
     plans never reaches the pins and never waits for them; both share the CPU."""
-    if not PRINTERS.get("stepper"):
+    if not KEPT.get("stepper"):
         gc.collect()
         # Its one move needs neither the trace's records (3 kB at the firmware's 256)
         # nor a long queue: the heap they took left too little for the PIO programs
@@ -149,13 +153,13 @@ def stepping_printer():
                      b"M567 P6 E0.1:0.15:0.2:0.25:0.12:0.18", b"T6",
                      b"G1 X800 Y600 E115.66 F7500"):
             printer.run_line(printer.parser.parse(line, len(line)))
-        PRINTERS["stepper"] = printer
-    return PRINTERS["stepper"]
+        KEPT["stepper"] = printer
+    return KEPT["stepper"]
 
 
 def planned_printer():
     """The printer whose planning is measured, its queue retired by hand."""
-    if not PRINTERS.get("plan"):
+    if not KEPT.get("plan"):
         gc.collect()
         # No trace records (3 kB at the firmware's 256): its step loop never runs, and
         # the heap holds two printers beside the lines.
@@ -165,12 +169,10 @@ def planned_printer():
         # The excerpts are relative E (their file's M83 comes before them).
         for line in (b"M302 P1", b"M83"):
             printer.run_line(printer.parser.parse(line, len(line)))
-        PRINTERS["plan"] = printer
-    return PRINTERS["plan"]
+        KEPT["plan"] = printer
+    return KEPT["plan"]
 
 
-PRINTERS = {}
-SPACER = []
 
 
 def plan(path, stepping, profile=0):
@@ -190,7 +192,7 @@ def plan(path, stepping, profile=0):
     gc.threshold(-1)
     planner = printer.planner
     run_line = printer.run_line
-    data = LINES.get(path) or Lines(path)
+    data = KEPT.get(path) or Lines(path)
     moves = data.moves
     timer = None
     steps0 = 0
@@ -242,20 +244,21 @@ def plan(path, stepping, profile=0):
         few = data.first(b"G1 ", 5)
         allocated = chip_profile.bytes_allocated(run_line, parse, few)
         planner.synchronize()
-    out = {"lines": data.count, "move_lines": moves, "seconds": us / 1e6,
-           "move_lines_per_s": moves * 1e6 / us, "errors": errors,
-           "mem_free_before": free, "mem_free_after": gc.mem_free()}
+    # The keys split from strings: see the name pools above.
+    out = dict(zip("lines move_lines seconds move_lines_per_s errors mem_free_before "
+                   "mem_free_after".split(), (data.count, moves, us / 1e6, moves * 1e6 / us,
+                                              errors, free, gc.mem_free())))
     if stepper:
         m = stepper.mem
         steps1 = m[st.S_POS + st.X] + m[st.S_POS + st.Y] + abs(m[st.S_POS + st.E])
-        out["stepper_steps_per_s"] = (steps1 - steps0) * 1e6 / us
-        out["stepper_still_moving"] = bool(stepper.planner.busy())
+        out.update(zip("stepper_steps_per_s stepper_still_moving".split(), (
+            (steps1 - steps0) * 1e6 / us, bool(stepper.planner.busy()))))
         timer.deinit()
     if profile == 2:
         out["functions"] = chip_profile.report(timed[0], timed[1], moves)
     if profile == 1:
-        out["bytes_allocated_per_line"] = allocated / len(few)
-        out["collect_us"] = collect_us
+        out.update(zip("bytes_allocated_per_line collect_us".split(), (
+            allocated / len(few), collect_us)))
     return out
 
 
@@ -268,7 +271,8 @@ def functions():
             if type(v) is type:
                 for attr, f in v.__dict__.items():
                     if "function" in str(type(f)):
-                        print("FUN", machine.mem32[id(f) + 12], "%s.%s.%s" % (mname, name, attr))
+                        print("FUN", machine.mem32[id(f) + 12],
+                              "%s.%s" % (mname, name + "." + attr))
             elif "function" in str(type(v)):
                 print("FUN", machine.mem32[id(v) + 12], "%s.%s" % (mname, name))
 
@@ -286,7 +290,7 @@ def serve():
                     # A spacer of that many bytes first, kept: the printers' objects
                     # then lie elsewhere in the heap (see chip_rows.LAYOUTS).
                     if len(words) > 3:
-                        SPACER.append(bytearray(int(words[3])))
+                        KEPT["spacers"].append(bytearray(int(words[3])))
                     res = plan(words[1], words[2] == "1")
                 else:
                     res = plan(words[1], False, 1)

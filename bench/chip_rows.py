@@ -31,6 +31,7 @@ rows on another board or with settings laid over the board's (as `mixstep emu --
 e.g. `--set step_backend=timer` for the hard-timer path, or `--board pico`; the move
 is then mixed over the board's drives.
 """
+import ast
 import json
 import subprocess
 import sys
@@ -280,23 +281,53 @@ print(" ".join(m for m in sys.modules if m.startswith("mixfw.")))
 """
 
 
-def _names(work, harness):
-    """A file of the names that the firmware's modules, as building the board's printer
-    imports them, and the .mpy files `harness` intern as they load, a line each:
-    chip_main.py interns them first (see its intern_names)."""
+def _getattr_names(source):
+    """The names a module's getattr and hasattr calls give as strings: mpy-cross keeps a
+    string of 10 characters or more as an object, not a name, and the call interns it
+    as it runs."""
+    found = set()
+    for node in ast.walk(ast.parse(Path(source).read_text())):
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)
+                and node.func.id in ("getattr", "hasattr") and len(node.args) > 1
+                and isinstance(node.args[1], ast.Constant)
+                and isinstance(node.args[1].value, str)):
+            found.add(node.args[1].value)
+    return found
+
+
+def _names(work, harness, settings):
+    """A file of the names the chip interns as it boots and builds the board's printer,
+    a line each: chip_main.py interns them first (see its intern_names). They are the
+    names of the firmware's modules that building the printer imports and of the .mpy
+    files `harness`; the names of the sources the chip compiles itself (boot.py, and
+    board.py with `settings` laid over it); and each module's name and path, which an
+    import interns. A name left out is interned late, and may be the one that needs a
+    new pool."""
     listed = subprocess.run([paths.micropython(), "-X", "heapsize=4M", "-c", _BUILD_MODULES],
                             env=paths.micropython_env(BOARD), capture_output=True,
                             text=True, check=True).stdout.split()
-    deploy.compile_mixfw(work / "chip_names", deploy.MARCH["rp2040"])
-    names = set()
-    for mpy in [work / "chip_names" / "mixfw" / (m[6:] + ".mpy") for m in listed] + harness:
+    out = work / "chip_names"
+    deploy.compile_mixfw(out, deploy.MARCH["rp2040"])
+    sources = {"boot": paths.FIRMWARE / "boot.py", "board": out / "board.py"}
+    sources["board"].write_text((paths.BOARDS / BOARD / "board.py").read_text()
+                                + emu._settings_source(settings))
+    compiled = list(_compiled(out / "sources", sources).values())
+    names = {"mixfw", "mixfw/__init__.py", "mixfw/__init__.mpy", "main.py", "boot.py",
+             "board.py"}
+    for m in listed:
+        names.update((m, m[6:], m.replace(".", "/") + ".mpy"))
+        names.update(_getattr_names(paths.FIRMWARE / "mixfw" / (m[6:] + ".py")))
+    for mpy in harness:
+        names.update((mpy.stem, mpy.name))
+    mpys = [out / "mixfw" / (m[6:] + ".mpy") for m in listed] + harness
+    for mpy in mpys + [p for p in compiled if p.suffix == ".mpy"]:
         # A newline in a name (string constants are names too) is written as \n,
         # and a name with a backslash of its own is left out.
         names.update(n.replace("\n", "\\n") for n in deploy.mpy_qstrs(mpy)
                      if "\\" not in n)
-    out = work / "chip_names" / "names.txt"
-    out.write_text("".join(n + "\n" for n in sorted(names)))
-    return out
+    listing = out / "names.txt"
+    listing.write_text("".join(n + "\n" for n in sorted(names)))
+    return listing
 
 
 def _planner_chip(work, requests, gcode=None, profile=None):
@@ -313,11 +344,11 @@ def _planner_chip(work, requests, gcode=None, profile=None):
         "chip_main": BENCH_DIR / "chip_main.py", "chip_profile": BENCH_DIR / "chip_profile.py",
         "plan_only": paths.BOARDS / "sim" / "plan_only.py"})
     files["plan.gcode"] = excerpt
-    files["names.txt"] = _names(work, [p for p in files.values() if p.suffix == ".mpy"
-                                       and p.stem != "chip_profile"])
-    got = []
     settings = dict({"tick_us": PLANNER_TICK_US, "queue_blocks": PLANNER_QUEUE_BLOCKS},
                     **OVERRIDES)
+    files["names.txt"] = _names(work, [p for p in files.values() if p.suffix == ".mpy"
+                                       and p.stem != "chip_profile"], settings)
+    got = []
     with emu.Chip(BOARD, settings=settings, files=files, max_emu_s=120,
                   max_wall_s=900) as chip:
         for i, request in enumerate(requests):

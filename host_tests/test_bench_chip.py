@@ -147,12 +147,16 @@ def test_the_names_the_planner_harness_interns_first(tmp_path):
     """The firmware's modules that building the board's printer loads (listed by the
     unix port's simulated board: the chip's own list), and the names their .mpy files
     intern, read from each file's qstr table."""
-    names = chip_rows._names(tmp_path, [])
+    names = chip_rows._names(tmp_path, [], {"tick_us": 50})
     listed = set(names.read_text().split("\n"))
     # Names from the step loop, the mixer and the planner, none from a module the board
     # never loads (the network console).
     assert {"mix_load", "run_mix", "schedule_counts", "add_move", "MixError"} <= listed
     assert "SocketConsole" not in listed
+    # What an import interns (a module's name, its last part, its path), the names of
+    # the board.py the chip compiles itself, and a getattr's long string constant.
+    assert {"mixfw.gcode", "gcode", "mixfw/gcode.mpy", "e5_enable", "tick_us",
+            "dma_register_bank"} <= listed
     src = tmp_path / "small.py"
     src.write_text("import gc\nLONG_PUBLIC_NAME = 1\n\ndef made_up(value):\n"
                    "    return value.attribute_name\n")

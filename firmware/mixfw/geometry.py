@@ -15,7 +15,7 @@ from mixfw.ramp import div_limbs, isqrt_limbs, product
 # Words of the geometry array g (array 'i', G_WORDS): first ramp.py's io words, which
 # product() and isqrt_limbs() use as scratch, then these.
 G_D = const(16)  # the move: |X| |Y| |Z| steps, then |E| in steps or nm (see GF_E_NM)
-G_C = const(20)  # its components: |X| |Y| |Z| |E| in the move's unit
+_G_C = const(20)  # its components: |X| |Y| |Z| |E| in the move's unit
 G_LEN = const(24)  # its length in X Y Z E, in that unit
 G_DIST = const(25)  # its length in X Y Z, or |E| for a move of E alone
 _G_SIGNS = const(26)  # bit i: component i is negative
@@ -64,7 +64,7 @@ _STRAIGHT = const(268)
 
 @micropython.viper
 def lengths(g4: int) -> int:
-    """The move in g's G_D words -> its components (G_C), its length (G_LEN) and the
+    """The move in g's G_D words -> its components (_G_C), its length (G_LEN) and the
     length its speed is along (G_DIST), which also goes into the planner's floats'
     first word (lookahead.F_MM) as float32 bits. g's flags: FL_* and the signs.
     Returns those bits halved (a small int), which order as the lengths do: a
@@ -122,7 +122,7 @@ def lengths(g4: int) -> int:
                 c = hi >> (u - 30)
             else:
                 c = (hi << (30 - u)) | (lo >> u)
-        g[G_C + i] = c
+        g[_G_C + i] = c
     g[_G_SIGNS] = flags & 15
     # Sums of squares, in two limbs: X Y Z, then E. Each square c * c (c below 2**27)
     # in two 30-bit limbs, in ramp.product's form (for a square: 2 c1 c0 in the middle),
@@ -130,7 +130,7 @@ def lengths(g4: int) -> int:
     # line.
     hi = 0
     lo = 0
-    dist = g[G_C + 3]  # a move of E alone
+    dist = g[_G_C + 3]  # a move of E alone
     for i in range(4):
         if i == 3:
             if hi or lo:
@@ -140,7 +140,7 @@ def lengths(g4: int) -> int:
             if dist < 1:
                 dist = 1  # X Y Z below the unit: still a length to divide by
             g[G_DIST] = dist
-        c = g[G_C + i]
+        c = g[_G_C + i]
         if c:
             c1 = c >> 15
             c0 = c & 0x7FFF
@@ -198,7 +198,7 @@ def junction(g4: int) -> int:
         d_lo = 0
         for i in range(5):
             if i < 4:
-                a = g[G_C + i]
+                a = g[_G_C + i]
                 b = g[_G_PREV_C + i]
             else:
                 a = g[G_LEN]
@@ -285,7 +285,7 @@ def junction(g4: int) -> int:
             if v2 > _V2_MAX:
                 v2 = _V2_MAX
     for i in range(4):
-        g[_G_PREV_C + i] = g[G_C + i]
+        g[_G_PREV_C + i] = g[_G_C + i]
     g[_G_PREV_SIGNS] = g[_G_SIGNS]
     g[_G_PREV_LEN] = g[G_LEN]
     return v2

@@ -53,11 +53,11 @@ _V2_AT_NOMINAL = const(0x20000000)
 # A block's planning data comes in as float32 in an array('f'), whose bits viper reads
 # as integers (mantissa, exponent): no float operation, so nothing allocated.
 F_MM = const(0)  # its length
-F_ACCEL = const(1)  # mm/s**2
-F_NOMINAL = const(2)  # mm/s
-F_NOMINAL2 = const(3)  # its square
+_F_ACCEL = const(1)  # mm/s**2
+_F_NOMINAL = const(2)  # mm/s
+_F_NOMINAL2 = const(3)  # its square
 F_TICK_ONE = const(4)  # the step loop's tick in s, times ONE (its rate of a step a tick)
-F_ACCEL_TICK = const(5)  # F_ACCEL times the tick in s: the speed gained a tick
+_F_ACCEL_TICK = const(5)  # _F_ACCEL times the tick in s: the speed gained a tick
 F_WORDS = const(6)
 # Scratch words of the planning io array, after ramp.py's (its IO_WORDS).
 _W_M = const(16)  # F_WORDS mantissas (with the hidden bit; 0 for 0)
@@ -154,8 +154,8 @@ def plan_words(w4: int):
         w[_W_E + i] = ex
     m_mm = w[_W_M + F_MM]
     e_mm = w[_W_E + F_MM] - _BIAS
-    m_a = w[_W_M + F_ACCEL]
-    e_a = w[_W_E + F_ACCEL] - _BIAS
+    m_a = w[_W_M + _F_ACCEL]
+    e_a = w[_W_E + _F_ACCEL] - _BIAS
     # GAIN = 2 _V2_SCALE a mm (_V2_SCALE = 2**6)
     w[_IO_A] = m_a
     w[_IO_B] = m_mm
@@ -164,11 +164,11 @@ def plan_words(w4: int):
     w[_IO_HOW] = _P_ROUND
     x = int(prod(w4))
     lk[at + L_GAIN] = x if x < _V2_MAX else _V2_MAX
-    bits = f[F_NOMINAL2]
+    bits = f[_F_NOMINAL2]
     if bits != w[_W_N2_BITS]:
-        w[_IO_A] = w[_W_M + F_NOMINAL2]
+        w[_IO_A] = w[_W_M + _F_NOMINAL2]
         w[_IO_B] = 1
-        w[_IO_S] = w[_W_E + F_NOMINAL2] - _BIAS + 6
+        w[_IO_S] = w[_W_E + _F_NOMINAL2] - _BIAS + 6
         x = int(prod(w4))  # C and HOW as for GAIN
         w[_W_N2_V2] = x if x < _V2_MAX else _V2_MAX
         w[_W_N2_BITS] = bits
@@ -196,17 +196,17 @@ def plan_words(w4: int):
     ke += w[_W_E + F_TICK_ONE] - _BIAS - 6 - ns - e_mm
     km = w[_IO_LO]
     # RATE_NOM = nominal k, truncated.
-    w[_IO_A] = w[_W_M + F_NOMINAL]
+    w[_IO_A] = w[_W_M + _F_NOMINAL]
     w[_IO_B] = km
     w[_IO_C] = 1
-    w[_IO_S] = w[_W_E + F_NOMINAL] - _BIAS + ke
+    w[_IO_S] = w[_W_E + _F_NOMINAL] - _BIAS + ke
     w[_IO_HOW] = _P_TRUNC
     r_nom = int(prod(w4))
     # acc = k a TICK_S, the rate change per tick, as km * m_at 2**s (a TICK_S comes
     # in as one float, worked out where the acceleration changes: a product less a
     # line): ACC rounded, at least 1.
-    m_at = w[_W_M + F_ACCEL_TICK]
-    s = ke + w[_W_E + F_ACCEL_TICK] - _BIAS
+    m_at = w[_W_M + _F_ACCEL_TICK]
+    s = ke + w[_W_E + _F_ACCEL_TICK] - _BIAS
     w[_IO_A] = km
     w[_IO_B] = m_at
     w[_IO_S] = s

@@ -126,8 +126,8 @@ BLOCK_BASE = const(115)
 # Block record words.
 B_N = const(0)  # lead-axis steps (step events)
 B_STEPS = const(1)  # steps per axis X Y Z E, absolute (4 words)
-B_DIR_SET = const(5)  # DIR pins to raise at block start
-B_DIR_CLR = const(6)
+_B_DIR_SET = const(5)  # DIR pins to raise at block start
+_B_DIR_CLR = const(6)
 B_FLAGS = const(7)
 B_RATE_INIT = const(8)
 B_RATE_NOM = const(9)
@@ -165,8 +165,8 @@ _PENDING_BATCHES = const(4)
 # Flag bits.
 F_DWELL = const(1)
 F_HOMING = const(2)
-F_NEG = const(4)  # shifted by axis: F_NEG << X .. F_NEG << E are negative moves
-F_HOME_SHIFT = const(8)  # homing axis mask (X=1, Y=2, Z=4) << F_HOME_SHIFT
+_F_NEG = const(4)  # shifted by axis: _F_NEG << X .. _F_NEG << E are negative moves
+_F_HOME_SHIFT = const(8)  # homing axis mask (X=1, Y=2, Z=4) << _F_HOME_SHIFT
 # The record's ramp schedule (ACCEL_UNTIL, DECEL_AFTER, RATE_DECEL) is still to be
 # worked out from its rates: the look-ahead changes a waiting block's entry and exit
 # as more blocks come (on curves a dozen times a line), and a schedule worked out at
@@ -344,7 +344,7 @@ def _start(mem_buf, b: int) -> int:
     if blk[B_STEPS + E] != 0 and blk[B_MIX] != mem[MIX_BASE]:
         mix_load(mem_buf, MIX_BASE, b + B_MIX)
     old = mem[S_DIR]
-    new = (old & (0 - 1 - blk[B_DIR_CLR])) | blk[B_DIR_SET]
+    new = (old & (0 - 1 - blk[_B_DIR_CLR])) | blk[_B_DIR_SET]
     changed = old ^ new
     if changed:
         mem[S_DIR] = new
@@ -488,7 +488,7 @@ def tick(io) -> int:
         # block, whatever the switch reads as it bounces.
         stopped = 0
         if run and (flags & F_HOMING):
-            homing = (flags >> F_HOME_SHIFT) & 7
+            homing = (flags >> _F_HOME_SHIFT) & 7
             stopped = mem[S_HOME_STOP] | (int(io[2]()) & homing)
             mem[S_HOME_STOP] = stopped
             if stopped == homing:
@@ -598,7 +598,7 @@ def tick(io) -> int:
                 err -= n
                 if (stopped & 1) == 0:
                     set_mask = mem[MASK_BASE + X]
-                    if flags & (F_NEG << X):
+                    if flags & (_F_NEG << X):
                         mem[S_POS + X] -= 1
                     else:
                         mem[S_POS + X] += 1
@@ -608,7 +608,7 @@ def tick(io) -> int:
                 err -= n
                 if (stopped & 2) == 0:
                     set_mask |= mem[MASK_BASE + Y]
-                    if flags & (F_NEG << Y):
+                    if flags & (_F_NEG << Y):
                         mem[S_POS + Y] -= 1
                     else:
                         mem[S_POS + Y] += 1
@@ -618,7 +618,7 @@ def tick(io) -> int:
                 err -= n
                 if (stopped & 4) == 0:
                     set_mask |= mem[MASK_BASE + Z]
-                    if flags & (F_NEG << Z):
+                    if flags & (_F_NEG << Z):
                         mem[S_POS + Z] -= 1
                     else:
                         mem[S_POS + Z] += 1
@@ -636,7 +636,7 @@ def tick(io) -> int:
                 q = mem[_MIX_Q]
                 picks = ptr8(int(mem) + mem[_MIX_RING])
                 best = -1
-                if flags & (F_NEG << E):
+                if flags & (_F_NEG << E):
                     q -= 1
                     ahead = mem[_MIX_AHEAD] + 1
                     # Known if walked and not yet written over: forward steps on new
@@ -914,7 +914,7 @@ def run_mix(weights, moves, out=None, ring_steps=_RING_STEPS):
         n = abs(steps)
         mem[b + B_N] = mem[b + B_STEPS + E] = n
         mem[b + B_DECEL_AFTER] = n + 1  # a step per tick: done before it decelerates
-        mem[b + B_FLAGS] = (F_NEG << E) if steps < 0 else 0
+        mem[b + B_FLAGS] = (_F_NEG << E) if steps < 0 else 0
         mem[b + B_RATE_INIT] = mem[b + B_RATE_NOM] = mem[b + B_RATE_FINAL] = ONE
         mem[b + B_MIX] = mix_id
         for d in range(drives):
