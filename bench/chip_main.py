@@ -300,6 +300,9 @@ def serve():
                 res = None  # the heap may be too full for the answer: the traceback first
                 gc.collect()
                 sys.print_exception(e)
+                # The name pools too: n_pool=7 is the seventh pool's 7.7 kB, which the
+                # heap the two printers leave does not hold (see the pools above).
+                micropython.qstr_info()
                 res = {"failed": repr(e), "mem_free": gc.mem_free()}
             gc.collect()
             print("bench:", end="")  # one line, with no copy of the answer made for it
