@@ -49,8 +49,8 @@ CIRCLES = ROOT / "testdata" / "circles_tube_emu_excerpt.gcode"
 # The example's lines planned on the chip: perimeters and infill, 289 of 301 are G1.
 PLAN_LINES = (3000, 3300)
 CAVEAT = ("An estimate from the emulated RP2040 (rp2040js, the real MicroPython v1.28 "
-          "rp2 firmware, 125 MHz), which charges no flash wait states and no interrupt "
-          "entry: real silicon is slower.")
+          "rp2 firmware, at the board's 200 MHz), which charges no flash wait states and "
+          "no interrupt entry: real silicon is slower.")
 
 # The stepping moves: X, Y and E in the ratio 8 : 6 : 6 of steps, E mixed over all
 # six drives (weights below, tool 6). At 20,000 steps/s: X 100 mm/s, Y 75 mm/s and

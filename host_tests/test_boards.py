@@ -185,6 +185,11 @@ def test_settings_rules():
                       settings={"step_backend": "pio"}), "pio", "one run of GPIOs", "16, 28")
     assert_one(broken("pico", settings={"pin_writer": "fast"}), "pin_writer")
     assert_one(broken("pico", settings={"invert_dir": ("x", "e5")}), "invert_dir", "e5")
+    # The clock: up to what the chip is certified for (the RP2040's 200 MHz at 1.15 V).
+    assert broken("pico", settings={"clock_hz": 0}) == []
+    assert_one(broken("pico", settings={"clock_hz": 250000000}), "clock_hz", "200 MHz")
+    assert_one(broken("pico2", settings={"clock_hz": 200000000}), "clock_hz", "150 MHz")
+    assert_one(broken("sim", settings={"clock_hz": 125000000}), "clock_hz", "simulated")
 
 
 def test_pico_6drives_trades_the_part_fan_for_a_sixth_drive():

@@ -59,6 +59,9 @@ CHIPS = {
 STEP_BACKENDS = {"timer": tuple(CHIPS), "pio": ("rp2040", "rp2350"),
                  "pio_dma": ("rp2040", "rp2350")}
 PIN_WRITERS = ("registers", "pin")
+# The fastest system clock each chip is certified for (clock_hz): the RP2040 at 200 MHz
+# with its core at 1.15 V (pico-sdk 2.1.1), the RP2350 at 150 MHz, the ESP32 at 240.
+MAX_CLOCK_HZ = {"rp2040": 200000000, "rp2350": 150000000, "esp32": 240000000}
 TMC_ADDRESSES = range(4)  # TMC2209: MS1/MS2 straps give 0..3
 TMC_SETTINGS = ("driver_microsteps", "driver_current_ma", "driver_spreadcycle")
 
@@ -190,6 +193,12 @@ def _check_settings(settings, chip, bad):
         bad("step_backend %r is not one of %s" % (backend, ", ".join(STEP_BACKENDS)))
     elif chip not in STEP_BACKENDS[backend]:
         bad("step_backend %r needs an rp2 chip; this is %s" % (backend, chip))
+    clock_hz = settings.get("clock_hz", 0)
+    if clock_hz and (not isinstance(clock_hz, int) or chip not in MAX_CLOCK_HZ
+                     or not 48000000 <= clock_hz <= MAX_CLOCK_HZ[chip]):
+        bad("clock_hz is %r; it must be 0 (the clock the chip boots with) or %s" % (
+            clock_hz, "48 MHz..%d MHz" % (MAX_CLOCK_HZ[chip] // 1000000)
+            if chip in MAX_CLOCK_HZ else "0 on the simulated chip"))
     writer = settings.get("pin_writer", "pin")
     if writer not in PIN_WRITERS:
         bad("pin_writer %r is not one of %s" % (writer, ", ".join(PIN_WRITERS)))

@@ -15,7 +15,7 @@
 # 48) or drives on an I/O expander.
 # The heaters and the fan sit on three different PWM slices (17: 0B, 19: 1B, 21: 2B),
 # because the two channels of a slice share one frequency and the heaters run at
-# 10 Hz while the fan runs at 1 kHz.
+# 12 Hz while the fan runs at 1 kHz.
 from mixfw import defaults
 
 NAME = "pico"
@@ -59,6 +59,13 @@ TMC_UART = None  # external drivers, set up by their own jumpers
 SETTINGS = dict(
     defaults.SETTINGS,
     chip="rp2040",
+    # 200 MHz, the RP2040's certified clock (at 1.15 V, which boot.py sets): a host
+    # streaming a curved print's short segments over USB takes the CPU whole at 125.
+    # A board whose flash or crystal misbehaves there (some clones') sets clock_hz=0.
+    clock_hz=200_000_000,
+    # The rp2040's PWM makes no slower than 12 Hz at 200 MHz: the heaters run there.
+    hotend_pwm_hz=12,
+    bed_pwm_hz=12,
     # No step timer: the step loop fills 2 ms batches of timed edges that DMA feeds to
     # a PIO state machine (mixfw/piodma.py), each step at its own time within its
     # tick. A motor steps at most every other tick: 50,000 steps/s at 10 us (a

@@ -14,7 +14,7 @@
 # ENABLE moves to the part fan's GPIO 21 and the hot end to the spare GPIO 28. With no
 # fan output, M106 answers an error; run a part fan from the supply if the print needs
 # cooling. Everything else is wired as on boards/pico.
-# The heaters are on two PWM slices (28: 6A, 19: 1B), both at 10 Hz.
+# The heaters are on two PWM slices (28: 6A, 19: 1B), both at 12 Hz.
 from mixfw import defaults
 
 NAME = "pico_6drives"
@@ -58,6 +58,13 @@ TMC_UART = None  # external drivers, set up by their own jumpers
 SETTINGS = dict(
     defaults.SETTINGS,
     chip="rp2040",
+    # 200 MHz, the RP2040's certified clock (at 1.15 V, which boot.py sets): a host
+    # streaming a curved print's short segments over USB takes the CPU whole at 125.
+    # A board whose flash or crystal misbehaves there (some clones') sets clock_hz=0.
+    clock_hz=200_000_000,
+    # The rp2040's PWM makes no slower than 12 Hz at 200 MHz: the heaters run there.
+    hotend_pwm_hz=12,
+    bed_pwm_hz=12,
     # No step timer: the step loop fills 2 ms batches of timed edges that DMA feeds to
     # a PIO state machine (mixfw/piodma.py), each step at its own time within its
     # tick. A motor steps at most every other tick: 50,000 steps/s at 10 us (a

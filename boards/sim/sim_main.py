@@ -21,7 +21,7 @@
 # simulated time: `<us> < <line>` received, `<us> > <line>` sent (as a host's serial
 # log, but in the printer's own time).
 # --clock-hz sets the simulated chip's system clock (machine.freq()) before the
-# firmware starts, as an overclocking board's boot code does.
+# firmware starts, as boot.py sets the board's clock_hz (the default here too).
 import sys
 
 # The script's own folder comes first on the path; board.py must be the board's from
@@ -203,8 +203,9 @@ def main():
     if interactive:
         simmachine.pace(float(opts["realtime"] or 0))
     warnings = []
-    if opts["clock_hz"]:  # as a board's boot code may: the PWM divides this clock
-        simmachine.freq(int(opts["clock_hz"]))
+    # The board's clock, as its boot.py sets it, or --clock-hz: the PWM divides it.
+    if opts["clock_hz"] or board.SETTINGS.get("clock_hz"):
+        simmachine.freq(int(opts["clock_hz"] or board.SETTINGS["clock_hz"]))
     config = firmware.Config(board.SETTINGS, opts["config"], flash, warn=warnings.append,
                              clock_hz=simmachine.freq())
     config.boot()

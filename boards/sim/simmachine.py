@@ -47,6 +47,23 @@ def freq(hz=None):
     if hz is None:
         return clock_hz
     clock_hz = int(hz)
+
+
+class _Mem32:
+    """machine.mem32 for the one register boot.py writes: the RP2040's core regulator
+    (VREG: VSEL 1.10 V and enabled, as at reset). Other words read 0."""
+
+    def __init__(self):
+        self.words = {0x40064000: 0xB1}
+
+    def __getitem__(self, address):
+        return self.words.get(address, 0)
+
+    def __setitem__(self, address, value):
+        self.words[address] = value & 0xFFFFFFFF
+
+
+mem32 = _Mem32()
 _CAPACITY = 8192
 _FLUSH_AT = _CAPACITY - 256  # one tick writes far fewer edges than this
 

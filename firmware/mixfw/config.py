@@ -193,7 +193,8 @@ class Config:
         """board_settings: the board's SETTINGS (not modified; kept for the defaults).
         path: the file on flash. warn(text): prints one `echo:` line, used when the
         saved file can't be loaded. clock_hz: the chip's system clock (machine.freq()),
-        which bounds the PWM frequencies; None: the clock the chip boots with."""
+        which bounds the PWM frequencies; None: the board's clock_hz (boot.py sets it),
+        else the clock the chip boots with."""
         self.path = path
         self.storage = storage or FileStorage()
         self.warn = warn or (lambda text: None)
@@ -202,7 +203,8 @@ class Config:
         self.board_settings = board_settings
         defaults = self._board_defaults()
         self.chip = defaults.get("chip", "sim")
-        self.clock_hz = clock_hz or CLOCK_HZ.get(self.chip, CLOCK_HZ["sim"])
+        self.clock_hz = (clock_hz or defaults.get("clock_hz")
+                         or CLOCK_HZ.get(self.chip, CLOCK_HZ["sim"]))
         # Widths of the per-tool options, fixed by the board (as the firmware's arrays).
         self.mix_width = defaults.get("drives", 0)
         self.pair_width = len(defaults.get("tool_mixes", ()))

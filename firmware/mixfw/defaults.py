@@ -12,6 +12,9 @@ SETTINGS = {
     # timed edges that DMA feeds to a state machine: one interrupt per batch).
     "step_backend": "timer",
     "pin_writer": "pin",  # "pin": Pin.value() (portable); "registers": set/clear registers
+    # The system clock boot.py sets before anything else runs; 0: the one MicroPython
+    # boots with (rp2040 125 MHz, rp2350 150 MHz, esp32 160 MHz).
+    "clock_hz": 0,
     "invert_dir": (),  # axes/drives whose motor turns the other way, e.g. ("x", "e0")
     "step_pulse_us": 2,  # minimum STEP high time (DRV8825 needs 1.9)
     "dir_setup_us": 1,  # minimum DIR-to-STEP setup time
