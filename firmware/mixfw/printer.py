@@ -219,7 +219,12 @@ class Printer:
         self.listeners = []  # objects with accept() -> console or None
         self.max_channels = 8
         self.current = None  # channel whose command is running
-        self.background = []  # fn(now_ms), run from the main loop and every wait
+        # fn(now_ms) each, run from the main loop and every wait, every
+        # _BACKGROUND_EVERY_MS; and each_turn's at every turn of a wait or of the idle
+        # main loop besides (the heaters' control on its period, a software PWM's
+        # edges).
+        self.background = []
+        self.each_turn = []
         self._background_at_ms = time.ticks_ms()
         # Heaters off: the first thing a halt and every way out of the main loop do, so
         # that nothing which can allocate or raise comes before it (thermal.py).
@@ -302,14 +307,30 @@ class Printer:
             ch.write(text + "\n")
 
     # --- time passing ---
-    def add_background(self, fn):
-        self.background.append(fn)
+    def add_background(self, fn, each_turn=False):
+        (self.each_turn if each_turn else self.background).append(fn)
 
     def _run_background(self):
         now = time.ticks_ms()
         self._background_at_ms = now
         for fn in self.background:
             fn(now)
+        for fn in self.each_turn:
+            fn(now)
+
+    def _turn(self):
+        """A turn of a wait or of the idle main loop, after the chip slept until an
+        interrupt: those come a few times a millisecond, and the background's calls cost
+        the chip tens of us each time, a tenth of its time. So the background runs every
+        _BACKGROUND_EVERY_MS, as while lines come back to back, and each_turn's now:
+        a heater's control held up to 10 ms past its period let a 1 Hz bed settle a
+        degree low."""
+        now = time.ticks_ms()
+        if time.ticks_diff(now, self._background_at_ms) >= _BACKGROUND_EVERY_MS:
+            self._run_background()
+        else:
+            for fn in self.each_turn:
+                fn(now)
 
     def pump_all(self):
         if self.listeners:
@@ -330,7 +351,7 @@ class Printer:
         every busy_every_ms. Raises Halted if the printer halted since the command
         started, Stopped if M410 dropped the moves."""
         self.machine_idle()
-        self._run_background()
+        self._turn()
         self.pump_all()
         self._quick_stop_if_asked()
         if self.current is not None and self.busy_every_ms:
@@ -645,7 +666,7 @@ class Printer:
                 self.channels[0].pump(self, block=True)
                 continue
             self.machine_idle()
-            self._run_background()
+            self._turn()
         for fn in self.finish:
             fn()
 

@@ -40,11 +40,12 @@ def clock_text(clock_hz):
 
 def heater_output(machine, chip, gpio, hz, add_background):
     """The heater's output at hz: the chip's PWM if it makes hz, else a SoftPwm run by
-    add_background(fn(now_ms)). Either takes duty_u16(d); duty_u16(0) is off at once."""
+    add_background(fn(now_ms), each_turn). Either takes duty_u16(d); duty_u16(0) is off
+    at once."""
     if hz >= range_hz(chip, machine.freq())[0]:
         return machine.PWM(machine.Pin(gpio), freq=hz, duty_u16=0)
     # Imported only here: most boards' heaters never need it.
     from mixfw.softpwm import SoftPwm
     out = SoftPwm(machine.Pin(gpio, machine.Pin.OUT, value=0), hz)
-    add_background(out.update)
+    add_background(out.update, True)  # its edges at every turn of the main loop
     return out

@@ -277,7 +277,7 @@ class Thermal:
             h.read_ms = None  # for the PID's start only: the guard reads anew
         self.last_ms = now
         self.next_ms = now
-        printer.add_background(self.background)
+        printer.add_background(self.background, True)  # the control on its period
         # One hook per heater: a heater whose PWM write raises leaves no other one on.
         for h in self.heaters:
             printer.heaters_off.append(h.off)
