@@ -60,6 +60,18 @@ def test_m926_refuses_a_pwm_frequency_the_chip_cannot_make():
         p.finish()
 
 
+def test_the_simulation_runs_the_chip_at_the_boards_clock():
+    """The Pico board's 200 MHz, as its boot.py sets it: the PWM's range is that
+    clock's."""
+    p = SimPrinter(board="pico")
+    try:
+        assert p.send("M926 Ifan_pwm_hz V11")[0] == (
+            "Error:fan_pwm_hz = 11 is below the minimum 12 (the rp2040's PWM makes "
+            "12..100000000 Hz at 200 MHz)")
+    finally:
+        p.finish()
+
+
 def test_a_saved_pwm_frequency_the_chip_cannot_make_boots_with_a_warning(tmp_path):
     """Saved at 125 MHz, where the chip makes 8 Hz; loaded at 200 MHz, where it does
     not: the firmware starts on the defaults and says why."""

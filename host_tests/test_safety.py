@@ -98,6 +98,17 @@ def test_the_watchdog_cant_be_turned_off(sim_printer, tmp_path):
     p.finish()
 
 
+def test_a_wait_runs_the_background_every_10_ms_and_each_turn_tasks_at_every_turn(mp):
+    """A wait wakes at every interrupt, a few times a millisecond on a chip: the
+    background tasks (the watchdog, the step-loop check, the reports) run every 10 ms
+    of it, as while lines come back to back; the heaters' control and a software PWM
+    (each_turn) at every turn."""
+    got = mp.script_json("background_turns")
+    assert got["turns"] == 201
+    assert got["each_turn"] == 200
+    assert 19 <= got["background"] <= 21, got
+
+
 def test_back_to_back_lines_feed_the_watchdog():
     # Lines that never wait still let the main loop feed the watchdog (and run the
     # heater control): 3 s hangs, each under the timeout, 8 s in all.
