@@ -194,11 +194,12 @@ def _check_settings(settings, chip, bad):
     elif chip not in STEP_BACKENDS[backend]:
         bad("step_backend %r needs an rp2 chip; this is %s" % (backend, chip))
     clock_hz = settings.get("clock_hz", 0)
-    if clock_hz and (not isinstance(clock_hz, int) or chip not in MAX_CLOCK_HZ
-                     or not 48000000 <= clock_hz <= MAX_CLOCK_HZ[chip]):
-        bad("clock_hz is %r; it must be 0 (the clock the chip boots with) or %s" % (
-            clock_hz, "48 MHz..%d MHz" % (MAX_CLOCK_HZ[chip] // 1000000)
-            if chip in MAX_CLOCK_HZ else "0 on the simulated chip"))
+    top_hz = MAX_CLOCK_HZ.get(chip, 0)
+    if clock_hz and not (isinstance(clock_hz, int) and 48000000 <= clock_hz <= top_hz):
+        allowed = ("48 MHz..%d MHz" % (top_hz // 1000000) if top_hz
+                   else "0 on the simulated chip")
+        bad("clock_hz is %r; it must be 0 (the clock the chip boots with) or %s"
+            % (clock_hz, allowed))
     writer = settings.get("pin_writer", "pin")
     if writer not in PIN_WRITERS:
         bad("pin_writer %r is not one of %s" % (writer, ", ".join(PIN_WRITERS)))

@@ -204,8 +204,9 @@ def main():
         simmachine.pace(float(opts["realtime"] or 0))
     warnings = []
     # The board's clock, as its boot.py sets it, or --clock-hz: the PWM divides it.
-    if opts["clock_hz"] or board.SETTINGS.get("clock_hz"):
-        simmachine.freq(int(opts["clock_hz"] or board.SETTINGS["clock_hz"]))
+    clock_hz = opts["clock_hz"] or board.SETTINGS.get("clock_hz")
+    if clock_hz:
+        simmachine.freq(int(clock_hz))
     config = firmware.Config(board.SETTINGS, opts["config"], flash, warn=warnings.append,
                              clock_hz=simmachine.freq())
     config.boot()

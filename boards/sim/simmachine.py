@@ -64,6 +64,7 @@ class _Mem32:
 
 
 mem32 = _Mem32()
+
 _CAPACITY = 8192
 _FLUSH_AT = _CAPACITY - 256  # one tick writes far fewer edges than this
 

@@ -322,9 +322,7 @@ class Printer:
         """A turn of a wait or of the idle main loop, after the chip slept until an
         interrupt: those come a few times a millisecond, and the background's calls cost
         the chip tens of us each time, a tenth of its time. So the background runs every
-        _BACKGROUND_EVERY_MS, as while lines come back to back, and each_turn's now:
-        a heater's control held up to 10 ms past its period let a 1 Hz bed settle a
-        degree low."""
+        _BACKGROUND_EVERY_MS, as while lines come back to back, and each_turn's now."""
         now = time.ticks_ms()
         if time.ticks_diff(now, self._background_at_ms) >= _BACKGROUND_EVERY_MS:
             self._run_background()

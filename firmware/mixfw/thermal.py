@@ -277,7 +277,9 @@ class Thermal:
             h.read_ms = None  # for the PID's start only: the guard reads anew
         self.last_ms = now
         self.next_ms = now
-        printer.add_background(self.background, True)  # the control on its period
+        # At every turn: the control held up to 10 ms past its period (the rest of the
+        # background's pace) let a 1 Hz software-PWM bed settle a degree low.
+        printer.add_background(self.background, True)
         # One hook per heater: a heater whose PWM write raises leaves no other one on.
         for h in self.heaters:
             printer.heaters_off.append(h.off)
