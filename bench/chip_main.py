@@ -119,8 +119,9 @@ KEPT = {"plan.gcode": Lines("plan.gcode"), "spacers": []}
 # printer is built once and kept: a request's garbage would split a later one's heap.
 import board  # noqa: E402
 from mixfw import heap, planner  # noqa: E402
-# The planned printer's arrays: it keeps no trace records (see planned_printer).
-heap.reserve(planner.step_loop_bytes(dict(board.SETTINGS, trace_records=0)))
+# A reserve for each printer's arrays (the second is the one assemble takes as it
+# loads), each of the board's size: bench/chip_rows.py gives the board no trace records.
+heap.reserve(planner.step_loop_bytes(board.SETTINGS))
 from mixfw import assemble  # noqa: E402
 from mixfw import safety  # noqa: E402
 from mixfw.config import Config  # noqa: E402
@@ -141,9 +142,8 @@ def stepping_printer():
         # its step path assembles when it starts, once a change of the firmware's
         # code had moved the pieces (MemoryError).
         # Its config first, and its garbage collected (22 kB of it, in pieces across
-        # the heap): then the reserve goes back, whole for build()'s tables and arrays.
-        config = Config(dict(board.SETTINGS, trace_records=0, queue_blocks=4), None)
-        heap.release()
+        # the heap): then build() gives a reserve back, whole for its tables and arrays.
+        config = Config(dict(board.SETTINGS, queue_blocks=4), None)
         printer = assemble.build(config, files_root=None)
         # The step path's move while planning: X 100 mm/s, Y 75 mm/s and E 14.46 mm/s
         # of filament mixed over all six drives, i.e. 8,000 + 6,000 + 6,000 steps/s at
@@ -153,6 +153,12 @@ def stepping_printer():
                      b"M567 P6 E0.1:0.15:0.2:0.25:0.12:0.18", b"T6",
                      b"G1 X800 Y600 E115.66 F7500"):
             printer.run_line(printer.parser.parse(line, len(line)))
+        # From here on only its step path runs: what else it holds goes, and the
+        # planned printer's tables find room in the holes it leaves.
+        for name in ("commands", "guarded", "parser", "motion", "thermal", "background",
+                     "each_turn", "on_halt", "on_quick_stop", "heaters_off", "finish"):
+            setattr(printer, name, None)
+        gc.collect()
         KEPT["stepper"] = printer
     return KEPT["stepper"]
 
@@ -161,9 +167,9 @@ def planned_printer():
     """The printer whose planning is measured, its queue retired by hand."""
     if not KEPT.get("plan"):
         gc.collect()
-        # No trace records (3 kB at the firmware's 256): its step loop never runs, and
-        # the heap holds two printers beside the lines.
-        config = Config(dict(board.SETTINGS, trace_records=0), None)
+        # The board's settings have no trace records (3 kB at the firmware's 256): its
+        # step loop never runs, and the heap holds two printers beside the lines.
+        config = Config(board.SETTINGS, None)
         printer = assemble.build(config, files_root=None)
         printer.planner.idle = retire_one(printer.mem, printer.planner.queue)
         # The excerpts are relative E (their file's M83 comes before them).
@@ -183,11 +189,11 @@ def plan(path, stepping, profile=0):
     # with none, the second printer's tables once found no room, with 31 kB free in
     # pieces of under 584 bytes: MemoryError).
     gc.threshold(1024)
+    # The stepping printer first, while the heap is whole: the planned one is built
+    # where its table and arrays then find room, as a board's printer is.
+    stepper = stepping_printer() if stepping else None
     printer = planned_printer()
-    if stepping:
-        stepper = stepping_printer()
-    else:
-        stepper = None
+    if not stepping:
         heap.release()  # the stepping printer's reserve: heap as a board has it
     gc.threshold(-1)
     planner = printer.planner

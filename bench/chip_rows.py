@@ -344,8 +344,10 @@ def _planner_chip(work, requests, gcode=None, profile=None):
         "chip_main": BENCH_DIR / "chip_main.py", "chip_profile": BENCH_DIR / "chip_profile.py",
         "plan_only": paths.BOARDS / "sim" / "plan_only.py"})
     files["plan.gcode"] = excerpt
-    settings = dict({"tick_us": PLANNER_TICK_US, "queue_blocks": PLANNER_QUEUE_BLOCKS},
-                    **OVERRIDES)
+    # No trace records: neither printer captures, and the reserve assemble takes as it
+    # loads is then the planned printer's size.
+    settings = dict({"tick_us": PLANNER_TICK_US, "queue_blocks": PLANNER_QUEUE_BLOCKS,
+                     "trace_records": 0}, **OVERRIDES)
     files["names.txt"] = _names(work, [p for p in files.values() if p.suffix == ".mpy"
                                        and p.stem != "chip_profile"], settings)
     got = []
