@@ -31,12 +31,12 @@ from mixfw.files import Files  # noqa: E402
 from mixfw.thermal import Thermal  # noqa: E402
 from mixfw.transition import Transitions, l0_mm  # noqa: E402
 from mixfw import (cmd_motion, cmd_mixing, cmd_thermal, cmd_report,  # noqa: E402
-                   cmd_config, cmd_files, cmd_trace)
+                   cmd_config, cmd_files, cmd_trace, cmd_objects)
 from mixfw import safety  # noqa: E402
 
 # Commands whose arguments are text, not numbers.
 RAW_COMMANDS = (cmd_config.RAW_COMMANDS + cmd_files.RAW_COMMANDS + cmd_mixing.RAW_COMMANDS
-                + cmd_report.RAW_COMMANDS)
+                + cmd_report.RAW_COMMANDS + cmd_objects.RAW_COMMANDS)
 # Where G-code files for printing from flash live.
 _FILES_ROOT = const("/")
 # Where the configuration lives on the board's flash filesystem.
@@ -136,9 +136,10 @@ def build(config=None, pin_map=None, files_root=_FILES_ROOT):
     cmd_mixing.register(printer, mixing)
     thermal = Thermal(machine, pin_map, settings, printer)
     cmd_thermal.register(printer, thermal, motion)
-    cmd_report.register(printer, cmd_report.Reports(
-        printer, motion, planner, board.NAME,
-        storage=config.path is not None, files=bool(files_root)))
+    reports = cmd_report.Reports(printer, motion, planner, board.NAME,
+                                 storage=config.path is not None, files=bool(files_root))
+    cmd_report.register(printer, reports)
+    cmd_objects.register(printer, cmd_objects.Objects(motion, printer.reply))
     cmd_config.register(printer, config)
     cmd_trace.register(printer, cmd_trace.Trace(mem, settings, printer.reply))
     config.appliers.append(motion.apply)
@@ -151,7 +152,8 @@ def build(config=None, pin_map=None, files_root=_FILES_ROOT):
     # Every flash write (configuration, uploads, deletions) waits for the moves first.
     config.storage.wait_idle = planner.synchronize
     if files_root:
-        cmd_files.register(printer, Files(files_root, printer, config.storage))
+        reports.files = Files(files_root, printer, config.storage)
+        cmd_files.register(printer, reports.files)
     printer.finish.append(planner.synchronize)
     printer.mem = mem
     printer.settings = settings
@@ -159,6 +161,7 @@ def build(config=None, pin_map=None, files_root=_FILES_ROOT):
     printer.pins = pins
     printer.motion = motion
     printer.thermal = thermal
+    printer.reports = reports
     printer.irq = st.make_irq(mem, out, pins.endstops)
     printer.feed = feed
     if feed:  # the stopped feed runs again once everything else has stopped

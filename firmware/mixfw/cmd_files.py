@@ -1,6 +1,6 @@
 # Printing from flash, with Marlin's SD commands: M21 mount, M20 list, M23 select, M24
-# start or resume, M25 pause, M26 rewind or set position, M27 status, M32 select and
-# start, M28/M29 upload, M30 delete. File names are text, so these take raw arguments.
+# start or resume, M25 pause, M26 rewind or set position, M32 select and start, M28/M29
+# upload, M30 delete (M27's report is cmd_report's). File names are text, so these take raw arguments.
 from mixfw.gcode import GcodeError
 
 RAW_COMMANDS = (("M", 23), ("M", 28), ("M", 30), ("M", 32))
@@ -43,14 +43,6 @@ class FileCommands:
             raise GcodeError("no file selected (M23 <name>)")
         job.seek(line.int("S", 0, lo=0, hi=job.size))
 
-    # M27: print progress of the selected file, paused or not.
-    def m27(self, line):
-        job = self.files.selected
-        if job is None:
-            self.printer.reply("Not SD printing")
-        else:
-            self.printer.reply("SD printing byte %d/%d" % (job.pos(), job.size))
-
     # M32 <name>: select a file and start printing it. Example: M32 part.gcode
     def m32(self, line):
         self.m23(line)
@@ -85,7 +77,6 @@ def register(printer, files):
         ("M", 23, c.m23),  # select a file
         ("M", 25, c.m25),  # pause the file print
         ("M", 26, c.m26),  # file position S<byte> (rewind without S)
-        ("M", 27, c.m27),  # file print progress
         ("M", 28, c.m28),  # write lines to a file until M29
         ("M", 29, c.m29),  # end of upload
         ("M", 30, c.m30),  # delete a file

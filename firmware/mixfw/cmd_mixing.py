@@ -36,6 +36,7 @@ class Mixing:
         # Printing extrusion since the gradient was set (ALONG_E), in integer nm: a sum
         # over a whole print, which 32-bit floats would let drift.
         self.extruded_nm = 0
+        self.flow_pct = [100] * self.count  # M221's, per tool (not saved, as in Marlin)
         self._activate(0)
 
     def filament_used_mm(self):
@@ -72,6 +73,8 @@ class Mixing:
     def _activate(self, tool):
         """Blocks queued from now on print with this tool's mix; queued ones keep theirs."""
         self.active = tool
+        if self.motion:
+            self.motion.flow_pct = self.flow_pct[tool]
         mix = self.tool_mix(tool)
         if mix != self.mix:
             self.mix = mix
@@ -293,6 +296,19 @@ class Mixing:
                 total[i] += u * row[i]
         return total
 
+    # M221 [S<percent>] [T<tool>]: the flow of a virtual tool (without T the active
+    # one), as a percentage of its moves' E (OctoPrint's flow slider): the filament of
+    # the whole mix, which its drives share as before. No S: report, as Marlin's
+    # "E0 Flow: 100%". Example: M221 S95
+    def m221(self, line):
+        tool = self._check_tool(line.int("T", self.active))
+        if not line.has("S"):
+            self.reply("echo:E%d Flow: %d%%" % (tool, self.flow_pct[tool]))
+            return
+        self.flow_pct[tool] = line.int("S", lo=1, hi=999)
+        if tool == self.active:
+            self._activate(tool)
+
     # T<n>: select virtual tool n. Example: T2
     def t(self, line):
         tool = self._check_tool(line.number)
@@ -314,3 +330,4 @@ def register(printer, mixing):
     printer.add_command("M", 166, mixing.m166)  # Z gradient A<z0> Z<z1> I<tool0> J<tool1> S T
     printer.add_command("M", 169, mixing.m169)  # gradient of stops along Z or E
     printer.add_command("T", -1, mixing.t)  # select virtual tool
+    printer.add_command("M", 221, mixing.m221)  # flow percentage S of tool T

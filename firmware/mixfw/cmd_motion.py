@@ -359,7 +359,19 @@ class Motion:
         self.e_nm = 0  # logical E
         self.e_offset_nm = 0  # filament = logical E + offset (G92 E, G10/G11)
         self.absolute_e = True  # G90/G91 for X Y Z: in _xyz_spm's modes word
-        self.feed_mm_s = settings["default_feed_mm_s"]
+        # The speed moves run at: the last F word's (f_mm_s) times M220's percentage.
+        self.f_mm_s = self.feed_mm_s = settings["default_feed_mm_s"]
+        self.feed_pct = 100
+        self.feed_pct_kept = 100  # M220 B keeps it, R brings it back
+        # M221: the active tool's flow percentage (Mixing sets it), and what its moves'
+        # filament carried below a nanometre: see flowed.
+        self.flow_pct = 100
+        self._flow_carry = 0
+        # Filament retracted and not yet pushed back, whatever the policy; while an
+        # object M486 cancelled is skipped, what it would be had the object printed.
+        self.unprimed_nm = 0
+        self.skipping = False
+        self._skip_unprimed_nm = 0
         self._travel(settings["travel_mm"])
         self.homing_feed_mm_s = settings["homing_feed_mm_s"]
         self.drives = settings["drives"]
@@ -495,7 +507,9 @@ class Motion:
             f = line.float_at(_F_INDEX, -1.0)
             if f <= 0:
                 raise GcodeError("feed rate F must be > 0, got %s" % f)
-            self.feed_mm_s = f / 60.0
+            self.f_mm_s = f / 60.0
+            self.feed_mm_s = self.f_mm_s if self.feed_pct == 100 else \
+                self.f_mm_s * self.feed_pct / 100
         if not present & MOVE_BITS:
             return None
         # The target goes in an array made once, which then becomes pos_nm, and pos_nm
@@ -525,10 +539,14 @@ class Motion:
             target_e_nm = v if self.absolute_e else target_e_nm + v
         e_nm = target_e_nm - e_was
         xyz = (moved >> 4) & 7
+        if e_nm:
+            for fn in self.before_extrude:
+                fn(pos[2] + target[2], e_nm)
+            if self.skipping:  # a cancelled object's: the move goes, E is counted
+                e_nm = xyz = skipped(self, e_nm, self.flow_pct)
+            elif self.flow_pct != 100:
+                e_nm = flowed(self, e_nm)
         if xyz or e_nm:
-            if e_nm:
-                for fn in self.before_extrude:
-                    fn(pos[2] + target[2], e_nm)
             _queue(self, steps, xyz, e_nm, self.feed_mm_s)
         self.e_nm = target_e_nm
         self.pos_nm = target
@@ -550,7 +568,9 @@ class Motion:
             f = line.float_at(_F_INDEX, -1.0)
             if f <= 0:
                 raise GcodeError("feed rate F must be > 0, got %s" % f)
-            self.feed_mm_s = f / 60.0
+            self.f_mm_s = f / 60.0
+            self.feed_mm_s = self.f_mm_s if self.feed_pct == 100 else \
+                self.f_mm_s * self.feed_pct / 100
         spm = self._xyz_spm
         plane = (spm[_SPM_MODES] >> _MODE_PLANE_SHIFT) & 3
         a = (0, 2, 1)[plane]  # the plane's first axis, its second, and the third
@@ -714,17 +734,35 @@ class Motion:
                 e = e_nm - e_sum
             moved = xyz_targets(spm, 0, end, end, self.queue.position_steps)
             xyz = (moved >> 4) & 7
-            if xyz or e:
-                if e:
-                    for fn in self.before_extrude:
-                        fn(z_nm + end[2], e)
-                _queue(self, steps, xyz, e, self.feed_mm_s)
             e_sum += e
+            if e:
+                for fn in self.before_extrude:
+                    fn(z_nm + end[2], e)
+                if self.skipping:
+                    e = xyz = skipped(self, e, self.flow_pct)
+                elif self.flow_pct != 100:
+                    e = flowed(self, e)
+            if xyz or e:
+                _queue(self, steps, xyz, e, self.feed_mm_s)
             z_nm = end[2]
         self.e_nm = target_e_nm
         self.pos_nm = target
         self._spare_nm = pos
         return None
+
+    # M220 [S<percent>] [B] [R]: the speed of G0-G3 moves from now on, as a percentage of
+    # their F (OctoPrint's feed rate slider); B keeps the percentage it had, R brings the
+    # kept one back. No words: report, as Marlin's "FR:100%". Example: M220 S120
+    def m220(self, line):
+        if line.has("B"):
+            self.feed_pct_kept = self.feed_pct
+        pct = line.int("S", self.feed_pct, lo=1, hi=999)
+        if line.has("R"):
+            pct = self.feed_pct_kept
+        if not line.present:
+            self.reply("FR:%d%%" % pct)
+        self.feed_pct = pct
+        self.feed_mm_s = self.f_mm_s if pct == 100 else self.f_mm_s * pct / 100
 
     # G17 / G18 / G19: the plane of G2/G3 arcs: XY, ZX or YZ.
     def g17(self, line):
@@ -759,8 +797,30 @@ class Motion:
         self._fw_retract(self.retract_nm, self.unretract_feed_mm_s)
         self.fw_retracted = False
 
+    def skip(self, on):
+        """M486: from now on the moves of a cancelled object are skipped (on), or not:
+        travel runs, extrusion is counted and not fed. At the end the filament is
+        retracted or pushed back to where the object's moves would have left it, so
+        the next object starts as it would have."""
+        if on and not self.skipping:
+            self._skip_unprimed_nm = self.unprimed_nm
+        elif not on and self.skipping:
+            self.skipping = False
+            e_nm = self.unprimed_nm - self._skip_unprimed_nm
+            if e_nm:
+                steps = self._steps_out
+                at = self.queue.position_steps
+                for i in range(4):  # the E move starts and ends where the axes are
+                    steps[i] = at[i]
+                _queue(self, steps, 0, e_nm, self.unretract_feed_mm_s if e_nm > 0
+                       else self.retract_feed_mm_s)
+        self.skipping = on
+
     def _fw_retract(self, e_nm, feed_mm_s):
         self.e_offset_nm += e_nm  # the filament moves; the logical E does not
+        if self.skipping:  # in a cancelled object: counted, as its moves' E
+            skipped(self, e_nm, 100)
+            return
         _queue(self, self.machine_steps(), 0, e_nm, feed_mm_s)
 
     # G4 P<ms> | S<s>: dwell after the queued moves. Example: G4 P500
@@ -907,6 +967,29 @@ class Motion:
         self.reply("echo:Soft endstops: %s" % ("On" if spm[_SPM_MODES] & _MODE_SOFT else "Off"))
 
 
+def skipped(self, e_nm, pct):
+    """Motion self's e_nm of filament in a cancelled object, counted and not fed: how
+    much would be retracted now (at pct, its flow percentage); returns 0."""
+    if pct != 100:
+        e_nm = e_nm * pct // 100
+    if e_nm < 0:
+        self._skip_unprimed_nm -= e_nm
+    else:
+        self._skip_unprimed_nm = max(0, self._skip_unprimed_nm - e_nm)
+    return 0
+
+
+def flowed(self, e_nm):
+    """Motion self's e_nm of filament at its flow percentage, to the nanometre; what
+    falls below one is carried to the next move, so the filament of many moves is
+    their sum's at that percentage, not less by a rounding each."""
+    pct = self.flow_pct
+    # e_nm * pct in two parts: the product may pass the chips' 31-bit small ints.
+    part = e_nm % 100 * pct + self._flow_carry
+    self._flow_carry = part % 100
+    return e_nm // 100 * pct + part // 100
+
+
 @micropython.native
 def _queue(self, steps, xyz, e_nm, feed_mm_s):
     """Motion self queues a move of X Y Z (axes in xyz) to steps, with e_nm of
@@ -922,6 +1005,10 @@ def _queue(self, steps, xyz, e_nm, feed_mm_s):
             for guard in self.extrusion_guards:
                 guard()
             self._guards_passed = True
+    if e_nm < 0:
+        self.unprimed_nm -= e_nm
+    elif self.unprimed_nm:
+        self.unprimed_nm = max(0, self.unprimed_nm - e_nm)
     # Mostly the move's drivers are on already. Not all of them may be: a print
     # that never moves Z leaves it off, and enable_for's bytecode call then costs
     # the chip 35 us a line.
@@ -975,3 +1062,4 @@ def register(printer, motion):
         printer.add_command(letter, number, fn, guarded)
     printer.add_command("M", 119, m.m119)  # endstop states
     printer.add_command("M", 211, m.m211)  # soft limits S0/S1
+    printer.add_command("M", 220, m.m220)  # feed rate percentage S, B keeps, R restores

@@ -475,8 +475,23 @@ class Printer:
         if not key or key in self.commands or (
                 key // 10000 == 84 and _ANY_TOOL in self.commands):
             return False
-        self.reply('echo:Unknown command: "%s"' % self.parser.failed_command())
+        command = self.parser.failed_command()
+        refused = self._unknown_command(command[0], command)
+        if refused:
+            self.reply("Error:" + refused)
+            self.failed = True
         return True
+
+    def _unknown_command(self, letter, command):
+        """An M-code we lack is a setting or a report, and a host goes on past it, as
+        Marlin's echo says; a G-code is motion, and a file that needs one would print
+        wrong without it: its refusal is returned, to answer as an error (hosts stop
+        the print)."""
+        if letter == "G":
+            return ('Unknown command: "%s" (a motion command this firmware lacks; the '
+                    'print would go wrong without it)' % command)
+        self.reply('echo:Unknown command: "%s"' % command)
+        return None
 
     def run_line(self, line):
         """Run a parsed line; returns text to follow `ok` or None."""
@@ -488,7 +503,9 @@ class Printer:
             key = _ANY_TOOL
             handler = self.commands.get(key)
         if handler is None:
-            self.reply('echo:Unknown command: "%s%d"' % (line.letter, line.number))
+            refused = self._unknown_command(line.letter, "%s%d" % (line.letter, line.number))
+            if refused:
+                raise GcodeError(refused)
             return None
         if self.refuse_after_error and self.failed and key not in self._always:
             raise GcodeError("refused: an earlier command failed (M933 leaves this mode)")
