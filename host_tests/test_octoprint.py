@@ -287,3 +287,19 @@ def console_cancel_figures(path):
     if len(oks) > k108:
         figures["m109_ok_after_m108_us"] = oks[k108] - us108
     return figures
+
+
+def test_octoprints_feed_rate_and_flow_sliders_reach_the_printer(rig):
+    """The control tab's sliders, through the REST API: OctoPrint sends M220 S and M221
+    S, and the printer's M220/M221 reports (Marlin's words) then show them."""
+    printer, octoprint = rig(realtime=0)
+    octoprint.post("/api/printer/printhead", {"command": "feedrate", "factor": 125})
+    octoprint.post("/api/printer/tool", {"command": "flowrate", "factor": 90})
+    octoprint.command("M220", "M221")
+    serial = wait_for(lambda: (lambda t: t if "Recv: echo:E0 Flow:" in t else None)(
+        octoprint.log_text("serial.log")), 30, "M221's answer in serial.log", octoprint)
+    sent = [t[len("Send: "):] for _, t in serial_entries(serial) if t.startswith("Send: ")]
+    assert "M220 S125" in sent and "M221 S90" in sent, sent
+    assert "Recv: FR:125%" in serial
+    assert "Recv: echo:E0 Flow: 90%" in serial
+    assert not trouble(serial), trouble(serial)

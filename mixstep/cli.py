@@ -23,7 +23,7 @@ def _sim(args):
     report = sim.run(args.gcode or paths.EXAMPLE_GCODE, args.trace, args.report,
                      heap_lock=args.heap_lock, board=args.board, config_path=config,
                      files_dir=files, settings=settings)
-    sim.print_summary(report, ("lines", "sim_seconds", "wall_seconds", "steps"))
+    sim.print_summary(report, ("lines", "sim_seconds", "wall_seconds", "steps", "status"))
     return 1 if report["errors"] else 0
 
 

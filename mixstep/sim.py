@@ -59,6 +59,8 @@ def run(gcode_path, trace_path=None, report_path=None, heap_lock=False, edges_pa
         "errors": errors,
         # What the firmware's start-up found wrong: a saved configuration it refused.
         "warnings": fw["warnings"],
+        # The progress (M73) and message (M117) the print left, as M27 shows them.
+        "status": fw["status"],
         "steps": steps,
         "firmware_steps": fw["steps"],
         "sim_seconds": fw["sim_us"] / 1e6,

@@ -33,6 +33,14 @@ section, "How the mixer picks a drive" and the options' meaning), in exact arith
   them, and a wait for the moves (M400, G4, G28, M92 ...) releases them.
 - Gradients (M166, M169) set the mix of each extruding move from its middle: mid-Z
   of the move, or the printing filament since M169 plus half the move's.
+- Flow (M221 S, per virtual tool): a G0-G3 move's filament is its E times the active
+  tool's percentage, to the nanometre rounded down, what falls below one carried to
+  the next such move; G10/G11 are not scaled.
+- Cancelled objects (M486): while the current object is cancelled, a move that
+  extrudes (G0-G3 with E, G10, G11) steps nothing and its position is taken; travel
+  runs. The filament it would have retracted is followed (a retraction adds to it,
+  extrusion takes from it down to 0), and when the skip ends (another object, S-1, U)
+  an E move where the axes are makes the filament retracted what it would have been.
 
 Where the firmware departs from its specification, this model keeps to the
 specification, and the tests say which is right and why (host_tests/test_trace_check.py):
@@ -77,7 +85,7 @@ _MAX_DIGITS = 9
 
 # Commands whose arguments are text, not words (the firmware reads them whole).
 RAW_COMMANDS = {"M23", "M28", "M30", "M32", "M117", "M118", "M567", "M168", "M169",
-                "M925", "M926"}
+                "M925", "M926", "M486"}
 # Commands that wait for the queued moves (so moves held for a transition go to the
 # planner first, and a later mix change cannot reach back over them).
 SYNC_COMMANDS = {"M400", "G28", "M92", "M201", "M203", "M204", "M205", "M930", "M167",
@@ -715,6 +723,14 @@ class Machine:
         self.gradient = None
         self.gradient_on = False
         self.extruded_nm = 0
+        self.flow = [100] * len(self.mixes)  # M221, per tool
+        self.flow_carry = 0
+        self.unprimed_nm = 0  # filament retracted, not pushed back
+        # M486: the objects cancelled, the current one, and while it is cancelled, the
+        # filament that would be retracted now (None: not skipping).
+        self.cancelled = set()
+        self.current_object = -1
+        self.skip_unprimed_nm = None
         self.active = 0
         self.mix = None
         self._activate(0)
@@ -788,9 +804,65 @@ class Machine:
         return [div_round((pos_nm[i] + self.offset_nm[i]) * self.spm[i].numerator,
                           NM_PER_MM * self.spm[i].denominator) for i in range(3)]
 
+    def _printing_e(self, e_nm, xyz):
+        """A G0-G3 move's filament after M221 and M486: 0 while skipping."""
+        pct = self.flow[self.active]
+        if self.skip_unprimed_nm is not None:
+            e = e_nm * pct // 100
+            self.skip_unprimed_nm = (self.skip_unprimed_nm - e if e < 0
+                                     else max(0, self.skip_unprimed_nm - e))
+            return 0
+        if pct != 100:
+            total = e_nm * pct + self.flow_carry
+            self.flow_carry = total % 100
+            return total // 100
+        return e_nm
+
+    def _skip(self, on):
+        if on and self.skip_unprimed_nm is None:
+            self.skip_unprimed_nm = self.unprimed_nm
+        elif not on and self.skip_unprimed_nm is not None:
+            e = self.unprimed_nm - self.skip_unprimed_nm
+            self.skip_unprimed_nm = None
+            if e:
+                self._queue(list(self.axis_steps), False, e)
+
+    def m486(self, ln):
+        words = {}
+        for word in ln.text.split():
+            letter = word[0].upper()
+            if letter == "A":
+                break
+            words[letter] = int(word[1:]) if word[1:] else None
+        if "T" in words:
+            self.cancelled = set()
+            self.current_object = -1
+            self._skip(False)
+        if "S" in words:
+            self.current_object = words["S"]
+            self._skip(words["S"] in self.cancelled)
+        if "P" in words:
+            self.cancelled.add(words["P"])
+        if "U" in words:
+            self.cancelled.discard(words["U"])
+        if "C" in words:
+            if self.current_object < 0:
+                raise Refused("M486 C with no current object")
+            self.cancelled.add(self.current_object)
+        self._skip(self.current_object in self.cancelled)
+
+    def m221(self, ln):
+        tool = self._check_tool(ln.int("T", self.active))
+        if ln.has("S"):
+            self.flow[tool] = ln.int("S", lo=1, hi=999)
+
     def _queue(self, target_steps, xyz, e_nm):
         if e_nm and not -self.max_extrude_nm <= e_nm <= self.max_extrude_nm:
             raise Refused("extrusion over max_extrude_mm")
+        if e_nm < 0:
+            self.unprimed_nm -= e_nm
+        else:
+            self.unprimed_nm = max(0, self.unprimed_nm - e_nm)
         start = list(self.axis_steps)
         q = self.queue
         if not xyz and self.policy == 1 and (e_nm < 0 or self.retracted_nm > 0):
@@ -835,9 +907,11 @@ class Machine:
         steps = self._steps(target)
         e_nm = target_e - self.e_nm
         xyz = steps != self.axis_steps
+        if e_nm:
+            self._before_extrude(Fraction(self.pos_nm[2] + target[2], 2 * NM_PER_MM), e_nm)
+            e_nm = self._printing_e(e_nm, xyz)
+            xyz = xyz and self.skip_unprimed_nm is None
         if xyz or e_nm:
-            if e_nm:
-                self._before_extrude(Fraction(self.pos_nm[2] + target[2], 2 * NM_PER_MM), e_nm)
             self._queue(steps, xyz, e_nm)
         self.e_nm = target_e
         self.pos_nm = target
@@ -915,11 +989,13 @@ class Machine:
             e = e_nm * i // n - e_done
             steps = self._steps(point)
             xyz = steps != self.axis_steps
-            if xyz or e:
-                if e:
-                    self._before_extrude(Fraction(self.pos_nm[2] + point[2], 2 * NM_PER_MM), e)
-                self._queue(steps, xyz, e)
             e_done += e
+            if e:
+                self._before_extrude(Fraction(self.pos_nm[2] + point[2], 2 * NM_PER_MM), e)
+                e = self._printing_e(e, xyz)
+                xyz = xyz and self.skip_unprimed_nm is None
+            if xyz or e:
+                self._queue(steps, xyz, e)
             self.pos_nm = point
         self.e_nm = target_e
         self.pos_nm = list(target)
@@ -942,14 +1018,22 @@ class Machine:
                 "steps_per_mm": tuple(float(v) for v in self.spm),
                 "step_shift": tuple(self.step_shift)}
 
+    def _fw_retract(self, e_nm):
+        if self.skip_unprimed_nm is None:
+            self._queue(list(self.axis_steps), False, e_nm)
+        elif e_nm < 0:
+            self.skip_unprimed_nm -= e_nm
+        else:
+            self.skip_unprimed_nm = max(0, self.skip_unprimed_nm - e_nm)
+
     def g10(self, ln):
         if not self.fw_retracted:
-            self._queue(list(self.axis_steps), False, -self.retract_nm)
+            self._fw_retract(-self.retract_nm)
             self.fw_retracted = True
 
     def g11(self, ln):
         if self.fw_retracted:
-            self._queue(list(self.axis_steps), False, self.retract_nm)
+            self._fw_retract(self.retract_nm)
             self.fw_retracted = False
 
     def g28(self, ln):
@@ -1149,7 +1233,8 @@ class Machine:
 _HANDLERS = {"G10": Machine.g10, "G11": Machine.g11, "G28": Machine.g28,
              "G92": Machine.g92, "M92": Machine.m92, "M163": Machine.m163,
              "M164": Machine.m164, "M165": Machine.m165, "M567": Machine.m567,
-             "M168": Machine.m168, "M166": Machine.m166, "M169": Machine.m169}
+             "M168": Machine.m168, "M166": Machine.m166, "M169": Machine.m169,
+             "M221": Machine.m221, "M486": Machine.m486}
 
 
 def expected(gcode_path, settings):

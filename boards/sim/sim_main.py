@@ -271,6 +271,8 @@ def main():
         "heater_duty_at_exit": {b.name: simanalog.duty_of(b.heater_gpio)
                                 for b in simthermal.world.bodies},
         "drivers_enabled_at_exit": _drivers_enabled(board),
+        # The progress (M73) and message (M117) the print left, as M27 shows them.
+        "status": printer.reports.status(),
     }
     if opts["stdio"]:  # for the host that drives this console (mixstep sim, the tests)
         # Streamed: the report as one string would need a kilobyte in one piece of a
