@@ -7,22 +7,22 @@
 #                          the firmware's parser, command table and planner, with the
 #                          queue retired by hand (boards/sim/plan_only.py's make_room
 #                          after each line, so the look-ahead stays full and the
-#                          planner never waits); with STEP 1 the step path runs meanwhile (see
-#                          stepping_printer). Answers `bench:{json}`.
+#                          planner never waits); with STEP 1 a step path runs meanwhile
+#                          (see stepping_path). Answers `bench:{json}`.
 #   profile FILE           plan FILE without stepping, then again with the planner's
 #                          functions timed (bench/chip_profile.py): `bench:{json}`.
 #   functions              where each loaded function's code starts, for
 #                          bench/chip_pcprofile.py.
 # Written against the firmware's API: heap.reserve/release and planner.step_loop_bytes
-# (one more reserve, for the second printer), assemble.build(config, files_root=None),
-# assemble.drop(), Config, safety.start_timer(machine, printer, tick_us) (returns what
+# (one more reserve, for the second step path), assemble.build(config, files_root=None),
+# assemble.build_step_path(settings, pins), assemble.drop(), Config, planner.set_mix and
+# add_move, pins.axis_dir_masks(), mixer.normalize, safety.start_timer(machine, printer, tick_us) (returns what
 # has deinit()), printer.parser.parse,
 # printer.run_line, printer.planner (.idle, .queue, .synchronize), printer.mem with the
 # stepper's S_HEAD/S_TAIL/S_ACTIVE/S_POS words (plan_only.retire_one).
 import sys
 import gc
 import json
-import os
 import time
 import machine
 import micropython
@@ -37,6 +37,10 @@ from array import array
 # emulator's program counter profile (bench/chip_pcprofile.py, emu/harness.mjs).
 _PROFILED = const(0x4005800C)
 _LINE_MAX = const(256)
+_CHUNK = const(2048)
+_CHUNK_LINES = const(256)  # at most: a slicer's shortest lines take 8 bytes
+_TABLES = const(6144)
+_PATH_TABLES = const(4096)
 
 
 @micropython.viper
@@ -48,53 +52,86 @@ def _copy(dst, src, start: int, n: int):
 
 
 class Lines:
-    """A G-code file in RAM as one block and its lines' bounds, read before the
-    firmware's modules load: the modules' code leaves the heap in pieces too small for a
-    list of lines, and the printers' arrays need the whole blocks left. Each line is
-    copied into one buffer, as the firmware receives a line, and parsed from there."""
+    """A G-code file read a chunk at a time into one buffer, made before the firmware's
+    modules load: the file whole would take kilobytes of the heap that the printers'
+    tables need. plan() times the lines of each chunk, not the reading. Each line is
+    copied into one buffer, as the firmware receives a line, and parsed from there.
+    Lines that wait for the heaters are left out."""
 
     def __init__(self, path):
-        size = os.stat(path)[6]
-        self.blob = bytearray(size)
-        with open(path, "rb") as f:
-            f.readinto(self.blob)
-        blob = self.blob
-        # 16-bit offsets where they fit: the heap holds two printers beside this.
-        bounds = array("H" if size < 0x10000 else "i")
-        self.moves = 0
-        at = 0
-        while at < size:
-            end = blob.find(b"\n", at)
-            end = size if end < 0 else end
-            stop = end
-            while stop > at and blob[stop - 1] in (10, 13):
-                stop -= 1
-            head = bytes(blob[at:at + 4])
-            if head not in (b"M109", b"M190", b"M116"):
-                bounds.append(at)
-                bounds.append(stop)
-                self.moves += head[:3] in (b"G1 ", b"G0 ")
-            at = end + 1
-        self.bounds = bounds
-        self.count = len(bounds) // 2
+        self.path = path
+        self.chunk = bytearray(_CHUNK)
+        self.bounds = array("H", range(2 * _CHUNK_LINES))
         self.buf = bytearray(_LINE_MAX)
+        self.f = None
+        self.count = self.moves = 0
+        self.rewind()
+        while True:
+            n = self.fill()
+            if n < 0:
+                break
+            for i in range(n):
+                self.count += 1
+                self.moves += bytes(self.chunk[self.bounds[2 * i]:][:3]) in (b"G1 ", b"G0 ")
+
+    def rewind(self):
+        # Opened once: a file object takes a kilobyte in one piece, which the heap the
+        # printers leave may not have.
+        if self.f is None:
+            self.f = open(self.path, "rb")
+        self.f.seek(0)
+        self.size = self.at = 0  # the chunk's bytes, and where its next line starts
+
+    def fill(self):
+        """The next chunk's whole lines, their bounds in self.bounds: how many, or -1
+        at the end of the file. A line cut by the chunk's end goes to its start."""
+        chunk = self.chunk
+        held = self.size - self.at
+        chunk[:held] = chunk[self.at:self.size]
+        got = self.f.readinto(memoryview(chunk)[held:])
+        size = held + got
+        if not size:
+            return -1
+        bounds = self.bounds
+        n = at = 0
+        while at < size:
+            end = chunk.find(b"\n", at)
+            if end < 0 or end >= size:
+                if got:
+                    break  # the rest of this line comes with the next read
+                end = size
+            stop = end
+            while stop > at and chunk[stop - 1] in (10, 13):
+                stop -= 1
+            if n == _CHUNK_LINES:
+                break  # the rest with the next chunk
+            if bytes(chunk[at:at + 4]) not in (b"M109", b"M190", b"M116"):
+                bounds[2 * n] = at
+                bounds[2 * n + 1] = stop
+                n += 1
+            at = end + 1
+        self.size, self.at = size, min(at, size)
+        return n
 
     def line(self, i):
-        """Line i in the buffer; returns its length."""
+        """Line i of the chunk in the buffer; returns its length."""
         a = self.bounds[2 * i]
         n = self.bounds[2 * i + 1] - a
-        _copy(self.buf, self.blob, a, n)
+        _copy(self.buf, self.chunk, a, n)
         return n
 
     def first(self, prefix, k):
         """The first k lines that start with prefix, as bytes."""
         out = []
-        for i in range(self.count):
-            n = self.line(i)
-            if bytes(self.buf[:len(prefix)]) == prefix:
-                out.append(bytes(self.buf[:n]))
-                if len(out) == k:
-                    break
+        self.rewind()
+        while len(out) < k:
+            n = self.fill()
+            if n < 0:
+                break
+            for i in range(n):
+                m = self.line(i)
+                if bytes(self.buf[:len(prefix)]) == prefix and len(out) < k:
+                    out.append(bytes(self.buf[:m]))
         return out
 
 
@@ -122,44 +159,50 @@ from mixfw import heap, planner  # noqa: E402
 # A reserve for each printer's arrays (the second is the one assemble takes as it
 # loads), each of the board's size: bench/chip_rows.py gives the board no trace records.
 heap.reserve(planner.step_loop_bytes(board.SETTINGS))
+# And room for the tables of the planned printer (its command table alone grows to
+# 776 bytes in one piece) and of the step path (the planner's), held whole while the
+# modules load, whose code would leave the heap in pieces too small for them; each
+# given back just before its build.
+KEPT["tables"] = bytearray(_TABLES)
+KEPT["path_tables"] = bytearray(_PATH_TABLES)
 from mixfw import assemble  # noqa: E402
 from mixfw import safety  # noqa: E402
 from mixfw.config import Config  # noqa: E402
 from mixfw import stepper as st  # noqa: E402
+from mixfw.mixer import normalize  # noqa: E402
 from plan_only import make_room, retire_one  # noqa: E402
 
 
 
-def stepping_printer():
-    """A second printer, built as main.py builds the board's, whose only job is to keep
-    the step path busy with one long six-drive mixed move, as while printing. The
-    planner measured is another printer whose queue is retired by hand, so what it
-    plans never reaches the pins and never waits for them; both share the CPU."""
+class StepPath:
+    """A step path alone, as safety.start_timer takes a printer's."""
+
+    def __init__(self, settings, parts):
+        self.settings = settings
+        self.mem, self.pins, self.planner, self.feed, self.irq = parts
+
+
+def stepping_path():
+    """A second step path, built as the board's printer's is (assemble.build_step_path),
+    whose only job is to keep the step loop busy with one long six-drive mixed move, as
+    while printing. The planner measured is a printer's whose queue is retired by hand,
+    so what it plans never reaches the pins and never waits for them; both share the
+    CPU. Without a printer of its own around it, it takes a few kB beside the planned
+    printer, its arrays the reserve held for them."""
     if not KEPT.get("stepper"):
+        # The planned printer's settings: its arrays take the reserve held for them
+        # (the board's size), and a second configuration would take the heap kilobytes.
+        settings = KEPT["plan"].settings
+        del KEPT["path_tables"]
         gc.collect()
-        # Its one move needs neither the trace's records (3 kB at the firmware's 256)
-        # nor a long queue: the heap they took left too little for the PIO programs
-        # its step path assembles when it starts, once a change of the firmware's
-        # code had moved the pieces (MemoryError).
-        # Its config first, and its garbage collected (22 kB of it, in pieces across
-        # the heap): then build() gives a reserve back, whole for its tables and arrays.
-        config = Config(dict(board.SETTINGS, queue_blocks=4), None)
-        printer = assemble.build(config, files_root=None)
-        # The step path's move while planning: X 100 mm/s, Y 75 mm/s and E 14.46 mm/s
-        # of filament mixed over all six drives, i.e. 8,000 + 6,000 + 6,000 steps/s at
-        # the pico_6drives steps/mm (80, 80, 415), for 8 s: longer than any planning
-        # run here.
-        for line in (b"M302 P1", b"M211 S0", b"G91", b"M83",
-                     b"M567 P6 E0.1:0.15:0.2:0.25:0.12:0.18", b"T6",
-                     b"G1 X800 Y600 E115.66 F7500"):
-            printer.run_line(printer.parser.parse(line, len(line)))
-        # From here on only its step path runs: what else it holds goes, and the
-        # planned printer's tables find room in the holes it leaves.
-        for name in ("commands", "guarded", "parser", "motion", "thermal", "background",
-                     "each_turn", "on_halt", "on_quick_stop", "heaters_off", "finish"):
-            setattr(printer, name, None)
-        gc.collect()
-        KEPT["stepper"] = printer
+        path = StepPath(settings, assemble.build_step_path(settings, board.PINS))
+        # The move: X 100 mm/s, Y 75 mm/s and E 14.46 mm/s of filament mixed over all
+        # six drives, i.e. 8,000 + 6,000 + 6,000 steps/s at the pico_6drives steps/mm
+        # (80, 80, 415), for 8 s: longer than any planning run here.
+        path.planner.set_mix(2, normalize([0.1, 0.15, 0.2, 0.25, 0.12, 0.18], 6))
+        path.planner.add_move([64000, 48000, 0], 125.0, path.pins.axis_dir_masks(),
+                              115660000)
+        KEPT["stepper"] = path
     return KEPT["stepper"]
 
 
@@ -170,6 +213,8 @@ def planned_printer():
         # The board's settings have no trace records (3 kB at the firmware's 256): its
         # step loop never runs, and the heap holds two printers beside the lines.
         config = Config(board.SETTINGS, None)
+        del KEPT["tables"]
+        gc.collect()
         printer = assemble.build(config, files_root=None)
         printer.planner.idle = retire_one(printer.mem, printer.planner.queue)
         # The excerpts are relative E (their file's M83 comes before them).
@@ -189,12 +234,13 @@ def plan(path, stepping, profile=0):
     # with none, the second printer's tables once found no room, with 31 kB free in
     # pieces of under 584 bytes: MemoryError).
     gc.threshold(1024)
-    # The stepping printer first, while the heap is whole: the planned one is built
-    # where its table and arrays then find room, as a board's printer is.
-    stepper = stepping_printer() if stepping else None
     printer = planned_printer()
-    if not stepping:
-        heap.release()  # the stepping printer's reserve: heap as a board has it
+    if stepping:
+        stepper = stepping_path()
+    else:
+        stepper = None
+        heap.release()  # the step path's reserve: heap as a board has it
+        KEPT.pop("path_tables", None)
     gc.threshold(-1)
     planner = printer.planner
     run_line = printer.run_line
@@ -207,6 +253,7 @@ def plan(path, stepping, profile=0):
         time.sleep_ms(300)  # past the move's acceleration, into its cruise
         m = stepper.mem
         steps0 = m[st.S_POS + st.X] + m[st.S_POS + st.Y] + abs(m[st.S_POS + st.E])
+    start_us = time.ticks_us()  # the step path's rate: over the reading too
     # As main.py on a board: once the printers are built, the code that built them
     # goes (a session's one plan request builds them; a later one builds none).
     global assemble
@@ -224,21 +271,32 @@ def plan(path, stepping, profile=0):
     errors = []
     mem = printer.mem
     full = planner.queue - 1
-    machine.mem32[_PROFILED] = 1  # the program counter's profile, if one is taken
-    t0 = time.ticks_us()
     buf = data.buf
     line = data.line
-    for number in range(1, data.count + 1):
-        try:
-            run_line(parse(buf, line(number - 1)))
-        except Exception as e:  # the firmware would answer Error: and go on
-            if len(errors) < 5:
-                errors.append("line %d: %r" % (number, e))
-        # As a board's step path would: the ring keeps its one free slot, so the
-        # planner never waits (its wait hook stays for a line of several blocks).
-        make_room(mem, full)
-    planner.synchronize()
-    us = time.ticks_diff(time.ticks_us(), t0)
+    us = number = 0
+    data.rewind()
+    while True:
+        n = data.fill()
+        if n < 0:
+            break
+        machine.mem32[_PROFILED] = 1  # the program counter's profile, if one is taken
+        t0 = time.ticks_us()
+        for i in range(n):
+            number += 1
+            try:
+                run_line(parse(buf, line(i)))
+            except Exception as e:  # the firmware would answer Error: and go on
+                if len(errors) < 5:
+                    errors.append("line %d: %r" % (number, e))
+            # As a board's step path would: the ring keeps its one free slot, so the
+            # planner never waits (its wait hook stays for a line of several blocks).
+            make_room(mem, full)
+        us += time.ticks_diff(time.ticks_us(), t0)
+        machine.mem32[_PROFILED] = 0
+    machine.mem32[_PROFILED] = 1
+    t0 = time.ticks_us()
+    planner.synchronize()  # the look-ahead's last moves
+    us += time.ticks_diff(time.ticks_us(), t0)
     machine.mem32[_PROFILED] = 0
     if profile == 1:
         # What a line allocates (the collector held off for a few lines), and what one
@@ -257,8 +315,9 @@ def plan(path, stepping, profile=0):
     if stepper:
         m = stepper.mem
         steps1 = m[st.S_POS + st.X] + m[st.S_POS + st.Y] + abs(m[st.S_POS + st.E])
+        wall_us = time.ticks_diff(time.ticks_us(), start_us)
         out.update(zip("stepper_steps_per_s stepper_still_moving".split(), (
-            (steps1 - steps0) * 1e6 / us, bool(stepper.planner.busy()))))
+            (steps1 - steps0) * 1e6 / wall_us, bool(stepper.planner.busy()))))
         timer.deinit()
     if profile == 2:
         out["functions"] = chip_profile.report(timed[0], timed[1], moves)

@@ -31,12 +31,13 @@ from mixfw.files import Files  # noqa: E402
 from mixfw.thermal import Thermal  # noqa: E402
 from mixfw.transition import Transitions, l0_mm  # noqa: E402
 from mixfw import (cmd_motion, cmd_mixing, cmd_thermal, cmd_report,  # noqa: E402
-                   cmd_config, cmd_files, cmd_trace, cmd_objects)
+                   cmd_config, cmd_files, cmd_trace)
 from mixfw import safety  # noqa: E402
 
-# Commands whose arguments are text, not numbers.
+# Commands whose arguments are text, not numbers; M486's module loads at its first
+# use (add_lazy_command), so its object names are told here.
 RAW_COMMANDS = (cmd_config.RAW_COMMANDS + cmd_files.RAW_COMMANDS + cmd_mixing.RAW_COMMANDS
-                + cmd_report.RAW_COMMANDS + cmd_objects.RAW_COMMANDS)
+                + cmd_report.RAW_COMMANDS + (("M", 486),))
 # Where G-code files for printing from flash live.
 _FILES_ROOT = const("/")
 # Where the configuration lives on the board's flash filesystem.
@@ -71,10 +72,10 @@ def _start_pio(mem, settings, pin_map):
     return sm.put  # bound once: the interrupt must not look it up
 
 
-def build(config=None, pin_map=None, files_root=_FILES_ROOT):
-    config = config or Config(board.SETTINGS, None, clock_hz=machine.freq())
-    settings = config.settings
-    pin_map = pin_map or board.PINS
+def build_step_path(settings, pin_map):
+    """What a printer's moves reach the pins through: the step loop's memory, the pins,
+    the planner (its idle hook machine.idle until the printer's is set), the DMA feed
+    (step_backend pio_dma, else None) and the step loop's interrupt handler."""
     tick_us = settings["tick_us"]
     # Step-loop memory: one array for state, mixer, pin masks and the block ring; it
     # and the DMA ring (step_backend pio_dma) are the largest blocks, so they come first.
@@ -108,10 +109,19 @@ def build(config=None, pin_map=None, files_root=_FILES_ROOT):
         out, offsets = pins.registers
         for i, word in enumerate(offsets):
             mem[st.S_REG_SET + i] = word
-    printer = Printer(settings["line_buffer_bytes"], machine.idle, RAW_COMMANDS)
-    planner = Planner(mem, settings, printer.idle, machine.disable_irq, machine.enable_irq,
+    planner = Planner(mem, settings, machine.idle, machine.disable_irq, machine.enable_irq,
                       lk, feed.irq if feed else None)
     planner.set_dir_invert(pins.dir_invert_mask)
+    return mem, pins, planner, feed, st.make_irq(mem, out, pins.endstops)
+
+
+def build(config=None, pin_map=None, files_root=_FILES_ROOT):
+    config = config or Config(board.SETTINGS, None, clock_hz=machine.freq())
+    settings = config.settings
+    pin_map = pin_map or board.PINS
+    mem, pins, planner, feed, irq = build_step_path(settings, pin_map)
+    printer = Printer(settings["line_buffer_bytes"], machine.idle, RAW_COMMANDS)
+    planner.idle = printer.idle
     motion = cmd_motion.Motion(planner, pins, settings, printer.reply)
     motion.feed = feed
     # A halt stops motion before anything is reported; steps the DMA ring still held
@@ -136,10 +146,15 @@ def build(config=None, pin_map=None, files_root=_FILES_ROOT):
     cmd_mixing.register(printer, mixing)
     thermal = Thermal(machine, pin_map, settings, printer)
     cmd_thermal.register(printer, thermal, motion)
+    # filament change, loaded at its first use
+    printer.add_lazy_command("M", 600, "mixfw.cmd_change", "FilamentChange",
+                             (printer, motion, thermal, settings), "m600", guarded=True)
     reports = cmd_report.Reports(printer, motion, planner, board.NAME,
                                  storage=config.path is not None, files=bool(files_root))
     cmd_report.register(printer, reports)
-    cmd_objects.register(printer, cmd_objects.Objects(motion, printer.reply))
+    # objects of a print, cancelling them: loaded at its first use
+    printer.add_lazy_command("M", 486, "mixfw.cmd_objects", "Objects",
+                             (motion, printer.reply), "m486")
     cmd_config.register(printer, config)
     cmd_trace.register(printer, cmd_trace.Trace(mem, settings, printer.reply))
     config.appliers.append(motion.apply)
@@ -162,7 +177,7 @@ def build(config=None, pin_map=None, files_root=_FILES_ROOT):
     printer.motion = motion
     printer.thermal = thermal
     printer.reports = reports
-    printer.irq = st.make_irq(mem, out, pins.endstops)
+    printer.irq = irq
     printer.feed = feed
     if feed:  # the stopped feed runs again once everything else has stopped
         printer.on_halt.append(feed.resume)

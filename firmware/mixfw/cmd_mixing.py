@@ -36,7 +36,7 @@ class Mixing:
         # Printing extrusion since the gradient was set (ALONG_E), in integer nm: a sum
         # over a whole print, which 32-bit floats would let drift.
         self.extruded_nm = 0
-        self.flow_pct = [100] * self.count  # M221's, per tool (not saved, as in Marlin)
+        self.tool_flow_pct = [100] * self.count  # M221's, per tool (not saved, as in Marlin)
         self._activate(0)
 
     def filament_used_mm(self):
@@ -74,7 +74,7 @@ class Mixing:
         """Blocks queued from now on print with this tool's mix; queued ones keep theirs."""
         self.active = tool
         if self.motion:
-            self.motion.flow_pct = self.flow_pct[tool]
+            self.motion.set_flow(self.tool_flow_pct[tool])
         mix = self.tool_mix(tool)
         if mix != self.mix:
             self.mix = mix
@@ -303,9 +303,9 @@ class Mixing:
     def m221(self, line):
         tool = self._check_tool(line.int("T", self.active))
         if not line.has("S"):
-            self.reply("echo:E%d Flow: %d%%" % (tool, self.flow_pct[tool]))
+            self.reply("echo:E%d Flow: %d%%" % (tool, self.tool_flow_pct[tool]))
             return
-        self.flow_pct[tool] = line.int("S", lo=1, hi=999)
+        self.tool_flow_pct[tool] = line.int("S", lo=1, hi=999)
         if tool == self.active:
             self._activate(tool)
 

@@ -372,6 +372,8 @@ class Motion:
         self.unprimed_nm = 0
         self.skipping = False
         self._skip_unprimed_nm = 0
+        # Either of the two: a printing line reads one word to know it has neither.
+        self.e_changed = False
         self._travel(settings["travel_mm"])
         self.homing_feed_mm_s = settings["homing_feed_mm_s"]
         self.drives = settings["drives"]
@@ -542,10 +544,11 @@ class Motion:
         if e_nm:
             for fn in self.before_extrude:
                 fn(pos[2] + target[2], e_nm)
-            if self.skipping:  # a cancelled object's: the move goes, E is counted
-                e_nm = xyz = skipped(self, e_nm, self.flow_pct)
-            elif self.flow_pct != 100:
-                e_nm = flowed(self, e_nm)
+            if self.e_changed:
+                if self.skipping:  # a cancelled object's: the move goes, E is counted
+                    e_nm = xyz = skipped(self, e_nm, self.flow_pct)
+                else:
+                    e_nm = flowed(self, e_nm)
         if xyz or e_nm:
             _queue(self, steps, xyz, e_nm, self.feed_mm_s)
         self.e_nm = target_e_nm
@@ -815,6 +818,43 @@ class Motion:
                 _queue(self, steps, 0, e_nm, self.unretract_feed_mm_s if e_nm > 0
                        else self.retract_feed_mm_s)
         self.skipping = on
+        self.set_flow(self.flow_pct)
+
+    def set_flow(self, pct):
+        """M221: the active tool's flow percentage."""
+        self.flow_pct = pct
+        self.e_changed = self.skipping or pct != 100
+
+    def travel_to(self, target_nm, feed_mm_s):
+        """A move the firmware makes of itself (M600's park and return) to the logical
+        X Y Z target_nm (nanometres), with no filament; outside the soft limits it is
+        refused, as G1's."""
+        verdict = xyz_targets(self._xyz_spm, 0, target_nm, self._spare_nm, None)
+        if verdict >= 0 and self._xyz_spm[_SPM_MODES] & _MODE_SOFT:
+            for i in range(3):
+                at = target_nm[i] + self.offset_nm[i]
+                if at < -1 or at > self._travel_nm[i] + 1:
+                    verdict = -_OUTSIDE - i
+        if verdict < 0:
+            self._refuse_target(target_nm, verdict)
+        _queue(self, self._steps_out, 7, 0, feed_mm_s)
+        for i in range(3):
+            self.pos_nm[i] = target_nm[i]
+
+    def feed_filament(self, e_nm, feed_mm_s, drive=-1):
+        """Filament in (e_nm > 0) or out where the head stands, made by the firmware of
+        itself (M600): the logical E stays. drive: that drive alone; -1: the mix."""
+        self.e_offset_nm += e_nm
+        steps = self.machine_steps()
+        if drive < 0:
+            _queue(self, steps, 0, e_nm, feed_mm_s)
+            return
+        for guard in self.extrusion_guards:
+            guard()
+        self.enable_for(8)
+        q = self.queue
+        q.add_move(steps, feed_mm_s, dir_masks=self.dir_masks, e_nm=e_nm,
+                   mix=(q.mix_id, tuple(int(i == drive) for i in range(self.drives))))
 
     def _fw_retract(self, e_nm, feed_mm_s):
         self.e_offset_nm += e_nm  # the filament moves; the logical E does not

@@ -113,10 +113,3 @@ class Objects:
         self.reply("echo:objects:%d current:%d cancelled:%s" % (
             self.count, self.current,
             ",".join(str(i) for i in sorted(self.cancelled)) or "none"))
-
-
-RAW_COMMANDS = (("M", 486),)
-
-
-def register(printer, objects):
-    printer.add_command("M", 486, objects.m486)  # objects: T S P U C A<name>

@@ -45,6 +45,14 @@ FIRMWARE_DEFAULTS = {
     "min_circle_segments": 72,
     # Marlin's SLOWDOWN and its DEFAULT_MINSEGMENTTIME (M205 B).
     "min_segment_time_us": 20000,
+    # M600: park at X 10 Y 10 with Z 5 mm up; no unload or load (a change by hand),
+    # a purge of 30 mm at 10 mm/s; the hot end off after 5 minutes' wait.
+    "change_park_mm": (10.0, 10.0, 5.0),
+    "change_unload_mm": 0.0,
+    "change_load_mm": 0.0,
+    "change_purge_mm": 30.0,
+    "change_feed_mm_s": 10.0,
+    "change_heater_timeout_s": 300,
 }
 
 
@@ -199,6 +207,18 @@ SCHEMA = (
      "G10 retraction speed"),
     ("unretract_feed_mm_s",        "",     "float", 0.1,     500,         False,
      "G11 unretraction speed"),
+    ("change_park_mm",             "xyz",  "float", 0,       100000,      False,
+     "M600 parks the nozzle at X, Y (within the travel), Z raised by this"),
+    ("change_unload_mm",           "",     "float", 0,       100000,      False,
+     "M600 unloads this much filament before the change (0: by hand)"),
+    ("change_load_mm",             "",     "float", 0,       100000,      False,
+     "M600 loads this much filament after the change, before the purge"),
+    ("change_purge_mm",            "",     "float", 0,       100000,      False,
+     "M600 purges this much filament with the active mix after the load"),
+    ("change_feed_mm_s",           "",     "float", 0.1,     500,         False,
+     "M600 unload, load and purge speed"),
+    ("change_heater_timeout_s",    "",     "int",   0,       86400,       False,
+     "M600 turns the hot end off after waiting this long (0: never); resuming heats it"),
     ("transition_l1_mm",           "",     "float", 0,       100,         True,
      "mixing chamber delay L1; with L2, changes apply L1 + L2/2 of extrusion early"),
     ("transition_l2_mm",           "",     "float", 0,       100,         True,

@@ -237,6 +237,8 @@ class Printer:
         # it in the ring; once its own line runs, no later wait sees it.
         self.breaks_received = 0
         self.breaks_used = 0
+        self.prompt_open = False  # a host prompt waits for its answer (M876), as M108
+
         self._breaks_run = 0
         self.stop_count = 0  # M410s done
         self._cmd_stop_count = 0
@@ -284,6 +286,20 @@ class Printer:
         self.commands[key] = handler
         if guarded:
             self.guarded.add(key)
+
+    def add_lazy_command(self, letter, number, module, make, args, method, guarded=False):
+        """A command whose module loads at its first use: a board keeps a module's
+        code in RAM, and a rarely used command (M600, M486) would hold kilobytes of it
+        from boot. make is the module's class, built with args; its method runs the
+        command from then on."""
+        key = command_key(letter, number)
+
+        def first(line):
+            mod = __import__(module, None, None, (make,))
+            handler = getattr(getattr(mod, make)(*args), method)
+            self.commands[key] = handler
+            return handler(line)
+        self.add_command(letter, number, first, guarded)
 
     def add_channel(self, console):
         """A console at start, or a host that connected over the network: it hears
@@ -410,7 +426,8 @@ class Printer:
         elif number == 410:
             # Done between commands or at a wait, never inside the planner's work.
             self._stop_pending = True
-        # M876: no prompt of ours waits for an answer (Cap:PROMPT_SUPPORT:0).
+        elif self.prompt_open:  # M876: the answer to the prompt a wait showed (M600)
+            self.breaks_received += 1
 
     def _quick_stop_if_asked(self):
         if self._stop_pending:
@@ -713,8 +730,9 @@ class Printer:
         if self.current is None:
             self.quick_stop()
 
-    # M876 S<choice>: a host's answer to a prompt. This firmware opens none
-    # (Cap:PROMPT_SUPPORT:0), so there is nothing to answer. Example: M876 S0
+    # M876 S<choice>: a host's answer to a prompt (M600's Continue). The receive path
+    # acts on it, ending the wait that showed the prompt; in its turn it does nothing.
+    # Example: M876 S0
     def m876(self, line):
         pass
 
