@@ -130,3 +130,68 @@ def test_an_unknown_g_code_is_refused_and_an_unknown_m_code_passed_over(printer)
     assert printer.send("M355 S1 P255") == ['echo:Unknown command: "M355"', "ok"]
     assert printer.send("M9999 S1") == ['echo:Unknown command: "M9999"', "ok"]
     assert printer.finish()["steps"]["x"] == 0
+
+
+def _read_until(p, text):
+    """The firmware's lines up to the first that holds text."""
+    seen = []
+    while not seen or text not in seen[-1]:
+        seen.append(p._readline())
+    return seen
+
+
+def test_m600_parks_changes_a_drive_waits_for_the_host_and_goes_back(sim_printer, board):
+    """M600 D1 mid-print: the mix retracts, Z rises, the head parks, drive 1 unloads;
+    the host hears //action:paused and a prompt; M876 (the prompt's Continue) resumes:
+    drive 1 loads, the mix purges, the head goes back and the print goes on where it
+    was, its logical E untouched."""
+    p = sim_printer()
+    for line in ("M104 S200", "M109 S200", "G28", "M83", "G1 X50 Y40 Z0.3 F3000",
+                 "G1 X60 E1"):
+        assert p.send(line)[-1] == "ok", line
+    p.proc.stdin.write(b"M600 D1 U20 L25 P5 X5 Y7 Z10\n")
+    waiting = _read_until(p, "then M108 or Continue")
+    assert "//action:paused" in waiting and "//action:prompt_show" in waiting
+    p.proc.stdin.write(b"M876 S0\n")
+    resumed = _read_until(p, "ok")
+    assert resumed[-3:] == ["//action:prompt_end", "//action:resumed", "ok"]
+    assert p._readline() == "ok"  # the M876 line's own turn: nothing more
+    p.send("M400")
+    m114 = [t for t in p.send("M114") if not t.startswith("busy:")]
+    assert m114[0].startswith("X:60.00 Y:40.00 Z:0.30 E:1.00 Count X:4800 Y:3200"), m114
+    p.send("G1 X70 E1")
+    steps = p.finish()["steps"]
+    spm = board["SETTINGS"]["steps_per_mm"]
+    # Drive 1: unloaded 20, loaded 25; the mix (T0, drive 0): 1 + 5 purged + 1 mm.
+    assert steps["e1"] == 5 * E_SPM and steps["e0"] == 7 * E_SPM
+    assert steps["x"] == 70 * spm[0] and steps["z"] == round(0.3 * spm[2])
+
+
+def test_m600_turns_the_hot_end_off_after_its_timeout_and_heats_it_again(sim_printer):
+    p = sim_printer()
+    for line in ("M926 Ichange_heater_timeout_s V3", "M930", "M104 S200", "M109 S200",
+                 "G28", "G1 X20 Y20 Z1 F3000"):
+        assert p.send(line)[-1] == "ok", line
+    p.proc.stdin.write(b"M600\n")
+    off = _read_until(p, "hot end off after 3 s")
+    assert "//action:paused" in off
+    p.proc.stdin.write(b"M108\n")
+    back = _read_until(p, "ok")
+    assert "echo:filament change: heating the hot end to 200 C" in back
+    assert back[-2:] == ["//action:resumed", "ok"]
+    assert p._readline() == "ok"  # the M108 line's own
+    temp = float(p.send("M105")[-1].split()[1][2:])  # ok T:<now> /<target> ...
+    assert temp >= 195  # heated again before the print went on
+    p.finish()
+
+
+def test_m600_refuses_bad_words_and_a_cold_hot_end_without_moving(printer):
+    for line, error in (("M600 D6", "D6 out of range 0..5"),
+                        ("M600 X-1", "M600 X-1.0 out of range 0..250"),
+                        ("M600 U500", "M600 U500.0 out of range 0..200")):
+        assert printer.send(line) == ["Error:" + error, "ok"], line
+    assert printer.send("M302 P0")[-1] == "ok"
+    got = printer.send("M600")
+    assert got[0].startswith("Error:cold extrusion prevented") and got[-1] == "ok"
+    assert printer.finish()["steps"] == {k: 0 for k in (
+        "x", "y", "z", "e0", "e1", "e2", "e3", "e4", "e5")}

@@ -35,6 +35,8 @@ GROUPS = (
      "changes moved ahead of time (see [Mixing](Mixing.md))."),
     ("retraction", "Retraction", "Firmware retraction (`G10`/`G11`) and how a "
      "retraction is shared among the drives."),
+    ("change", "Filament change", "What `M600` does when its line gives no word of its "
+     "own (see [G-Codes](G-Codes.md))."),
     ("step_path", "Step path and pins",
      "What the step loop runs at and how the drivers' and endstops' pins are read and "
      "driven (see [Step_Timing](Step_Timing.md) and [Boards](Boards.md))."),
@@ -192,6 +194,24 @@ DESCRIPTIONS = {
         "drive takes back exactly the steps it made in the latest extrusion, newest "
         "first, and the unretraction pushes those back, whatever tool is active by "
         "then."),
+    "change_park_mm": (
+        "change", "mm",
+        "X, Y: where `M600` parks the nozzle, within the travel. Z: how far it raises the "
+        "nozzle first (at most to the top of the travel)."),
+    "change_unload_mm": (
+        "change", "mm",
+        "Filament `M600` unloads from the drive changed (`D`), or the mix, after parking. "
+        "0: none, the change is made by hand."),
+    "change_load_mm": (
+        "change", "mm", "Filament `M600` loads into the drive changed after the wait."),
+    "change_purge_mm": (
+        "change", "mm",
+        "Filament `M600` purges with the active mix after the load, before going back."),
+    "change_feed_mm_s": ("change", "mm/s", "Speed of `M600`'s unload, load and purge."),
+    "change_heater_timeout_s": (
+        "change", "s",
+        "How long `M600` waits with the hot end at its target; then the hot end turns "
+        "off, and heats again before the print goes on. 0: it stays on."),
     "retract_mm": ("retraction", "mm", "Length of `G10`; `G11` pushes it back."),
     "retract_feed_mm_s": ("retraction", "mm/s", "Speed of `G10`."),
     "unretract_feed_mm_s": ("retraction", "mm/s", "Speed of `G11`."),

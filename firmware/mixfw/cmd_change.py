@@ -34,8 +34,9 @@ class FilamentChange:
     # filament. After the queued moves: retract E (retract_mm), raise Z by Z, park at X
     # Y (change_park_mm), unload U of drive D (without D, of the active mix), tell the
     # host and wait for M108 or the prompt's Continue (M876); then heat again if the
-    # wait turned the hot end off, load L, purge P with the active mix, go back and
-    # push E back. Example: M600 D2 U80 L80
+    # wait turned the hot end off, push E back, load L, purge P with the active mix,
+    # retract E for the way back, go back and push it back: the drives end U less L
+    # and P more than they were. Example: M600 D2 U80 L80
     def m600(self, line):
         s = self.settings
         m = self.motion
@@ -66,6 +67,7 @@ class FilamentChange:
         planner.synchronize()
         if not self._wait():
             return
+        m.feed_filament(retract, m.unretract_feed_mm_s)  # the pause's retraction back
         if load:
             m.feed_filament(load, feed, drive)
         if purge:
