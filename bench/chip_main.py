@@ -37,8 +37,8 @@ from array import array
 # emulator's program counter profile (bench/chip_pcprofile.py, emu/harness.mjs).
 _PROFILED = const(0x4005800C)
 _LINE_MAX = const(256)
-_CHUNK = const(2048)
-_CHUNK_LINES = const(256)  # at most: a slicer's shortest lines take 8 bytes
+_CHUNK = const(1024)
+_CHUNK_LINES = const(128)  # at most: a slicer's shortest lines take 8 bytes
 _TABLES = const(6144)
 _PATH_TABLES = const(4096)
 
@@ -211,10 +211,10 @@ def planned_printer():
     if not KEPT.get("plan"):
         gc.collect()
         # The board's settings have no trace records (3 kB at the firmware's 256): its
-        # step loop never runs, and the heap holds two printers beside the lines.
-        config = Config(board.SETTINGS, None)
+        # step loop never runs, and the heap holds two step paths beside the lines.
         del KEPT["tables"]
         gc.collect()
+        config = Config(board.SETTINGS, None)
         printer = assemble.build(config, files_root=None)
         printer.planner.idle = retire_one(printer.mem, printer.planner.queue)
         # The excerpts are relative E (their file's M83 comes before them).

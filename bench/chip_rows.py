@@ -89,8 +89,9 @@ HEAP_PRINT_S = 3.0
 # (a --set tick_us overrides it). The CPU share a step path leaves at 20,000 steps/s
 # is the same at both ticks (chip_cpu_left_while_stepping, docs/Benchmarks.md).
 PLANNER_TICK_US = 50
-# And with queues of this many blocks: two of the board's own (48) do not fit either.
-PLANNER_QUEUE_BLOCKS = 24
+# And with queues of this many blocks: two of the board's own (48), or of 24, do not
+# fit beside the firmware's code and the seventh name pool.
+PLANNER_QUEUE_BLOCKS = 16
 # The stepping planner row is the median over these heap layouts: a spacer of so many
 # bytes allocated first moves both printers' objects. The same firmware's row moved by
 # up to 7 % between layouts, in the planner's native code and bytecode (bench/

@@ -86,7 +86,7 @@ def test_options_are_the_boards_settings_one_per_axis(mp, board):
     got = run_unit_script(mp, "config_options")
     names = got["names"]
     axes = {"steps_per_mm": "xyze", "max_feed_mm_s": "xyze", "max_accel_mm_s2": "xyze",
-            "travel_mm": "xyz", "homing_feed_mm_s": "xyz"}
+            "travel_mm": "xyz", "homing_feed_mm_s": "xyz", "change_park_mm": "xyz"}
     expected = [k + "_" + a for k, ax in axes.items() for a in ax] + [
         "acceleration_mm_s2", "retract_acceleration_mm_s2", "junction_deviation_mm",
         "min_segment_time_us", "min_arc_segment_mm", "max_arc_segment_mm", "min_circle_segments",
@@ -95,7 +95,9 @@ def test_options_are_the_boards_settings_one_per_axis(mp, board):
         "retract_feed_mm_s", "unretract_feed_mm_s", "transition_l1_mm", "transition_l2_mm",
         "drives", "virtual_tools", "queue_blocks",
         "line_buffer_bytes", "tick_us", "step_pulse_us", "dir_setup_us",
-        "enable_active_low", "endstop_active_high", "endstop_pullup"]
+        "enable_active_low", "endstop_active_high", "endstop_pullup",
+        "change_unload_mm", "change_load_mm", "change_purge_mm", "change_feed_mm_s",
+        "change_heater_timeout_s"]
     heater = ["beta", "r25_ohm", "pullup_ohm", "sh_a", "sh_b", "sh_c", "kp", "ki", "kd",
               "pwm_hz", "min_c", "max_c", "watch_s", "watch_rise_c", "runaway_c",
               "runaway_s"]

@@ -40,10 +40,10 @@ def test_excerpt_prints_on_the_emulated_pico(tmp_path):
     assert report["lines"] == sum(1 for _ in open(EXCERPT))
     assert report["underruns"] == 0
     assert 0 < report["cpu_step_fraction"] < 1
-    # About 34 kB (after a 48-block queue and G2/G3): every kB of code the firmware
-    # adds comes from here (a .mpy module's code loads into the heap), so a drop past
-    # the margin asks whether it is worth its place.
-    assert report["mem_free_min_bytes"] > 32000
+    # About 27 kB (after a 48-block queue, G2/G3 and the job commands): every kB of
+    # code the firmware adds comes from here (a .mpy module's code loads into the
+    # heap), so a drop past the margin asks whether it is worth its place.
+    assert report["mem_free_min_bytes"] > 25000
     assert report["mem_free_samples"] >= 2
     assert 2 < report["emulated_seconds"] < 20
     # Every drive the excerpt uses moved: T0 prints with e0, T2 with e2.
