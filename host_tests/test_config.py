@@ -105,7 +105,8 @@ def test_options_are_the_boards_settings_one_per_axis(mp, board):
         "min_extrude_c", "fan_pwm_hz", "thermal_period_ms", "console_uart", "console_baud", "tcp_port",
         "tcp_max_clients"]
     expected += [n for n in optional if n in board["SETTINGS"]]
-    expected += ["tool_mixes_%d" % t for t in range(board["SETTINGS"]["virtual_tools"])]
+    expected += ["%s_%d" % (k, t) for t in range(board["SETTINGS"]["virtual_tools"])
+                 for k in ("tool_mixes", "tool_advance_k")]
     expected += ["transition_pairs_%d" % k for k in range(8)]
     expected += ["%s_%d" % (k, d) for d in range(board["SETTINGS"]["drives"])
                  for k in ("drive_steps_per_mm", "filament_used_mm")]

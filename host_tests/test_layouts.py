@@ -54,7 +54,7 @@ COPIES = {
         "stepper": ["_S_HEAD", "_S_TAIL", "_S_ACTIVE", "_S_QUEUE", "_R_PENDING",
                     "_BLOCK_BASE", "_B_WORDS", "_B_N", "_B_STEPS", "_B_DIR_SET",
                     "_B_DIR_CLR", "_B_FLAGS", "_B_DWELL", "_B_MIX", "_F_NEG", "_F_HOMING",
-                    "_F_HOME_SHIFT"],
+                    "_F_HOME_SHIFT", "_F_ADVANCE", "_B_ADV"],
         "lookahead": ["_F_MM", "_F_ACCEL", "_F_NOMINAL", "_F_NOMINAL2", "_F_ACCEL_TICK",
                       "_L_WORDS", "_L_NOMINAL", "_W_AT_LK", "_W_AT_F", "_W_AT_MEM",
                       "_W_SLOT", "_W_N", "_W_ENTRY_V2", "_W_RATE_CAP"],

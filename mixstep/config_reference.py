@@ -187,6 +187,13 @@ DESCRIPTIONS = {
         "`w0:w1:...`, kept as integers with their common factor taken out (`M164`, "
         "`M165`, `M567` set it). Default: Tn is drive n alone below `drives`, an equal "
         "mix of every drive above."),
+    "tool_advance_k": (
+        "mixing", "s",
+        "One per virtual tool: pressure advance K (Marlin's LIN_ADVANCE K), `M900` sets "
+        "it. A printing move's filament is pushed ahead by K times its speed, for the "
+        "whole mix, shared among the drives by the same error diffusion; at rest every "
+        "drive is where it would be without. Typical: 0.02-0.1 direct drive, 0.3-1 "
+        "Bowden. 0: off."),
     "retract_policy": (
         "retraction", "-",
         "How a retraction (an E move backwards, a wipe, `G10`/`G11`) is shared among the "

@@ -443,6 +443,12 @@ class Checker:
                         if name + kind not in index]
         self.walk = None if any(n.rsplit("_", 1)[0] in self.drives for n in self.missing) \
             else _MoveWalk(expected["moves"], settings["drives"], window, mix_tolerance, unit_us)
+        # With pressure advance the drives run ahead of the moves by design: they are
+        # followed with X Y Z instead, block by block.
+        self.advance = None
+        if expected.get("advance") and self.walk is not None and not self.missing:
+            self.advance = _AdvanceWalk(expected["advance"], settings["drives"], unit_us)
+            self.walk = None
         # Only a print with arcs pays for following X Y Z position by position.
         self.path = None
         if expected.get("arcs") and not any(n[0] in "xyz" for n in self.missing):
@@ -500,11 +506,18 @@ class Checker:
             if len(run) > RATE_RUN:
                 _track_min(ax, "run", run[RATE_RUN:] - run[:-RATE_RUN], run[RATE_RUN:])
             ax.recent = run[-RATE_RUN:]
-            if self.walk and name in self.drives:
+            if (self.walk or self.advance) and name in self.drives:
                 e_events.append((sel[rise], np.full(len(rt), self.drives.index(name)), sign, rt))
-            if self.path and name in AXES:
+            if (self.path or self.advance) and name in AXES:
                 xyz_events.append((sel[rise], np.full(len(rt), AXES.index(name)), sign, rt))
-        if xyz_events:
+        if self.advance and (xyz_events or e_events):
+            # X Y Z as 0 1 2, the drives from 3, in the order of the records.
+            both = xyz_events + [(e[0], e[1] + 3, e[2], e[3]) for e in e_events]
+            order = np.argsort(np.concatenate([e[0] for e in both]), kind="stable")
+            self.advance.feed(np.concatenate([e[1] for e in both])[order].tolist(),
+                              np.concatenate([e[2] for e in both])[order].tolist(),
+                              np.concatenate([e[3] for e in both])[order].tolist())
+        if self.path and xyz_events:
             order = np.argsort(np.concatenate([e[0] for e in xyz_events]), kind="stable")
             self.path.feed(np.concatenate([e[3] for e in xyz_events])[order],
                            np.concatenate([e[1] for e in xyz_events])[order],
@@ -515,6 +528,141 @@ class Checker:
             self.walk.feed(np.concatenate([e[1] for e in e_events])[order].tolist(),
                            np.concatenate([e[2] for e in e_events])[order].tolist(),
                            np.concatenate([e[3] for e in e_events])[order].tolist())
+
+
+DEBUG_ADVANCE = bool(os.environ.get("DEBUG_ADVANCE"))
+ADV_MOST_STEPS = 1024
+
+
+class _AdvanceWalk:
+    """With pressure advance (M900): follows X Y Z's steps through the planner's blocks
+    (the model's, each with its K) and looks at the drives where each ends.
+
+    Pressure advance's own physics: the drives push the filament the G-code asks
+    for plus K times its speed, so at the end of a block that moves X Y Z the drives
+    are ahead of the G-code's filament by K times the block's filament per lead-axis
+    step times the lead axis's speed there, which the trace itself gives (its last
+    step's interval). An E-only block (a retraction, a priming) and the last block end
+    with every drive exactly at the G-code's filament: the advance is given back
+    before it. Times in the trace's units, messages in us (unit_us each)."""
+
+    # Within this of K times the speed, plus STEP_SLACK steps for the rounding of the
+    # advance, the share and the speed taken from one step's interval. The advance is
+    # at most what the firmware's follower takes (stepper.ADV_MOST_STEPS).
+    TOLERANCE = 0.15
+    STEP_SLACK = 3
+    # A block shorter than this many lead-axis steps is not looked at: its filament per
+    # step, which sets its advance, is a step or two's rounding (the firmware takes it
+    # from the block's whole steps as well), and the advance can't follow the jump in a
+    # few steps.
+    SHORTEST_STEPS = 16
+
+    def __init__(self, blocks, drives, unit_us):
+        self.blocks = blocks
+        self.drives = drives
+        self.unit_us = unit_us
+        self.pos = [0] * drives
+        self.target = [0] * drives
+        self.before = [0] * drives  # the target before the current block
+        self.i = -1
+        self.left = [0, 0, 0]
+        self.sign = [1, 1, 1]
+        self.lead = -1
+        self.lead_t = [None, None]  # the lead axis's last two steps' times
+        self.error = None
+        self.ends = 0  # block ends looked at
+        self.worst = 0.0  # worst |measured - expected| over its tolerance
+        self.worst_at = None
+        self.most_steps = 0  # the largest advance seen, steps
+        # The filament the advance may run into after each block: the drives never
+        # push past the G-code's own filament (so that each ends exactly where it
+        # would without), and past a retraction, homing or a block without advance
+        # it is not theirs to push. Blocks without filament are passed over.
+        e = []
+        total = 0
+        for _, k, dx, dy, dz, targets in blocks:
+            step = sum(targets) - total if targets is not None else 0
+            total += step
+            e.append(step if k > 0 and step >= 0 else -1)
+        self.room = [0] * len(blocks)
+        for i in range(len(blocks) - 2, -1, -1):
+            self.room[i] = 0 if e[i + 1] < 0 else e[i + 1] + self.room[i + 1]
+        self._next()
+
+    def _next(self):
+        self.i += 1
+        if self.i >= len(self.blocks):
+            return
+        line, k, dx, dy, dz, targets = self.blocks[self.i]
+        self.before = self.target
+        if targets is not None:
+            self.target = list(targets)
+        d = (dx, dy, dz)
+        self.left = [abs(v) for v in d]
+        self.sign = [1 if v >= 0 else -1 for v in d]
+        self.lead = max(range(3), key=lambda a: self.left[a]) if any(d) else -1
+        self.lead_t = [None, None]
+        if self.lead < 0 and self.pos == self.target:
+            self._next()  # an E-only block the drives have done already
+
+    def _fail(self, text, t):
+        if self.error is None:
+            self.error = "%s at %s" % (text, _at(t, self.unit_us))
+
+    def feed(self, kinds, signs, times):
+        blocks = self.blocks
+        for kind, s, t in zip(kinds, signs, times):
+            if self.error:
+                return
+            if kind >= 3:
+                self.pos[kind - 3] += s
+                if self.i < len(blocks) and self.lead < 0 and self.pos == self.target:
+                    self._next()
+                continue
+            if self.i >= len(blocks):
+                self._fail("%s stepped after the last block" % AXES[kind], t)
+                continue
+            line = blocks[self.i][0]
+            if self.lead < 0:
+                self._fail("%s stepped before the drives reached the filament of the E move "
+                           "of G-code line %d (drives at %s, target %s)"
+                           % (AXES[kind], line, self.pos, self.target), t)
+                continue
+            if self.left[kind] == 0 or s != self.sign[kind]:
+                self._fail("%s stepped %s, outside the block of G-code line %d"
+                           % (AXES[kind], "forward" if s > 0 else "back", line), t)
+                continue
+            self.left[kind] -= 1
+            if kind == self.lead:
+                self.lead_t = [self.lead_t[1], t]
+            if not any(self.left):
+                self._block_end(t)
+                self._next()
+
+    def _block_end(self, t):
+        line, k, dx, dy, dz, _ = self.blocks[self.i]
+        e_steps = sum(self.target) - sum(self.before)
+        n = max(abs(dx), abs(dy), abs(dz), abs(e_steps))
+        t0, t1 = self.lead_t
+        if t0 is None or n > max(abs(dx), abs(dy), abs(dz)) or n < self.SHORTEST_STEPS:
+            return  # no speed to read, E leads, or too short to tell
+        after = self.blocks[self.i + 1] if self.i + 1 < len(self.blocks) else None
+        if after is None or not any(after[2:5]):
+            return  # X Y Z stop here: the advance goes back with the E-only block's check
+        speed = 1e6 / ((t1 - t0) * self.unit_us)  # lead-axis steps/s
+        want = min(k * max(e_steps, 0) / n * speed, self.room[self.i], ADV_MOST_STEPS)
+        got = sum(self.pos) - sum(self.target)
+        room = self.TOLERANCE * want + self.STEP_SLACK
+        self.ends += 1
+        if DEBUG_ADVANCE:
+            print("advance at line %d: want %.1f got %d" % (line, want, got))
+        self.most_steps = max(self.most_steps, got)
+        if abs(got - want) / room > self.worst:
+            self.worst = abs(got - want) / room
+            self.worst_at = (t, line, want, got)
+
+    def finished(self):
+        return self.error is None and self.i >= len(self.blocks) and self.pos == self.target
 
 
 class _MoveWalk:
@@ -922,10 +1070,10 @@ def _report_checks(ck, settings, expected, unit_us, pulse_us, setup_us, rate_mar
             add("steps_" + name, want, ax.net, ax.net == want,
                 "%d rising edges" % ax.rises)
     walk = ck.walk
-    if walk is None:
+    if walk is None and ck.advance is None:
         add("moves", len(expected["moves"]), None, None, "not checked: a drive that moves "
             "is not in the trace")
-    else:
+    elif walk is not None:
         done = walk.m + 1 if walk.finished() else walk.m
         add("moves", len(expected["moves"]), done, walk.finished(),
             walk.error or ("" if walk.finished() else "the trace ends inside the E move of "
@@ -936,6 +1084,26 @@ def _report_checks(ck, settings, expected, unit_us, pulse_us, setup_us, rate_mar
                 walk.windows, window, walk.bad_windows,
                 "e%d at %s" % (walk.worst_at[1], _at(walk.worst_at[0], unit_us))
                 if walk.worst_at else "-"))
+
+    adv = ck.advance
+    if adv is not None:
+        done = min(adv.i, len(adv.blocks))
+        add("moves", len(expected["moves"]), None, adv.finished(),
+            adv.error or ("%d blocks followed with X Y Z, every E move ended exactly "
+                          "where the G-code puts it" % done if adv.finished() else
+                          "the trace ends in the block of G-code line %d (drives at %s, "
+                          "target %s)" % (adv.blocks[min(adv.i, len(adv.blocks) - 1)][0],
+                                          adv.pos, adv.target)))
+        detail = "%d block ends, the most %d steps ahead" % (adv.ends, adv.most_steps)
+        if adv.worst_at:
+            t, line, want, got = adv.worst_at
+            detail += "; worst %d steps where K v is %.1f, at %s (G-code line %d)" % (
+                got, want, _at(t, unit_us), line)
+        add("advance", "within %d%% + %d steps of K v" % (100 * adv.TOLERANCE,
+                                                        adv.STEP_SLACK),
+            "%.0f%% of that" % (100 * adv.worst), adv.worst <= 1, detail)
+        add("mix", "<= %g steps off" % mix_tolerance, None, None,
+            "not checked with pressure advance: the drives step back and forth")
 
     path = ck.path
     if path is not None:

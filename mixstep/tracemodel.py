@@ -36,6 +36,8 @@ section, "How the mixer picks a drive" and the options' meaning), in exact arith
 - Flow (M221 S, per virtual tool): a G0-G3 move's filament is its E times the active
   tool's percentage, to the nanometre rounded down, what falls below one carried to
   the next such move; G10/G11 are not scaled.
+- Pressure advance (M900 K [T], per virtual tool): every block keeps the K in force as
+  it is planned, for the trace check's own reading of what the drives then do.
 - Cancelled objects (M486): while the current object is cancelled, a move that
   extrudes (G0-G3 with E, G10, G11) steps nothing and its position is taken; travel
   runs. The filament it would have retracted is followed (a retraction adds to it,
@@ -724,6 +726,13 @@ class Machine:
         self.gradient_on = False
         self.extruded_nm = 0
         self.flow = [100] * len(self.mixes)  # M221, per tool
+        # M900, per tool; every block with the K in force as it is planned, once one is
+        # set (see expected's "advance").
+        self.advance_k = [float(k) for k in s.get("tool_advance_k") or ()] or \
+            [0.0] * len(self.mixes)
+        self.k = 0.0
+        self.advance_blocks = []
+        self.advance_used = False
         self.flow_carry = 0
         self.unprimed_nm = 0  # filament retracted, not pushed back
         # M486: the objects cancelled, the current one, and while it is cancelled, the
@@ -737,6 +746,9 @@ class Machine:
 
     # --- the planner's side -------------------------------------------------------
     def _block(self, line, weights, targets, start, target):
+        self.advance_blocks.append((line, self.k, target[0] - start[0], target[1] - start[1],
+                                    target[2] - start[2],
+                                    None if targets is None else tuple(targets)))
         if list(target) != list(start):
             self.axis_blocks.extend((line, target[0] - start[0], target[1] - start[1],
                                      target[2] - start[2]))
@@ -764,6 +776,8 @@ class Machine:
 
     def _activate(self, tool):
         self.active = tool
+        self.k = self.advance_k[tool]
+        self.advance_used = self.advance_used or self.k > 0
         if self.mixes[tool] != self.mix:
             self.mix = self.mixes[tool]
             self._set_mix(self.mix, tool)
@@ -850,6 +864,16 @@ class Machine:
                 raise Refused("M486 C with no current object")
             self.cancelled.add(self.current_object)
         self._skip(self.current_object in self.cancelled)
+
+    def m900(self, ln):
+        tool = self._check_tool(ln.int("T", self.active))
+        if ln.has("K"):
+            k = float(ln.value("K"))
+            if not 0 <= k <= 10:
+                raise Refused("M900 K out of range")
+            self.advance_k[tool] = k
+            if tool == self.active:
+                self._activate(tool)
 
     def m221(self, ln):
         tool = self._check_tool(ln.int("T", self.active))
@@ -1048,6 +1072,7 @@ class Machine:
                 back = [0, 0, 0]
                 back[i] = -self.axis_net[i]
                 self.axis_blocks.extend([self.line] + back)
+                self.advance_blocks.append((self.line, 0.0, back[0], back[1], back[2], None))
             self.axis_net[i] = self.axis_steps[i] = self.step_shift[i] = 0
             self.pos_nm[i] = self.offset_nm[i] = 0
 
@@ -1234,7 +1259,8 @@ _HANDLERS = {"G10": Machine.g10, "G11": Machine.g11, "G28": Machine.g28,
              "G92": Machine.g92, "M92": Machine.m92, "M163": Machine.m163,
              "M164": Machine.m164, "M165": Machine.m165, "M567": Machine.m567,
              "M168": Machine.m168, "M166": Machine.m166, "M169": Machine.m169,
-             "M221": Machine.m221, "M486": Machine.m486}
+             "M221": Machine.m221, "M486": Machine.m486,
+             "M900": Machine.m900}
 
 
 def expected(gcode_path, settings):
@@ -1272,4 +1298,5 @@ def expected(gcode_path, settings):
                 refused.append((number, str(e)))
     steps = m.finish()
     return {"steps": steps, "moves": m.blocks, "moved": m.moved, "unmodelled": unmodelled,
-            "refused": refused, "arcs": m.arcs, "axis_blocks": m.axis_blocks}
+            "refused": refused, "arcs": m.arcs, "axis_blocks": m.axis_blocks,
+            "advance": m.advance_blocks if m.advance_used else None}

@@ -75,6 +75,7 @@ class Mixing:
         self.active = tool
         if self.motion:
             self.motion.set_flow(self.tool_flow_pct[tool])
+        self.planner.set_advance(self.settings["tool_advance_k"][tool])
         mix = self.tool_mix(tool)
         if mix != self.mix:
             self.mix = mix
@@ -309,6 +310,23 @@ class Mixing:
         if tool == self.active:
             self._activate(tool)
 
+    # M900 [K<s>] [T<tool>]: the pressure advance of a virtual tool (without T the
+    # active one), Marlin's LIN_ADVANCE K: the filament is pushed ahead by K times its
+    # speed, for the whole mix, which its drives share as before (stepper.py's
+    # follower); from the next move queued. 0 turns it off. Kept by M500, as Marlin's
+    # EEPROM keeps it. No K: report, as Marlin's "Advance K=0.05". Example: M900 K0.08
+    def m900(self, line):
+        tool = self._check_tool(line.int("T", self.active))
+        if not line.has("K"):
+            self.reply("echo:Advance K=%.3f" % self.settings["tool_advance_k"][tool])
+            return
+        k = line.float("K")
+        if not 0 <= k <= 10:
+            raise GcodeError("M900 K%s out of range 0..10 (s)" % k)
+        self.config.set("tool_advance_k_%d" % tool, k)
+        if tool == self.active:
+            self._activate(tool)
+
     # T<n>: select virtual tool n. Example: T2
     def t(self, line):
         tool = self._check_tool(line.number)
@@ -331,3 +349,4 @@ def register(printer, mixing):
     printer.add_command("M", 169, mixing.m169)  # gradient of stops along Z or E
     printer.add_command("T", -1, mixing.t)  # select virtual tool
     printer.add_command("M", 221, mixing.m221)  # flow percentage S of tool T
+    printer.add_command("M", 900, mixing.m900)  # pressure advance K of tool T

@@ -223,6 +223,8 @@ class Config:
         if "drives" in defaults and "tool_mixes" not in defaults:
             defaults["tool_mixes"] = default_tool_mixes(
                 defaults["drives"], defaults.get("virtual_tools", 16))
+        if "tool_mixes" in defaults and "tool_advance_k" not in defaults:
+            defaults["tool_advance_k"] = (0.0,) * len(defaults["tool_mixes"])
         return defaults
 
     def _default_settings(self):

@@ -95,8 +95,12 @@ def normalize(weights, drives):
 
 
 @micropython.viper
-def mix_load(mem: ptr32, base: int, src: int):
-    """Copy a mix (id and weights at mem[src:]) into the mixer and start it afresh."""
+def mix_load(mem: ptr32, base: int, src: int, keep_ring: int):
+    """Copy a mix (id and weights at mem[src:]) into the mixer and start it afresh;
+    with keep_ring, where the position stands, its ring of picks kept: pressure
+    advance's follower (stepper.py) walks from one block's picks on into the next
+    block's as one path, and back over them, which a fresh start would forget. The
+    picks ahead are the new mix's from there, as they would be from a fresh start."""
     mem[base + M_ID] = mem[src]
     total = 0
     i = 0
@@ -107,9 +111,10 @@ def mix_load(mem: ptr32, base: int, src: int):
         total += w
         i += 1
     mem[base + _M_SUM] = total
-    mem[base + _M_Q] = _MIX_BIAS
-    mem[base + _M_QMIN] = _MIX_BIAS
     mem[base + _M_AHEAD] = 0
+    if not keep_ring:
+        mem[base + _M_Q] = _MIX_BIAS
+        mem[base + _M_QMIN] = _MIX_BIAS
 
 
 def default_tool_mixes(drives, count=16):

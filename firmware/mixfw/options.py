@@ -231,6 +231,9 @@ SCHEMA = (
      "filament this drive has fed, net of retractions (M167 reports, M167 R clears)"),
     ("tool_mixes",                 "each", "mix",   0,       0,           False,
      "mix of this virtual tool, drive weights w0:w1:... (M164/M165/M567 set it)"),
+    ("tool_advance_k",             "each", "float", 0,       10,          False,
+     "pressure advance K of this virtual tool, s: filament pushed ahead by K times its "
+     "speed (M900 sets it; 0: off)"),
     ("trace_records",              "",     "int",   0,       100000,      True,
      "step events the on-board trace ring holds (M7300/M7301), 12 bytes each"),
     ("watchdog_ms",                "",     "int",   1000,    8388,        True,

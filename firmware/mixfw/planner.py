@@ -25,7 +25,7 @@ _S_TAIL = const(1)
 _S_ACTIVE = const(2)
 _S_QUEUE = const(26)
 _R_PENDING = const(96)
-_BLOCK_BASE = const(115)
+_BLOCK_BASE = const(123)
 _B_WORDS = const(24)
 _B_N = const(0)
 _B_STEPS = const(1)
@@ -37,6 +37,8 @@ _B_MIX = const(15)
 _F_NEG = const(4)
 _F_HOMING = const(2)
 _F_HOME_SHIFT = const(8)
+_F_ADVANCE = const(8192)
+_B_ADV = const(23)
 # lookahead.py's: the floats, the slots, and the words of plan_words and recalculate
 # in the io array they share with ramp.py's helpers (_RAMP_IO), which _plan_move
 # stores.
@@ -153,7 +155,11 @@ _S_MEMO_NEXT = const(96)  # where the memo's oldest entry starts (see _work_base
 # limits and none binds, and kept while _S_SHARES_SET is 1.
 _S_SHARES = const(97)
 _S_SHARES_SET = const(101)
-_S_WORDS = const(102)
+# Pressure advance: K times the step loop's ticks a second times 256 (0: off), and
+# the drives' DIR pins, which blocks with advance leave to the step loop's follower.
+_S_ADV_K = const(102)
+_S_E_DIR_PINS = const(103)
+_S_WORDS = const(104)
 
 
 # _plan_move's answers besides 1 (queued) and 0 (shorter than a step: nothing to do),
@@ -364,11 +370,32 @@ def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
     for i in range(4):
         blk[_B_STEPS + i] = words[i]
     flags = neg * _F_NEG
+    dir_set = ptr32(at + words[_AT_DIR_SET])[neg]
+    dir_clr = ptr32(at + words[_AT_DIR_CLR])[neg]
     if homing:
         flags |= _F_HOMING | (homing << _F_HOME_SHIFT)
+    elif words[_S_ADV_K] and e_steps >= 0:
+        # The step loop's follower runs the drives (stepper.S_ADV_OWED); a printing
+        # move's advance is K times its filament's speed: K E / n lead-axis rates,
+        # E / n in 2**-15 (E <= n), in 15-bit limbs below 2**30.
+        flags |= _F_ADVANCE
+        pins = words[_S_E_DIR_PINS]
+        dir_set &= 0 - 1 - pins
+        dir_clr &= 0 - 1 - pins
+        adv = 0
+        if e_steps > 0 and (moving & 7):
+            if e_abs < 0x8000:
+                ratio = (e_abs << 15) // n
+            else:
+                ratio = e_abs // (n >> 15)
+            k = words[_S_ADV_K]
+            adv = (k >> 15) * ratio + (((k & 0x7FFF) * ratio) >> 15)
+            if adv > 0xFFFFFF:
+                adv = 0xFFFFFF
+        blk[_B_ADV] = adv
     blk[_B_FLAGS] = flags
-    blk[_B_DIR_SET] = ptr32(at + words[_AT_DIR_SET])[neg]
-    blk[_B_DIR_CLR] = ptr32(at + words[_AT_DIR_CLR])[neg]
+    blk[_B_DIR_SET] = dir_set
+    blk[_B_DIR_CLR] = dir_clr
     blk[_B_DWELL] = 0
     if mix_id >= 0:
         blk[_B_MIX] = mix_id
@@ -633,6 +660,7 @@ class Planner:
         m = self.mem
         m[st.S_TAIL] = m[st.S_HEAD]
         m[st.S_ACTIVE] = 0
+        st.advance_off(m)
         self._irq_on(state)
         # In place: Transitions holds this list (see set_position_steps).
         for i in range(4):
@@ -997,6 +1025,15 @@ class Planner:
             self._given[i] = got[i]
         return self._given
 
+    def set_advance(self, k_s):
+        """Pressure advance for the moves queued from now on: K, seconds of the
+        filament's speed pushed ahead (Marlin's LIN_ADVANCE K); 0 turns it off."""
+        k = int(k_s / self.tick_s * 256 + 0.5)
+        if not 0 <= k < 1 << 28:
+            raise PlanError("pressure advance K %s is beyond the step loop's %s"
+                            % (k_s, ((1 << 28) - 1) * self.tick_s / 256))
+        self._abs_steps[_S_ADV_K] = k
+
     def set_dir_invert(self, mask):
         """The DIR pins of motors wired the other way round, flipped in every block."""
         self.dir_invert_mask = mask
@@ -1019,3 +1056,7 @@ class Planner:
             self._dir_set[neg] = (dset & ~inv) | (dclr & inv)
             self._dir_clr[neg] = (dclr & ~inv) | (dset & inv)
         self._dir_masks_seen = dir_masks
+        pins = dir_masks[3] if dir_masks else 0
+        self._abs_steps[_S_E_DIR_PINS] = pins
+        self.mem[st.S_ADV_FWD_SET] = pins & ~inv
+        self.mem[st.S_ADV_FWD_CLR] = pins & inv

@@ -121,7 +121,21 @@ R_FIRED = const(109)  # channel completions handled
 R_SM = const(110)  # the state machine's number
 R_SEG_LV = const(111)  # pin levels before each segment's first event (3 words)
 R_LEVEL_BITS = const(114)  # the state machine's pins
-BLOCK_BASE = const(115)
+# Pressure advance (blocks with F_ADVANCE): the drives follow a target, the block's
+# filament as Bresenham gives it plus the advance, K times the filament's speed (from
+# the rate); at most one E step each lead-axis step (or each tick while a block waits
+# for them), each through the mixer, forward or back. The picks are those of the
+# blocks without advance, position by position: the follower loads a block's mix where
+# its picks begin (mix_load keeping the ring), and walks back over the picks it made.
+S_ADV_OWED = const(115)  # E steps the drives owe the target, plus _ADV_BIAS
+S_ADV_NOW = const(116)  # the advance in the target, E steps
+S_ADV_SLOT = const(117)  # the block whose mix the follower has loaded; ADV_OFF: none
+S_ADV_END = const(118)  # the mixer's position where that block's picks end
+S_ADV_DIR_AT = const(119)  # S_TICKS when the follower last changed the drives' DIR
+S_ADV_BACK = const(120)  # 1 while the drives' DIR pins are set backward
+S_ADV_FWD_SET = const(121)  # the drives' DIR pins raised for forward (the planner's)
+S_ADV_FWD_CLR = const(122)  # and lowered
+BLOCK_BASE = const(123)
 
 # Block record words.
 B_N = const(0)  # lead-axis steps (step events)
@@ -144,6 +158,7 @@ B_DECEL_AFTER = const(13)
 B_DWELL = const(14)  # ticks, for dwell blocks
 B_MIX = const(15)  # mix id then 6 weights: same shape as the mixer's M_ID..M_W
 B_RATE_DECEL = const(22)
+B_ADV = const(23)  # F_ADVANCE: E steps of advance per rate, times 2**23 over 2**13
 B_WORDS = const(24)
 # A PIO event takes this many cycles besides its delay (piodma.py's program): a pull,
 # two outs and the last pass of the delay loop.
@@ -180,6 +195,13 @@ F_SCHEDULE = const(2048)
 # a dozen times a line on curves, and a root or two for each would cost the chip most
 # of a rewrite.
 F_RATES = const(4096)
+# The block's drives run by pressure advance's follower (see S_ADV_OWED): its DIR words
+# leave the drives' pins to it.
+F_ADVANCE = const(8192)
+ADV_OFF = const(0xFFFF)  # S_ADV_SLOT with no block's mix loaded by the follower (no slot)
+_ADV_BIAS = const(0x20000000)
+# The most advance the target takes, E steps: the mixer's ring walks back twice that.
+ADV_MOST_STEPS = const(1024)
 V2_AT_NOMINAL = const(0x20000000)  # above any V2 the look-ahead keeps
 SHIFT_BIAS = const(64)
 # ramp.py's io words, which schedule() stores and reads (copies).
@@ -215,6 +237,15 @@ def init_mem(mem, queue_blocks, capture_records=0, ring_steps=_RING_STEPS):
     mem[_MIX_RING] = 4 * (mem[S_CAP_BASE] + capture_records * CAP_WORDS)
     mem[_MIX_RING_MASK] = ring_steps - 1
     mem[MIX_BASE + mixer.M_ID] = -1
+    advance_off(mem)
+
+
+def advance_off(mem):
+    """Pressure advance's follower off, owing nothing: at start, and when the queue is
+    dropped (the step loop's counters hold where the drives are)."""
+    mem[S_ADV_SLOT] = ADV_OFF
+    mem[S_ADV_OWED] = _ADV_BIAS
+    mem[S_ADV_NOW] = 0
 
 
 @micropython.viper
@@ -341,8 +372,24 @@ def _start(mem_buf, b: int) -> int:
     # (trapezoidal integration): half a tick of acceleration above the entry speed.
     mem[_S_RATE] = blk[B_RATE_INIT] + (blk[B_ACCEL] >> 1)
     mem[_S_RAMP_TICKS] = 0
-    if blk[B_STEPS + E] != 0 and blk[B_MIX] != mem[MIX_BASE]:
-        mix_load(mem_buf, MIX_BASE, b + B_MIX)
+    if flags & F_ADVANCE:
+        if mem[S_ADV_SLOT] == ADV_OFF:
+            # The follower starts: the picks from here are new ground, as after a
+            # fresh start (which a block without advance makes), and its first step
+            # loads the mix of the first block with filament (_adv_next).
+            slot = mem[S_TAIL] - 1
+            if slot < 0:
+                slot = mem[S_QUEUE] - 1
+            mem[S_ADV_SLOT] = slot
+            mem[_MIX_Q] = _MIX_BIAS
+            mem[_MIX_QMIN] = _MIX_BIAS
+            mem[_MIX_AHEAD] = 0
+            mem[S_ADV_END] = _MIX_BIAS
+            fwd = mem[S_ADV_FWD_SET]
+            mem[S_ADV_BACK] = 0 if (mem[S_DIR] & (fwd | mem[S_ADV_FWD_CLR])) == fwd else 1
+            mem[S_ADV_DIR_AT] = (mem[S_TICKS] - mem[S_DIR_TICKS] - 1) & _MASK30
+    elif blk[B_STEPS + E] != 0 and blk[B_MIX] != mem[MIX_BASE]:
+        mix_load(mem_buf, MIX_BASE, b + B_MIX, 0)
     old = mem[S_DIR]
     new = (old & (0 - 1 - blk[_B_DIR_CLR])) | blk[_B_DIR_SET]
     changed = old ^ new
@@ -351,6 +398,81 @@ def _start(mem_buf, b: int) -> int:
         # The tick that writes DIR is the first tick of the setup time.
         mem[S_WAIT] = mem[S_DIR_TICKS] - 1
     return changed
+
+
+@micropython.viper
+def _adv_next(mem_buf) -> int:
+    """The follower at the end of the picks it has loaded: the next block's mix with
+    filament, loaded where its picks begin; blocks with none passed over. Returns 0,
+    and the follower waits, while that block is not queued yet or runs without advance
+    (the follower gives its advance back first)."""
+    mem = ptr32(mem_buf)
+    slot = mem[S_ADV_SLOT]
+    while True:
+        slot += 1
+        if slot >= mem[S_QUEUE]:
+            slot = 0
+        if slot == mem[S_HEAD]:
+            return 0
+        b = BLOCK_BASE + slot * B_WORDS
+        if not (mem[b + B_FLAGS] & F_ADVANCE):
+            return 0
+        mem[S_ADV_SLOT] = slot
+        e = mem[b + B_STEPS + E]
+        if e > 0:
+            mix_load(mem_buf, MIX_BASE, b + B_MIX, 1)
+            mem[S_ADV_END] = mem[_MIX_Q] + e
+            return 1
+
+
+@micropython.viper
+def _adv_done(mem_buf) -> int:
+    """1 if the tail block, its lead-axis steps all made, may end: the follower has
+    made its picks (a record may be written over once its block ends, so the follower
+    never stays behind one), and the last block queued, which ends at rest, has its
+    advance back and owes nothing. Else the block waits, and the follower steps each
+    tick."""
+    mem = ptr32(mem_buf)
+    tail = mem[S_TAIL]
+    queue = mem[S_QUEUE]
+    slot = mem[S_ADV_SLOT]
+    if slot == tail:
+        if mem[_MIX_Q] < mem[S_ADV_END]:
+            return 0
+    else:
+        ahead = slot - tail
+        if ahead < 0:
+            ahead += queue
+        queued = mem[S_HEAD] - tail
+        if queued < 0:
+            queued += queue
+        if ahead >= queued:  # behind: the follower has not reached this block's picks
+            if mem[BLOCK_BASE + tail * B_WORDS + B_STEPS + E] > 0:
+                return 0
+            mem[S_ADV_SLOT] = tail
+    nxt = tail + 1
+    if nxt >= queue:
+        nxt = 0
+    if nxt == mem[S_HEAD]:
+        owed = mem[S_ADV_OWED] - mem[S_ADV_NOW]
+        mem[S_ADV_NOW] = 0
+        mem[S_ADV_OWED] = owed
+        return 1 if owed == _ADV_BIAS else 0
+    return 1
+
+
+@micropython.viper
+def _adv_off(mem_buf) -> int:
+    """Before a block without advance: the target without the advance; 1, and the
+    follower off, once the drives owe it nothing."""
+    mem = ptr32(mem_buf)
+    owed = mem[S_ADV_OWED] - mem[S_ADV_NOW]
+    mem[S_ADV_NOW] = 0
+    mem[S_ADV_OWED] = owed
+    if owed != _ADV_BIAS:
+        return 0
+    mem[S_ADV_SLOT] = ADV_OFF
+    return 1
 
 
 @micropython.viper
@@ -439,6 +561,8 @@ def tick(io) -> int:
         set_mask = 0
         clr_mask = 0
         stepped = 0
+        # 1 to 3: the follower's step only: before a block, at its end, between steps
+        drain = 0
         left = mem[S_PULSE_LEFT]
         if left > 0:
             left -= 1
@@ -463,6 +587,10 @@ def tick(io) -> int:
                         mem[S_TICKS] = (mem[S_TICKS] + ticks_left) & _MASK30
                         ticks_left = 0
                     continue
+                run = 0
+            elif mem[S_ADV_SLOT] != ADV_OFF and not (blk[B_FLAGS] & F_ADVANCE) and \
+                    not int(_adv_off(io[0])):
+                drain = 1  # the advance goes back before a block that has none
                 run = 0
             else:
                 changed = int(_start(io[0], BLOCK_BASE + mem[S_TAIL] * B_WORDS))
@@ -494,6 +622,9 @@ def tick(io) -> int:
             if stopped == homing:
                 _finish(io[0])
                 run = 0
+        if run and (flags & F_ADVANCE) and mem[_S_EVENT] >= blk[B_N]:
+            drain = 2  # its lead-axis steps are made: it ends once _adv_done says so
+            run = 0
         while run:
             # Velocity ramp, per tick so speed is linear in time.
             ramp = mem[_S_RAMP_TICKS] + 1
@@ -522,6 +653,13 @@ def tick(io) -> int:
             mem[S_PHASE] = phase
             run = 0
             if clr_mask == 0:
+                if (flags & F_ADVANCE) and left == 0 and mem[S_ADV_OWED] != _ADV_BIAS and \
+                        phase + (rate << 2) < ONE:
+                    # The follower steps between lead-axis steps too, where its pulse
+                    # ends well before the next of them: the advance keeps up with a
+                    # ramp that asks more than a step of it each.
+                    drain = 3
+                    break
                 if ring == 0:
                     return 0  # the most common tick while moving: no step due, no pin to write
                 if ticks_left <= 0 or (rate == blk[B_RATE_NOM] and
@@ -589,43 +727,95 @@ def tick(io) -> int:
                 run = 1
         if cruise:
             continue
-        if run:
-            stepped = 1
+        if run or drain:
             n = blk[B_N]
-            # Bresenham for X, Y, Z, written out: constant offsets cost nothing.
-            err = mem[_S_ERR + X] + blk[B_STEPS + X]
-            if err > n:
-                err -= n
-                if (stopped & 1) == 0:
-                    set_mask = mem[MASK_BASE + X]
-                    if flags & (_F_NEG << X):
-                        mem[S_POS + X] -= 1
-                    else:
-                        mem[S_POS + X] += 1
-            mem[_S_ERR + X] = err
-            err = mem[_S_ERR + Y] + blk[B_STEPS + Y]
-            if err > n:
-                err -= n
-                if (stopped & 2) == 0:
-                    set_mask |= mem[MASK_BASE + Y]
-                    if flags & (_F_NEG << Y):
-                        mem[S_POS + Y] -= 1
-                    else:
-                        mem[S_POS + Y] += 1
-            mem[_S_ERR + Y] = err
-            err = mem[_S_ERR + Z] + blk[B_STEPS + Z]
-            if err > n:
-                err -= n
-                if (stopped & 4) == 0:
-                    set_mask |= mem[MASK_BASE + Z]
-                    if flags & (_F_NEG << Z):
-                        mem[S_POS + Z] -= 1
-                    else:
-                        mem[S_POS + Z] += 1
-            mem[_S_ERR + Z] = err
-            err = mem[_S_ERR + E] + blk[B_STEPS + E]
-            if err > n:
-                err -= n
+            dset = 0  # the drives' DIR pins the follower changes
+            dclr = 0
+            if run:
+                stepped = 1
+                # Bresenham for X, Y, Z, written out: constant offsets cost nothing.
+                err = mem[_S_ERR + X] + blk[B_STEPS + X]
+                if err > n:
+                    err -= n
+                    if (stopped & 1) == 0:
+                        set_mask = mem[MASK_BASE + X]
+                        if flags & (_F_NEG << X):
+                            mem[S_POS + X] -= 1
+                        else:
+                            mem[S_POS + X] += 1
+                mem[_S_ERR + X] = err
+                err = mem[_S_ERR + Y] + blk[B_STEPS + Y]
+                if err > n:
+                    err -= n
+                    if (stopped & 2) == 0:
+                        set_mask |= mem[MASK_BASE + Y]
+                        if flags & (_F_NEG << Y):
+                            mem[S_POS + Y] -= 1
+                        else:
+                            mem[S_POS + Y] += 1
+                mem[_S_ERR + Y] = err
+                err = mem[_S_ERR + Z] + blk[B_STEPS + Z]
+                if err > n:
+                    err -= n
+                    if (stopped & 4) == 0:
+                        set_mask |= mem[MASK_BASE + Z]
+                        if flags & (_F_NEG << Z):
+                            mem[S_POS + Z] -= 1
+                        else:
+                            mem[S_POS + Z] += 1
+                mem[_S_ERR + Z] = err
+            e_step = 0  # 1 forward, 2 back
+            if drain or (flags & F_ADVANCE):
+                owed = mem[S_ADV_OWED]
+                if run:
+                    # The target: the block's filament by Bresenham, and the advance
+                    # at the step's rate, at most ADV_MOST_STEPS.
+                    err = mem[_S_ERR + E] + blk[B_STEPS + E]
+                    if err > n:
+                        err -= n
+                        owed += 1
+                    mem[_S_ERR + E] = err
+                    a = blk[B_ADV]
+                    adv = 0
+                    if a:
+                        r = step_rate >> 13
+                        adv = ((r * (a >> 8)) >> 15) + ((r * (a & 255)) >> 23)
+                        if adv > ADV_MOST_STEPS:
+                            adv = ADV_MOST_STEPS
+                    owed += adv - mem[S_ADV_NOW]
+                    mem[S_ADV_NOW] = adv
+                # A step as the target is ahead or behind, once the drives' DIR pins
+                # point that way and have been set up; a step each lead-axis step, or
+                # a tick while no STEP pin is held.
+                if owed != _ADV_BIAS and (run or (left == 0 and clr_mask == 0)):
+                    back = 1 if owed < _ADV_BIAS else 0
+                    if back != mem[S_ADV_BACK]:
+                        mem[S_ADV_BACK] = back
+                        mem[S_ADV_DIR_AT] = mem[S_TICKS]
+                        dset = mem[S_ADV_FWD_SET]
+                        dclr = mem[S_ADV_FWD_CLR]
+                        if back:
+                            dset = dclr
+                            dclr = mem[S_ADV_FWD_SET]
+                        mem[S_DIR] = (mem[S_DIR] & (0 - 1 - dclr)) | dset
+                    elif ((mem[S_TICKS] - mem[S_ADV_DIR_AT]) & _MASK30) > mem[S_DIR_TICKS]:
+                        if back:
+                            e_step = 2
+                            owed += 1
+                        elif mem[_MIX_AHEAD] or mem[_MIX_Q] < mem[S_ADV_END] or \
+                                int(_adv_next(io[0])):
+                            e_step = 1
+                            owed -= 1
+                mem[S_ADV_OWED] = owed
+            else:
+                err = mem[_S_ERR + E] + blk[B_STEPS + E]
+                if err > n:
+                    err -= n
+                    e_step = 1
+                    if flags & (_F_NEG << E):
+                        e_step = 2
+                mem[_S_ERR + E] = err
+            if e_step:
                 # The mixer (see mixer.py): on new ground the highest error, ties to
                 # the lowest drive (backward: the lowest error less twice the weight,
                 # the rule on the mirrored errors); where the ring knows the pick, the
@@ -636,7 +826,7 @@ def tick(io) -> int:
                 q = mem[_MIX_Q]
                 picks = ptr8(int(mem) + mem[_MIX_RING])
                 best = -1
-                if flags & (_F_NEG << E):
+                if e_step == 2:
                     q -= 1
                     ahead = mem[_MIX_AHEAD] + 1
                     # Known if walked and not yet written over: forward steps on new
@@ -753,13 +943,20 @@ def tick(io) -> int:
                         set_mask |= mem[MASK_BASE + 3 + best]
                         mem[S_DRIVE_POS + best] += 1
                     mem[S_POS + E] += 1
-            mem[_S_ERR + E] = err
             if set_mask:
+                stepped = 1
                 mem[_S_PULSE_MASK] = set_mask
                 mem[S_PULSE_LEFT] = mem[S_PULSE_TICKS] + ring
-            event = mem[_S_EVENT] + 1
-            mem[_S_EVENT] = event
-            if event >= n:
+            # The follower's DIR pins, after the pulse's: they don't fall with it.
+            set_mask |= dset
+            clr_mask |= dclr
+            if run:
+                event = mem[_S_EVENT] + 1
+                mem[_S_EVENT] = event
+                if event >= n:
+                    if not (flags & F_ADVANCE) or int(_adv_done(io[0])):
+                        _finish(io[0])
+            elif drain == 2 and int(_adv_done(io[0])):
                 _finish(io[0])
         if (set_mask | clr_mask) == 0:
             if ring == 0:
@@ -789,7 +986,7 @@ def tick(io) -> int:
                     mem[r + 1] = cap_set
                     mem[r + 2] = cap_clr
                     mem[S_CAP_HEAD] = nxt
-                cap_clr = cap_set
+                cap_clr = mem[_S_PULSE_MASK]
                 cap_set = 0
                 cap_t += mem[S_PULSE_TICKS]
         # --- output: PIO/DMA words (pio_dma's ring here, and the batch's end below
@@ -815,15 +1012,16 @@ def tick(io) -> int:
                     at += 1
                     last = t
                     lv = nxt
-                    if run:
+                    if stepped:
                         t += pulse_cyc
                         if t < last + _EV_MIN_CYCLES:
                             t = last + _EV_MIN_CYCLES
                         evr[at] = (lv >> shift) | ((t - last - _EV_MIN_CYCLES) << bits)
                         at += 1
                         last = t
-                        lv = lv & ~set_mask
-                cruise = stepped & mem[S_ACTIVE]
+                        lv = lv & ~mem[_S_PULSE_MASK]
+                if drain == 0 and mem[S_ADV_OWED] == _ADV_BIAS:
+                    cruise = stepped & mem[S_ACTIVE]
                 continue
             if mem[_S_PIO_LEFT] == 0:
                 # A burst starts: old levels until the latency is queued, so this
