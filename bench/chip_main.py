@@ -200,6 +200,8 @@ def stepping_path():
         # six drives, i.e. 8,000 + 6,000 + 6,000 steps/s at the pico_6drives steps/mm
         # (80, 80, 415), for 8 s: longer than any planning run here.
         path.planner.set_mix(2, normalize([0.1, 0.15, 0.2, 0.25, 0.12, 0.18], 6))
+        # T0's pressure advance, as the printer's: its follower then runs the drives.
+        path.planner.set_advance(settings["tool_advance_k"][0])
         path.planner.add_move([64000, 48000, 0], 125.0, path.pins.axis_dir_masks(),
                               115660000)
         KEPT["stepper"] = path

@@ -530,8 +530,7 @@ class Checker:
                            np.concatenate([e[3] for e in e_events])[order].tolist())
 
 
-DEBUG_ADVANCE = bool(os.environ.get("DEBUG_ADVANCE"))
-ADV_MOST_STEPS = 1024
+ADV_MOST_STEPS = 1024  # stepper.ADV_MOST_STEPS: the most advance the firmware takes
 
 
 class _AdvanceWalk:
@@ -654,8 +653,6 @@ class _AdvanceWalk:
         got = sum(self.pos) - sum(self.target)
         room = self.TOLERANCE * want + self.STEP_SLACK
         self.ends += 1
-        if DEBUG_ADVANCE:
-            print("advance at line %d: want %.1f got %d" % (line, want, got))
         self.most_steps = max(self.most_steps, got)
         if abs(got - want) / room > self.worst:
             self.worst = abs(got - want) / room
