@@ -391,6 +391,9 @@ class Pin:
             self.value(value)
         elif mode == Pin.OUT and now_us == 0:
             _record(gpio, _levels[gpio])
+        elif mode == Pin.IN and pull in (Pin.PULL_UP, Pin.PULL_DOWN):
+            # An input nothing drives reads its pull (until set_input drives it).
+            _levels[gpio] = 1 if pull == Pin.PULL_UP else 0
 
     def value(self, v=None):
         g = self.gpio
