@@ -18,6 +18,9 @@
 //   endstops           [{axis, min_gpio, step_gpio, dir_gpio, forward_level, active_high}]:
 //                      each min endstop is triggered while the axis is at or below 0
 //                      steps, counted from the STEP/DIR pins (the axes start at home)
+//   inputs             [{gpio, level}]: inputs held at a level (the runout sensors,
+//                      filament present); rp2040js reads an undriven pad low, pull-up
+//                      or not
 //   heaters            [{name, heater_gpio, adc_channel, pullup_ohm, r25_ohm, beta,
 //                      capacity_j_k, heater_w, loss_w_k, fan_loss_w_k}], fan_gpio:
 //                      a first-order thermal model per heater, read through the ADC
@@ -234,6 +237,8 @@ for (const es of run.endstops || []) {
   onPin(es.step_gpio, (l) => { if (l) { pos += dir === es.forward_level ? 1 : -1; update(); } });
   update();
 }
+
+for (const input of run.inputs || []) mcu.gpio[input.gpio].setInputValue(!!input.level);
 
 // ---------------------------------------------------------------- thermal model
 // One lumped mass per heater: heater power while its PWM pin is high, loss to ambient

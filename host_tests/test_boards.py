@@ -136,7 +136,9 @@ def test_pin_the_board_keeps_for_itself():
 
 
 def test_thermistor_off_the_adc():
-    assert broken("pico", pins={"bed_thermistor": 28}) == []  # ADC2: fine
+    # ADC2: fine, once the runout input gives GPIO 28 up.
+    pico_pins = {k: v for k, v in paths.load_board("pico")["PINS"].items() if k != "e0_runout"}
+    assert broken("pico", PINS=dict(pico_pins, bed_thermistor=28)) == []
     assert_one(broken("pico", pins={"bed_thermistor": 22, "z_min": 27}),
                "bed_thermistor", "GPIO 22", "ADC")
     # GPIO 29 is an ADC pin of the chip, but the Pico keeps it for VSYS/3.
@@ -196,10 +198,11 @@ def test_pico_6drives_trades_the_part_fan_for_a_sixth_drive():
     six, five = paths.load_board("pico_6drives"), paths.load_board("pico")
     assert six["SETTINGS"]["drives"] == 6 and "part_fan" not in six["PINS"]
     # e5 next to e4, where pico has its ENABLE and hot end; those take the fan's GPIO
-    # and the spare 28. The rest is wired as on pico.
+    # and 28, pico's e0 runout input. The rest is wired as on pico.
     assert (six["PINS"]["e5_step"], six["PINS"]["e5_dir"]) == (16, 17)
     assert six["PINS"]["x_enable"] == five["PINS"]["part_fan"]
-    assert six["PINS"]["hotend_heater"] == 28 and 28 not in five["PINS"].values()
+    assert six["PINS"]["hotend_heater"] == 28 == five["PINS"]["e0_runout"]
+    assert not any(k.endswith("_runout") for k in six["PINS"])
     moved = {"hotend_heater"} | {k for k in six["PINS"] if k.endswith("_enable")}
     assert all(five["PINS"][k] == v for k, v in six["PINS"].items()
                if k in five["PINS"] and k not in moved)
@@ -208,6 +211,15 @@ def test_pico_6drives_trades_the_part_fan_for_a_sixth_drive():
     assert set(six["PINS"].values()) == header
     # Without a fan the check passes; pico without its fan, too (the fan is optional).
     assert broken("pico", PINS={k: v for k, v in five["PINS"].items() if k != "part_fan"}) == []
+
+
+def test_runout_inputs_are_checked_as_other_pins():
+    """A drive's runout input (e<n>_runout) may go on an input-only pin, but not on a
+    pin in use, nor name a drive beyond the sixth."""
+    assert broken("esp32_devkit", pins={"e0_runout": 37}) == []  # input only: fine
+    assert_one(broken("skr_pico", pins={"e2_runout": 4}), "GPIO 4", "x_min", "e2_runout")
+    assert_one(broken("pico", pins={"e1_runout": 25}), "e1_runout", "GPIO 25", "LED")
+    assert_one(broken("sim", pins={"e6_runout": 41}), "e6_runout", "up to e5")
 
 
 def test_pwm_slice_shared_at_two_frequencies():

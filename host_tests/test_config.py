@@ -97,7 +97,7 @@ def test_options_are_the_boards_settings_one_per_axis(mp, board):
         "line_buffer_bytes", "tick_us", "step_pulse_us", "dir_setup_us",
         "enable_active_low", "endstop_active_high", "endstop_pullup",
         "change_unload_mm", "change_load_mm", "change_purge_mm", "change_feed_mm_s",
-        "change_heater_timeout_s"]
+        "change_heater_timeout_s", "runout_enabled", "runout_active_high", "runout_pullup"]
     heater = ["beta", "r25_ohm", "pullup_ohm", "sh_a", "sh_b", "sh_c", "kp", "ki", "kd",
               "pwm_hz", "min_c", "max_c", "watch_s", "watch_rise_c", "runaway_c",
               "runaway_s"]

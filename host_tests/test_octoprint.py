@@ -303,3 +303,46 @@ def test_octoprints_feed_rate_and_flow_sliders_reach_the_printer(rig):
     assert "Recv: FR:125%" in serial
     assert "Recv: echo:E0 Flow: 90%" in serial
     assert not trouble(serial), trouble(serial)
+
+
+def test_octoprint_pauses_on_m600_shows_its_prompt_and_its_answer_resumes(rig, tmp_path):
+    """The real file with M600 where its second layer starts, as a slicer's colour
+    change puts it: on //action:paused OctoPrint pauses the job (its state Pausing: it
+    turns Paused once the lines already sent are answered, and M600's `ok` comes when
+    the change is done, as Marlin's, so that nothing a user sends while paused runs
+    before it), its Action Command Prompt plugin shows M600's prompt, and answering it
+    (the plugin's REST API, which force-sends M876 S0) resumes the print, which then
+    completes."""
+    lines = GCODE.read_text().splitlines()
+    second_layer = [i for i, t in enumerate(lines) if t.startswith(";LAYER_CHANGE")][1]
+    gcode = tmp_path / "short_3tool_m600.gcode"
+    gcode.write_text("\n".join(lines[:second_layer] + ["M600"] + lines[second_layer:])
+                     + "\n")
+    printer, octoprint = rig(realtime=0)
+    prompt_api = "/api/plugin/action_command_prompt"
+    poller = oh.Poller(octoprint)
+    upload = octoprint.upload_and_print(gcode)
+    assert upload["done"] and upload["effectivePrint"], upload
+    wait_for(lambda: octoprint.get("/api/printer?exclude=temperature,sd")["state"]["flags"][
+        "pausing"], 120, "the job pausing on M600", octoprint)
+    prompt = wait_for(lambda: octoprint.get(prompt_api), 30, "M600's prompt", octoprint)
+    assert prompt["text"].startswith("Filament change") and prompt["choices"] == ["Continue"]
+    time.sleep(1)  # the job stays paused while the prompt waits
+    assert octoprint.get("/api/job")["state"].startswith("Paus")
+    octoprint.post(prompt_api, {"command": "select", "choice": 0})
+    wait_for(lambda: "Print job done" in octoprint.log_text("octoprint.log"), 150,
+             "the print job ending", octoprint)
+    job = wait_for(lambda: (lambda j: j if j["state"] == "Operational" else None)(
+        octoprint.get("/api/job")), 30, "OctoPrint operational after the job")
+    poller.stop()
+    assert job["progress"]["completion"] == 100, job
+    states = [state for _, state, _, _ in poller.samples]
+    paused = states.index("Pausing")
+    assert "Printing" in states[paused:]  # printing again after the answer
+    serial = octoprint.log_text("serial.log")
+    sent = [t[len("Send: "):] for _, t in serial_entries(serial) if t.startswith("Send: ")]
+    assert any(re.match(r"(N\d+ )?M876 S0(\*\d+)?$", s) for s in sent), sent[-20:]
+    assert "Printer signalled that it paused" in serial
+    assert "Printer signalled that it resumed" in serial
+    assert octoprint.get(prompt_api) is None  # the prompt closed
+    assert not trouble(serial), trouble(serial)

@@ -4,9 +4,10 @@ A board's board.py is plain data: NAME, CHIP, SOURCE, PINS, SHARED_PINS, TMC_UAR
 SETTINGS and, optionally, RESERVED (GPIOs the board itself uses, with why). The
 checks here are the rules a wrong map breaks on real hardware: a GPIO used twice, a
 pin the chip doesn't have, the ESP32's flash pins, an output on an input-only pin, a
-thermistor away from the ADC, a drive without its pins, an unstated ENABLE polarity
-or TMC address, a STEP/DIR pin the step loop can't write, and on rp2 two PWM outputs
-of different frequencies on one PWM slice.
+thermistor away from the ADC, a drive without its pins, a runout input (e<n>_runout)
+of a drive beyond the sixth, an unstated ENABLE polarity or TMC address, a STEP/DIR
+pin the step loop can't write, and on rp2 two PWM outputs of different frequencies on
+one PWM slice.
 """
 import re
 import sys
@@ -23,6 +24,8 @@ THERMISTORS = ("hotend_thermistor", "bed_thermistor")
 OPTIONAL = ("part_fan",)
 OUTPUT_SUFFIXES = ("_step", "_dir", "_enable", "_heater")
 _MOTOR_KEY = re.compile(r"^(x|y|z|e[0-9])_(step|dir|enable)$")
+# A drive's filament runout input, which a board declares where it has a pin for it.
+_RUNOUT_KEY = re.compile(r"^e([0-9])_runout$")
 
 _RP2 = {
     "gpios": frozenset(range(30)),
@@ -46,10 +49,10 @@ CHIPS = {
         "flash": frozenset(range(6, 12)),
         "input_only": frozenset(range(34, 40)),
     },
-    # The simulated chip: 40 GPIOs, an ADC on any of them, a step path on 0-29.
+    # The simulated chip: 48 GPIOs, an ADC on any of them, a step path on 0-29.
     "sim": {
-        "gpios": frozenset(range(40)),
-        "adc": frozenset(range(40)),
+        "gpios": frozenset(range(48)),
+        "adc": frozenset(range(48)),
         "adc_name": "the simulated ADC",
         "step": frozenset(range(30)),
         "flash": frozenset(),
@@ -224,8 +227,11 @@ def _check_required(pins, drives, bad):
     known = set(ENDSTOPS) | set(THERMAL)
     for key in pins:
         m = _MOTOR_KEY.match(key)
-        if key not in known and not (m and (m.group(1) in AXES
-                                            or int(m.group(1)[1:]) < MAX_DRIVES)):
+        runout = _RUNOUT_KEY.match(key)
+        if runout and int(runout.group(1)) >= MAX_DRIVES:
+            bad("PINS has %r, but drives go up to e%d" % (key, MAX_DRIVES - 1))
+        elif key not in known and not runout and not (
+                m and (m.group(1) in AXES or int(m.group(1)[1:]) < MAX_DRIVES)):
             bad("PINS has an unknown key %r" % key)
 
 

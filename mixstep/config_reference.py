@@ -37,6 +37,10 @@ GROUPS = (
      "retraction is shared among the drives."),
     ("change", "Filament change", "What `M600` does when its line gives no word of its "
      "own (see [G-Codes](G-Codes.md))."),
+    ("runout", "Filament runout", "The runout inputs a board declares (`e<n>_runout` "
+     "in its `PINS`, see [Boards](Boards.md)): an input that reads the filament gone "
+     "while its drive feeds starts `M600 D<n>` (see [G-Codes](G-Codes.md), `M412`). A "
+     "board without such pins ignores these options."),
     ("step_path", "Step path and pins",
      "What the step loop runs at and how the drivers' and endstops' pins are read and "
      "driven (see [Step_Timing](Step_Timing.md) and [Boards](Boards.md))."),
@@ -219,6 +223,19 @@ DESCRIPTIONS = {
         "change", "s",
         "How long `M600` waits with the hot end at its target; then the hot end turns "
         "off, and heats again before the print goes on. 0: it stays on."),
+    "runout_enabled": (
+        "runout", "-",
+        "1: an input that reads the filament gone for five checks in a row (10 ms apart "
+        "at the least) starts `M600 D<n>` for its drive once that drive feeds filament; "
+        "0: the inputs are not watched. `M412 S0`/`S1` sets it, `M500` keeps it."),
+    "runout_active_high": (
+        "runout", "-",
+        "1: a runout input reads high when the filament is gone; 0: low (Marlin's "
+        "`FIL_RUNOUT_STATE LOW`)."),
+    "runout_pullup": (
+        "runout", "-",
+        "1: turn on the chip's pull-ups on the runout inputs, for switches that only pull "
+        "low; 0: none, for sensors that drive both levels or need a pull-down fitted."),
     "retract_mm": ("retraction", "mm", "Length of `G10`; `G11` pushes it back."),
     "retract_feed_mm_s": ("retraction", "mm/s", "Speed of `G10`."),
     "unretract_feed_mm_s": ("retraction", "mm/s", "Speed of `G11`."),

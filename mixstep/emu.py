@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 from mixstep import boards, deploy, paths, sim, trace
+from mixfw.options import FIRMWARE_DEFAULTS
 
 EMU = paths.ROOT / "emu"
 HARNESS = EMU / "harness.mjs"
@@ -113,6 +114,10 @@ def run_description(spec, uf2, bootrom, fs_image, max_emu_s, max_wall_s):
                      dir_gpio=pins[a + "_dir"], forward_level=0 if a in inverted else 1,
                      active_high=bool(settings["endstop_active_high"]))
                 for a in "xyz" if a + "_min" in pins]
+    # Runout inputs read the filament present: the emulated pads have no pull-ups.
+    gone_high = settings.get("runout_active_high", FIRMWARE_DEFAULTS["runout_active_high"])
+    inputs = [dict(gpio=gpio, level=0 if gone_high else 1)
+              for key, gpio in sorted(pins.items()) if key.endswith("_runout")]
     heaters = []
     for name, body in (("hotend", HOTEND), ("bed", BED)):
         if name + "_heater" not in pins:
@@ -126,7 +131,8 @@ def run_description(spec, uf2, bootrom, fs_image, max_emu_s, max_wall_s):
                             r25_ohm=settings[name + "_r25_ohm"], beta=settings[name + "_beta"]))
     return dict(uf2=str(uf2), bootrom=str(bootrom), fs_image=str(fs_image),
                 fs_offset=FS_OFFSET, record_pins=sorted(trace.signal_names(board)),
-                endstops=endstops, heaters=heaters, fan_gpio=pins.get("part_fan", -1),
+                endstops=endstops, inputs=inputs, heaters=heaters,
+                fan_gpio=pins.get("part_fan", -1),
                 max_emu_s=max_emu_s, max_wall_s=max_wall_s)
 
 

@@ -10,7 +10,8 @@
 #   e2  STEP on MISO (GPIO 19), DIR on CS (GPIO 5, a strapping pin that must be high
 #       at reset; the card's pull-up keeps it so)
 # Their drivers take EN from the shared ENABLE (GPIO 25, on the board's EN net).
-# Without them, set drives=1 and mixing is off.
+# Without them, set drives=1 and mixing is off. No pin is left for a filament runout
+# input, so no drive has one.
 # GPIO 12 (Z DIR) is the MTDI strap: it must be low at reset, as the board wires it.
 from mixfw import defaults
 

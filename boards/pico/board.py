@@ -9,8 +9,11 @@
 #   X/Y/Z min endstops      3
 #   hot end, bed, part fan  3
 #   thermistors (ADC0/1)    2   GPIO 26, 27
-#   spare                   1   GPIO 28 (ADC2): a chamber thermistor, or a UART pin
-# A sixth drive needs two more pins and only GPIO 28 is left, so the Pico runs five;
+#   e0's filament runout    1   GPIO 28: the last pin, so drives 1-4 have no runout
+#                               input (runout_* options; a board needing GPIO 28 for
+#                               something else, a chamber thermistor on ADC2 or a UART
+#                               pin, drops e0_runout)
+# A sixth drive needs two more pins and none is left, so the Pico runs five;
 # six take boards/pico_6drives (no part fan), a board with more GPIOs (RP2350B has
 # 48) or drives on an I/O expander.
 # The heaters and the fan sit on three different PWM slices (17: 0B, 19: 1B, 21: 2B),
@@ -47,6 +50,7 @@ PINS = {
     "part_fan": 21,
     "z_min": 22,
     "hotend_thermistor": 26, "bed_thermistor": 27,
+    "e0_runout": 28,
 }
 
 SHARED_PINS = (

@@ -9,7 +9,7 @@
 #   X/Y/Z min endstops      3
 #   hot end, bed            2
 #   thermistors (ADC0/1)    2   GPIO 26, 27
-# Every pin is used. The sixth drive's STEP/DIR follow e4's on GPIO 16 and 17, so all
+# Every pin is used, so no drive has a filament runout input. The sixth drive's STEP/DIR follow e4's on GPIO 16 and 17, so all
 # 18 STEP/DIR pins are one run of GPIOs (0-17), as the PIO backends need; the shared
 # ENABLE moves to the part fan's GPIO 21 and the hot end to the spare GPIO 28. With no
 # fan output, M106 answers an error; run a part fan from the supply if the print needs

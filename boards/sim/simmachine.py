@@ -21,9 +21,9 @@ import micropython
 import sys
 import time as walltime  # the real clock; firmware sees simtime instead
 
-GPIO_COUNT = 40  # 0..29 like an RP2040 for the step path, more for heaters and fans
+GPIO_COUNT = 48  # 0..29 like an RP2040 for the step path, more for heaters, fans, inputs
 # The chip being simulated (set_chip): which GPIOs exist and which can drive a pin.
-# "sim" is the simulated board's own chip: every GPIO 0..39 exists.
+# "sim" is the simulated board's own chip: every GPIO 0..47 exists.
 _CHIP_GPIOS = {
     "rp2040": tuple(range(30)), "rp2350": tuple(range(30)),
     "esp32": tuple(g for g in range(40) if g not in (20, 24, 28, 29, 30, 31)),
@@ -162,6 +162,12 @@ def set_bounce(us):
         _bouncing[axis] = 0
     if _settle_switches not in _world_hooks:
         add_world_hook(_settle_switches)
+
+
+def set_input(gpio, level):
+    """What the world outside drives an input to (a runout sensor, simswitch.py's
+    M7107): the level its Pin reads. An input's level is no edge of the trace."""
+    _levels[gpio] = 1 if level else 0
 
 
 def _switch_level(axis):
@@ -385,6 +391,9 @@ class Pin:
             self.value(value)
         elif mode == Pin.OUT and now_us == 0:
             _record(gpio, _levels[gpio])
+        elif mode == Pin.IN and pull in (Pin.PULL_UP, Pin.PULL_DOWN):
+            # An input nothing drives reads its pull (until set_input drives it).
+            _levels[gpio] = 1 if pull == Pin.PULL_UP else 0
 
     def value(self, v=None):
         g = self.gpio

@@ -9,8 +9,9 @@
 # from it, or tie it low if the driver has none. Their DIR is not inverted: if a
 # motor turns the wrong way, add its drive to invert_dir. With the board alone
 # (no external drivers), set drives=1 and mixing is off.
-# Still free: GPIO 22 (BLTouch probe input) and 16 (filament runout input); both are
-# inputs on the board, so check the schematic for a filter before driving from them.
+# The board's filament runout header (GPIO 16, which Klipper's example reads with the
+# chip's pull-up, as runout_pullup does) is e0's runout input, and the BLTouch header's
+# probe input (GPIO 22, free: mixstep has no probe) e1's; e2 has none.
 # The fan outputs 18 and 20 are low-side MOSFETs (12/24 V loads), not logic pins.
 from mixfw import defaults
 
@@ -18,8 +19,8 @@ NAME = "skr_pico"
 CHIP = "rp2040"
 SOURCE = ("Klipper config/generic-bigtreetech-skr-pico-v1.0.cfg (steppers, DIR "
           "inversion, TMC2209 UART pins and addresses, endstops, heaters, thermistors, "
-          "fans, neopixel, BLTouch); BIGTREETECH SKR-Pico repository, "
-          "Hardware/BTT SKR Pico V1.0-PIN.pdf and -SCH.pdf "
+          "fans, neopixel, BLTouch, filament runout sensor); BIGTREETECH SKR-Pico "
+          "repository, Hardware/BTT SKR Pico V1.0-PIN.pdf and -SCH.pdf "
           "(https://github.com/bigtreetech/SKR-Pico).")
 
 RESERVED = {}
@@ -35,6 +36,7 @@ PINS = {
     "hotend_heater": 23, "bed_heater": 21,
     "part_fan": 17,  # FAN1; FAN2 (18) and FAN3 (20) are left to the user
     "hotend_thermistor": 27, "bed_thermistor": 26,
+    "e0_runout": 16, "e1_runout": 22,
 }
 
 SHARED_PINS = (

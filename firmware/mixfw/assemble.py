@@ -149,6 +149,13 @@ def build(config=None, pin_map=None, files_root=_FILES_ROOT):
     # filament change, loaded at its first use
     printer.add_lazy_command("M", 600, "mixfw.cmd_change", "FilamentChange",
                              (printer, motion, thermal, settings), "m600", guarded=True)
+    # Filament runout inputs start M600 for their drive: only a board with some loads
+    # the watcher.
+    runout_gpios = [pin_map.get("e%d_runout" % i) for i in range(settings["drives"])]
+    printer.runout = None
+    if runout_gpios.count(None) < len(runout_gpios):
+        from mixfw import runout
+        printer.runout = runout.setup(machine, printer, runout_gpios, settings, mem)
     reports = cmd_report.Reports(printer, motion, planner, board.NAME,
                                  storage=config.path is not None, files=bool(files_root))
     cmd_report.register(printer, reports)

@@ -53,6 +53,11 @@ FIRMWARE_DEFAULTS = {
     "change_purge_mm": 30.0,
     "change_feed_mm_s": 10.0,
     "change_heater_timeout_s": 300,
+    # Filament runout inputs (a board's e<n>_runout pins), as Marlin's defaults: on,
+    # "gone" reads low, the chip's pull-up on.
+    "runout_enabled": True,
+    "runout_active_high": False,
+    "runout_pullup": True,
 }
 
 
@@ -219,6 +224,12 @@ SCHEMA = (
      "M600 unload, load and purge speed"),
     ("change_heater_timeout_s",    "",     "int",   0,       86400,       False,
      "M600 turns the hot end off after waiting this long (0: never); resuming heats it"),
+    ("runout_enabled",             "",     "bool",  0,       1,           False,
+     "a runout input reading empty starts M600 for its drive (M412)"),
+    ("runout_active_high",         "",     "bool",  0,       1,           True,
+     "runout inputs read high when the filament is gone"),
+    ("runout_pullup",              "",     "bool",  0,       1,           True,
+     "enable the chip's pull-ups on the runout inputs"),
     ("transition_l1_mm",           "",     "float", 0,       100,         True,
      "mixing chamber delay L1; with L2, changes apply L1 + L2/2 of extrusion early"),
     ("transition_l2_mm",           "",     "float", 0,       100,         True,

@@ -253,6 +253,9 @@ class Printer:
         self.failed = False
         self.sink = None  # M28 upload: takes each received line's text instead of running it
         self.job = None  # a file being printed: next_line() -> its intake's status, .paused
+        # fn() a background task asks the main loop to run between two lines, never
+        # inside a handler: a filament runout's M600 (runout.py). run_pending runs it.
+        self.pending = None
         # What the start-up found wrong (a saved configuration refused): said at start,
         # to every host that connects later and in M115's answer, as a host on USB
         # connects after the board has started; M500 and M501 clear it.
@@ -319,8 +322,13 @@ class Printer:
             self.current.write(text + "\n")
 
     def broadcast(self, text):
+        self.write(text + "\n")
+
+    def write(self, text):
+        """Text to every host. While run_pending runs a command the printer is its
+        channel: the command's replies and busy lines reach every host."""
         for ch in self.channels:
-            ch.write(text + "\n")
+            ch.write(text)
 
     # --- time passing ---
     def add_background(self, fn, each_turn=False):
@@ -571,9 +579,14 @@ class Printer:
 
     def report(self, ch, err):
         """answer() raised err: tell the host as it expects, then `ok`."""
+        self.explain(err)
+        self.done(ch, None)
+
+    def explain(self, err):
+        """What a command raised, told to its host (self.current) as it expects."""
         if isinstance(err, Resend):
             self.reply("Error:%s" % err)
-            self.reply("Resend: %d" % (ch.last_n + 1))
+            self.reply("Resend: %d" % (self.current.last_n + 1))
         elif isinstance(err, Stopped):
             self.reply("echo:command stopped: %s" % err)
         elif isinstance(err, Halted):
@@ -586,7 +599,6 @@ class Printer:
         else:  # a bug must not take the printer down with it
             self.reply("Error:internal error in this command: %r" % err)
             self.failed = True
-        self.done(ch, None)
 
     def _to_sink(self, ch, buf, n):
         """While uploading (M28): store the line's text; only M29 runs."""
@@ -626,12 +638,29 @@ class Printer:
         self.run_line(self.parser.parse(intake.buf, intake.st[_LEN]))
         line_taken(intake.st)  # intake.take(), a bytecode call less
 
+    def run_pending(self):
+        """Run what a background task asked for (self.pending) between two lines, as a
+        line of its own that every host hears; its errors go to them all."""
+        fn = self.pending
+        self.pending = None
+        self.current = self
+        self._cmd_halt_count = self.halt_count
+        self._cmd_stop_count = self.stop_count
+        self._busy_at_ms = time.ticks_ms()
+        try:
+            fn()
+        except Exception as err:
+            self.explain(err)
+        self.current = None
+
     # --- the main loop ---
     def serve(self):
         """Answer lines from every channel until all have closed and no listener is
         left."""
         unpumped = 0  # file lines run since the channels were last read
         while (self.channels or self.listeners) and not self.leaving:
+            if self.pending is not None:
+                self.run_pending()
             job = self.job
             printing = job is not None and not job.paused
             # While a file prints, the channels are read every few of its lines: a
