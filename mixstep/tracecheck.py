@@ -530,7 +530,7 @@ class Checker:
                            np.concatenate([e[3] for e in e_events])[order].tolist())
 
 
-ADV_MOST_STEPS = 1024  # stepper.ADV_MOST_STEPS: the most advance the firmware takes
+ADV_MOST_STEPS = 1024  # stepper._ADV_MOST_STEPS: the most advance the firmware takes
 
 
 class _AdvanceWalk:
@@ -547,7 +547,7 @@ class _AdvanceWalk:
 
     # Within this of K times the speed, plus STEP_SLACK steps for the rounding of the
     # advance, the share and the speed taken from one step's interval. The advance is
-    # at most what the firmware's follower takes (stepper.ADV_MOST_STEPS).
+    # at most what the firmware's follower takes (stepper._ADV_MOST_STEPS).
     TOLERANCE = 0.15
     STEP_SLACK = 3
     # A block shorter than this many lead-axis steps is not looked at: its filament per

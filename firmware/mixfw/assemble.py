@@ -31,7 +31,7 @@ from mixfw.files import Files  # noqa: E402
 from mixfw.thermal import Thermal  # noqa: E402
 from mixfw.transition import Transitions, l0_mm  # noqa: E402
 from mixfw import (cmd_motion, cmd_mixing, cmd_thermal, cmd_report,  # noqa: E402
-                   cmd_config, cmd_files, cmd_trace)
+                   cmd_config, cmd_files)
 from mixfw import safety  # noqa: E402
 
 # Commands whose arguments are text, not numbers; M486's module loads at its first
@@ -163,7 +163,10 @@ def build(config=None, pin_map=None, files_root=_FILES_ROOT):
     printer.add_lazy_command("M", 486, "mixfw.cmd_objects", "Objects",
                              (motion, printer.reply), "m486")
     cmd_config.register(printer, config)
-    cmd_trace.register(printer, cmd_trace.Trace(mem, settings, printer.reply))
+    # The trace capture, a debugging aid: its module loads at its first use.
+    for number, method in ((7300, "m7300"), (7301, "m7301")):
+        printer.add_lazy_command("M", number, "mixfw.cmd_trace", "Trace",
+                                 (mem, settings, printer.reply), method)
     config.appliers.append(motion.apply)
     config.appliers.append(thermal.apply)
     config.appliers.append(mixing.apply)

@@ -48,13 +48,14 @@ class ConfigCommands:
     # M503: print every option as an M926 line that can be sent back, with its help,
     # limits and whether it needs a restart as a comment. Example: M503
     def m503(self, line):
+        texts = _help_texts()
         for o in self.config.options:
-            self.printer.reply("echo:" + self.config.describe(o.name))
+            self.printer.reply("echo:" + self.config.describe(o.name, texts))
 
     # M925 I<option>: print one option the way M503 does. Example: M925 Isteps_per_mm_x
     def m925(self, line):
         name = _words(line.args_text, "I")["I"]
-        self.printer.reply("echo:" + self.config.describe(name))
+        self.printer.reply("echo:" + self.config.describe(name, _help_texts()))
 
     # M926 I<option> [V<value>]: set one option; without V, back to the board's
     # default. Booleans are 0 or 1. M930 applies it. Example: M926 Isteps_per_mm_x V80
@@ -135,6 +136,18 @@ class ConfigCommands:
             self.config.format("junction_deviation_mm"),
             self.config.format("min_segment_time_us")))
 
+
+
+def _help_texts():
+    """The options' help, for one reply: its module goes again, off the heap while
+    printing (about 4 kB of text a board would hold from boot)."""
+    import sys
+    import mixfw
+    from mixfw import options_help
+    texts = options_help.HELP
+    del sys.modules["mixfw.options_help"]
+    delattr(mixfw, "options_help")
+    return texts
 
 
 def register(printer, config):

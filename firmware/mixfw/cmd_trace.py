@@ -2,7 +2,8 @@
 # start, set mask, clear mask) in a ring preallocated at start-up (trace_records), and
 # M7301 hands them to the host, which turns them into a VCD (`mixstep trace pull`).
 # Masks are in step-loop bit space: bit g is GPIO g, except ESP32's GPIO 32/33 on
-# bits 28/29.
+# bits 28/29. Loaded at the first M7300 or M7301 (Printer.add_lazy_command): one Trace
+# for each, whose state is the step loop's words.
 from mixfw import stepper as st
 from mixfw.gcode import GcodeError
 
@@ -63,8 +64,3 @@ class Trace:
             tail = tail + 1 if tail + 1 < size else 0
             m[st.S_CAP_TAIL] = tail
         reply("trace:end")
-
-
-def register(printer, trace):
-    printer.add_command("M", 7300, trace.m7300)  # trace capture: S1 start, S0 stop, no S report
-    printer.add_command("M", 7301, trace.m7301)  # trace capture: send the recorded step events

@@ -92,16 +92,12 @@ class Option:
         """row: options.SCHEMA's; index: position in the setting's tuple, -1 for a plain
         value; axis: the name's suffix ("x", "3"); width: drives of a MIX, tools of a
         PAIR."""
-        self.key, _axes, self.kind, self.lo, self.hi, self.restart, self._help = row
+        self.key, _axes, self.kind, self.lo, self.hi, self.restart = row
         self.index = index
         self.axis = axis
         self.name = self.key if index < 0 else self.key + "_" + axis
         self.width = width
         self.why = ""  # where a limit comes from, if not from the schema
-
-    @property
-    def help(self):
-        return self._help if self.index < 0 else self.axis.upper() + ": " + self._help
 
     def parse(self, text):
         """The typed value of text as M926 or the file gives it."""
@@ -319,12 +315,16 @@ class Config:
         o = self.option(name)
         return o.format(self._read_setting(o))
 
-    def describe(self, name):
-        """One line M926 takes back, its help as a comment."""
+    def describe(self, name, texts):
+        """One line M926 takes back, its help (from texts: options_help.HELP) as a
+        comment."""
         o = self.option(name)
+        text = texts.get(o.key, "")
+        if o.index >= 0:
+            text = o.axis.upper() + ": " + text
         limits = "" if o.kind in (MIX, PAIR) else ", %s..%s" % (o.format(o.lo), o.format(o.hi))
         return "M926 I%s V%s ; %s%s%s" % (
-            name, self.format(name), o.help, limits, " (restart)" if o.restart else "")
+            name, self.format(name), text, limits, " (restart)" if o.restart else "")
 
     # --- applying ---
     def _mark_running(self):

@@ -95,9 +95,9 @@ def normalize(weights, drives):
 
 
 @micropython.viper
-def mix_load(mem: ptr32, base: int, src: int, keep_ring: int):
+def mix_load(mem: ptr32, base: int, src: int, ring: int):
     """Copy a mix (id and weights at mem[src:]) into the mixer and start it afresh;
-    with keep_ring, where the position stands, its ring of picks kept: pressure
+    with ring, where the position stands, its ring of picks kept: pressure
     advance's follower (stepper.py) walks from one block's picks on into the next
     block's as one path, and back over them, which a fresh start would forget. The
     picks ahead are the new mix's from there, as they would be from a fresh start."""
@@ -112,7 +112,7 @@ def mix_load(mem: ptr32, base: int, src: int, keep_ring: int):
         i += 1
     mem[base + _M_SUM] = total
     mem[base + _M_AHEAD] = 0
-    if not keep_ring:
+    if not ring:
         mem[base + _M_Q] = _MIX_BIAS
         mem[base + _M_QMIN] = _MIX_BIAS
 

@@ -39,6 +39,13 @@ _F_HOMING = const(2)
 _F_HOME_SHIFT = const(8)
 _F_ADVANCE = const(8192)
 _B_ADV = const(23)
+_S_ADV_OWED = const(115)
+_S_ADV_NOW = const(116)
+_S_ADV_SLOT = const(117)
+_S_ADV_FWD_SET = const(121)
+_S_ADV_FWD_CLR = const(122)
+_ADV_OFF = const(0xFFFF)
+_ADV_BIAS = const(0x20000000)
 # lookahead.py's: the floats, the slots, and the words of plan_words and recalculate
 # in the io array they share with ramp.py's helpers (_RAMP_IO), which _plan_move
 # stores.
@@ -375,7 +382,7 @@ def _plan_move(io, e_nm: int, neg: int, how: int, pos) -> int:
     if homing:
         flags |= _F_HOMING | (homing << _F_HOME_SHIFT)
     elif words[_S_ADV_K] and e_steps >= 0:
-        # The step loop's follower runs the drives (stepper.S_ADV_OWED); a printing
+        # The step loop's follower runs the drives (stepper._S_ADV_OWED); a printing
         # move's advance is K times its filament's speed: K E / n lead-axis rates,
         # E / n in 2**-15 (E <= n), in 15-bit limbs below 2**30.
         flags |= _F_ADVANCE
@@ -660,7 +667,11 @@ class Planner:
         m = self.mem
         m[st.S_TAIL] = m[st.S_HEAD]
         m[st.S_ACTIVE] = 0
-        st.advance_off(m)
+        # Pressure advance's follower off, owing nothing: the step loop's counters
+        # hold where the drives are.
+        m[_S_ADV_SLOT] = _ADV_OFF
+        m[_S_ADV_OWED] = _ADV_BIAS
+        m[_S_ADV_NOW] = 0
         self._irq_on(state)
         # In place: Transitions holds this list (see set_position_steps).
         for i in range(4):
@@ -1025,13 +1036,13 @@ class Planner:
             self._given[i] = got[i]
         return self._given
 
-    def set_advance(self, k_s):
-        """Pressure advance for the moves queued from now on: K, seconds of the
+    def set_advance(self, value):
+        """Pressure advance for the moves queued from now on: K (value), seconds of the
         filament's speed pushed ahead (Marlin's LIN_ADVANCE K); 0 turns it off."""
-        k = int(k_s / self.tick_s * 256 + 0.5)
+        k = int(value / self.tick_s * 256 + 0.5)
         if not 0 <= k < 1 << 28:
             raise PlanError("pressure advance K %s is beyond the step loop's %s"
-                            % (k_s, ((1 << 28) - 1) * self.tick_s / 256))
+                            % (value, ((1 << 28) - 1) * self.tick_s / 256))
         self._abs_steps[_S_ADV_K] = k
 
     def set_dir_invert(self, mask):
@@ -1058,5 +1069,5 @@ class Planner:
         self._dir_masks_seen = dir_masks
         pins = dir_masks[3] if dir_masks else 0
         self._abs_steps[_S_E_DIR_PINS] = pins
-        self.mem[st.S_ADV_FWD_SET] = pins & ~inv
-        self.mem[st.S_ADV_FWD_CLR] = pins & inv
+        self.mem[_S_ADV_FWD_SET] = pins & ~inv
+        self.mem[_S_ADV_FWD_CLR] = pins & inv

@@ -121,20 +121,20 @@ R_FIRED = const(109)  # channel completions handled
 R_SM = const(110)  # the state machine's number
 R_SEG_LV = const(111)  # pin levels before each segment's first event (3 words)
 R_LEVEL_BITS = const(114)  # the state machine's pins
-# Pressure advance (blocks with F_ADVANCE): the drives follow a target, the block's
+# Pressure advance (blocks with _F_ADVANCE): the drives follow a target, the block's
 # filament as Bresenham gives it plus the advance, K times the filament's speed (from
 # the rate); at most one E step each lead-axis step (or each tick while a block waits
 # for them), each through the mixer, forward or back. The picks are those of the
 # blocks without advance, position by position: the follower loads a block's mix where
 # its picks begin (mix_load keeping the ring), and walks back over the picks it made.
-S_ADV_OWED = const(115)  # E steps the drives owe the target, plus _ADV_BIAS
-S_ADV_NOW = const(116)  # the advance in the target, E steps
-S_ADV_SLOT = const(117)  # the block whose mix the follower has loaded; ADV_OFF: none
-S_ADV_END = const(118)  # the mixer's position where that block's picks end
-S_ADV_DIR_AT = const(119)  # S_TICKS when the follower last changed the drives' DIR
-S_ADV_BACK = const(120)  # 1 while the drives' DIR pins are set backward
-S_ADV_FWD_SET = const(121)  # the drives' DIR pins raised for forward (the planner's)
-S_ADV_FWD_CLR = const(122)  # and lowered
+_S_ADV_OWED = const(115)  # E steps the drives owe the target, plus _ADV_BIAS
+_S_ADV_NOW = const(116)  # the advance in the target, E steps
+_S_ADV_SLOT = const(117)  # the block whose mix the follower has loaded; _ADV_OFF: none
+_S_ADV_END = const(118)  # the mixer's position where that block's picks end
+_S_ADV_DIR_AT = const(119)  # S_TICKS when the follower last changed the drives' DIR
+_S_ADV_BACK = const(120)  # 1 while the drives' DIR pins are set backward
+_S_ADV_FWD_SET = const(121)  # the drives' DIR pins raised for forward (the planner's)
+_S_ADV_FWD_CLR = const(122)  # and lowered
 BLOCK_BASE = const(123)
 
 # Block record words.
@@ -158,7 +158,7 @@ B_DECEL_AFTER = const(13)
 B_DWELL = const(14)  # ticks, for dwell blocks
 B_MIX = const(15)  # mix id then 6 weights: same shape as the mixer's M_ID..M_W
 B_RATE_DECEL = const(22)
-B_ADV = const(23)  # F_ADVANCE: E steps of advance per rate, times 2**23 over 2**13
+_B_ADV = const(23)  # _F_ADVANCE: E steps of advance per rate, times 2**23 over 2**13
 B_WORDS = const(24)
 # A PIO event takes this many cycles besides its delay (piodma.py's program): a pull,
 # two outs and the last pass of the delay loop.
@@ -195,13 +195,13 @@ F_SCHEDULE = const(2048)
 # a dozen times a line on curves, and a root or two for each would cost the chip most
 # of a rewrite.
 F_RATES = const(4096)
-# The block's drives run by pressure advance's follower (see S_ADV_OWED): its DIR words
+# The block's drives run by pressure advance's follower (see _S_ADV_OWED): its DIR words
 # leave the drives' pins to it.
-F_ADVANCE = const(8192)
-ADV_OFF = const(0xFFFF)  # S_ADV_SLOT with no block's mix loaded by the follower (no slot)
+_F_ADVANCE = const(8192)
+_ADV_OFF = const(0xFFFF)  # _S_ADV_SLOT with no block's mix loaded by the follower (no slot)
 _ADV_BIAS = const(0x20000000)
 # The most advance the target takes, E steps: the mixer's ring walks back twice that.
-ADV_MOST_STEPS = const(1024)
+_ADV_MOST_STEPS = const(1024)
 V2_AT_NOMINAL = const(0x20000000)  # above any V2 the look-ahead keeps
 SHIFT_BIAS = const(64)
 # ramp.py's io words, which schedule() stores and reads (copies).
@@ -237,15 +237,9 @@ def init_mem(mem, queue_blocks, capture_records=0, ring_steps=_RING_STEPS):
     mem[_MIX_RING] = 4 * (mem[S_CAP_BASE] + capture_records * CAP_WORDS)
     mem[_MIX_RING_MASK] = ring_steps - 1
     mem[MIX_BASE + mixer.M_ID] = -1
-    advance_off(mem)
-
-
-def advance_off(mem):
-    """Pressure advance's follower off, owing nothing: at start, and when the queue is
-    dropped (the step loop's counters hold where the drives are)."""
-    mem[S_ADV_SLOT] = ADV_OFF
-    mem[S_ADV_OWED] = _ADV_BIAS
-    mem[S_ADV_NOW] = 0
+    # Pressure advance's follower off, owing nothing (as planner.abort leaves it).
+    mem[_S_ADV_SLOT] = _ADV_OFF
+    mem[_S_ADV_OWED] = _ADV_BIAS
 
 
 @micropython.viper
@@ -372,22 +366,22 @@ def _start(mem_buf, b: int) -> int:
     # (trapezoidal integration): half a tick of acceleration above the entry speed.
     mem[_S_RATE] = blk[B_RATE_INIT] + (blk[B_ACCEL] >> 1)
     mem[_S_RAMP_TICKS] = 0
-    if flags & F_ADVANCE:
-        if mem[S_ADV_SLOT] == ADV_OFF:
+    if flags & _F_ADVANCE:
+        if mem[_S_ADV_SLOT] == _ADV_OFF:
             # The follower starts: the picks from here are new ground, as after a
             # fresh start (which a block without advance makes), and its first step
-            # loads the mix of the first block with filament (_adv_next).
+            # loads the mix of the first block with filament (_adv).
             slot = mem[S_TAIL] - 1
             if slot < 0:
                 slot = mem[S_QUEUE] - 1
-            mem[S_ADV_SLOT] = slot
+            mem[_S_ADV_SLOT] = slot
             mem[_MIX_Q] = _MIX_BIAS
             mem[_MIX_QMIN] = _MIX_BIAS
             mem[_MIX_AHEAD] = 0
-            mem[S_ADV_END] = _MIX_BIAS
-            fwd = mem[S_ADV_FWD_SET]
-            mem[S_ADV_BACK] = 0 if (mem[S_DIR] & (fwd | mem[S_ADV_FWD_CLR])) == fwd else 1
-            mem[S_ADV_DIR_AT] = (mem[S_TICKS] - mem[S_DIR_TICKS] - 1) & _MASK30
+            mem[_S_ADV_END] = _MIX_BIAS
+            fwd = mem[_S_ADV_FWD_SET]
+            mem[_S_ADV_BACK] = 0 if (mem[S_DIR] & (fwd | mem[_S_ADV_FWD_CLR])) == fwd else 1
+            mem[_S_ADV_DIR_AT] = (mem[S_TICKS] - mem[S_DIR_TICKS] - 1) & _MASK30
     elif blk[B_STEPS + E] != 0 and blk[B_MIX] != mem[MIX_BASE]:
         mix_load(mem_buf, MIX_BASE, b + B_MIX, 0)
     old = mem[S_DIR]
@@ -400,44 +394,62 @@ def _start(mem_buf, b: int) -> int:
     return changed
 
 
-@micropython.viper
-def _adv_next(mem_buf) -> int:
-    """The follower at the end of the picks it has loaded: the next block's mix with
-    filament, loaded where its picks begin; blocks with none passed over. Returns 0,
-    and the follower waits, while that block is not queued yet or runs without advance
-    (the follower gives its advance back first)."""
-    mem = ptr32(mem_buf)
-    slot = mem[S_ADV_SLOT]
-    while True:
-        slot += 1
-        if slot >= mem[S_QUEUE]:
-            slot = 0
-        if slot == mem[S_HEAD]:
-            return 0
-        b = BLOCK_BASE + slot * B_WORDS
-        if not (mem[b + B_FLAGS] & F_ADVANCE):
-            return 0
-        mem[S_ADV_SLOT] = slot
-        e = mem[b + B_STEPS + E]
-        if e > 0:
-            mix_load(mem_buf, MIX_BASE, b + B_MIX, 1)
-            mem[S_ADV_END] = mem[_MIX_Q] + e
-            return 1
+# _adv's jobs.
+_ADV_NEXT = const(0)
+_ADV_DONE = const(1)
+_ADV_STOP = const(2)
 
 
 @micropython.viper
-def _adv_done(mem_buf) -> int:
-    """1 if the tail block, its lead-axis steps all made, may end: the follower has
-    made its picks (a record may be written over once its block ends, so the follower
-    never stays behind one), and the last block queued, which ends at rest, has its
-    advance back and owes nothing. Else the block waits, and the follower steps each
-    tick."""
+def _adv(mem_buf, job: int) -> int:
+    """Pressure advance's follower, one function for its three jobs (a name each would
+    take the chip's table of names past its sixth block).
+
+    _ADV_NEXT, at the end of the picks it has loaded: the next block's mix with
+    filament, loaded where its picks begin; blocks with none passed over. 0, and the
+    follower waits, while that block is not queued yet or runs without advance (the
+    follower gives its advance back first).
+
+    _ADV_DONE: 1 if the tail block, its lead-axis steps all made, may end: the
+    follower has made its picks (a record may be written over once its block ends, so
+    the follower never stays behind one), and the last block queued, which ends at
+    rest, has its advance back and owes nothing. Else the block waits, and the
+    follower steps each tick.
+
+    _ADV_STOP, before a block without advance: the target without the advance; 1, and
+    the follower off, once the drives owe it nothing."""
     mem = ptr32(mem_buf)
-    tail = mem[S_TAIL]
     queue = mem[S_QUEUE]
-    slot = mem[S_ADV_SLOT]
+    if job == _ADV_NEXT:
+        slot = mem[_S_ADV_SLOT]
+        while True:
+            slot += 1
+            if slot >= queue:
+                slot = 0
+            if slot == mem[S_HEAD]:
+                return 0
+            b = BLOCK_BASE + slot * B_WORDS
+            if not (mem[b + B_FLAGS] & _F_ADVANCE):
+                return 0
+            mem[_S_ADV_SLOT] = slot
+            e = mem[b + B_STEPS + E]
+            if e > 0:
+                mix_load(mem_buf, MIX_BASE, b + B_MIX, 1)
+                mem[_S_ADV_END] = mem[_MIX_Q] + e
+                return 1
+    owed = mem[_S_ADV_OWED]
+    if job == _ADV_STOP:
+        owed -= mem[_S_ADV_NOW]
+        mem[_S_ADV_NOW] = 0
+        mem[_S_ADV_OWED] = owed
+        if owed != _ADV_BIAS:
+            return 0
+        mem[_S_ADV_SLOT] = _ADV_OFF
+        return 1
+    tail = mem[S_TAIL]
+    slot = mem[_S_ADV_SLOT]
     if slot == tail:
-        if mem[_MIX_Q] < mem[S_ADV_END]:
+        if mem[_MIX_Q] < mem[_S_ADV_END]:
             return 0
     else:
         ahead = slot - tail
@@ -449,29 +461,15 @@ def _adv_done(mem_buf) -> int:
         if ahead >= queued:  # behind: the follower has not reached this block's picks
             if mem[BLOCK_BASE + tail * B_WORDS + B_STEPS + E] > 0:
                 return 0
-            mem[S_ADV_SLOT] = tail
+            mem[_S_ADV_SLOT] = tail
     nxt = tail + 1
     if nxt >= queue:
         nxt = 0
     if nxt == mem[S_HEAD]:
-        owed = mem[S_ADV_OWED] - mem[S_ADV_NOW]
-        mem[S_ADV_NOW] = 0
-        mem[S_ADV_OWED] = owed
+        owed -= mem[_S_ADV_NOW]
+        mem[_S_ADV_NOW] = 0
+        mem[_S_ADV_OWED] = owed
         return 1 if owed == _ADV_BIAS else 0
-    return 1
-
-
-@micropython.viper
-def _adv_off(mem_buf) -> int:
-    """Before a block without advance: the target without the advance; 1, and the
-    follower off, once the drives owe it nothing."""
-    mem = ptr32(mem_buf)
-    owed = mem[S_ADV_OWED] - mem[S_ADV_NOW]
-    mem[S_ADV_NOW] = 0
-    mem[S_ADV_OWED] = owed
-    if owed != _ADV_BIAS:
-        return 0
-    mem[S_ADV_SLOT] = ADV_OFF
     return 1
 
 
@@ -588,8 +586,8 @@ def tick(io) -> int:
                         ticks_left = 0
                     continue
                 run = 0
-            elif mem[S_ADV_SLOT] != ADV_OFF and not (blk[B_FLAGS] & F_ADVANCE) and \
-                    not int(_adv_off(io[0])):
+            elif mem[_S_ADV_SLOT] != _ADV_OFF and not (blk[B_FLAGS] & _F_ADVANCE) and \
+                    not int(_adv(io[0], _ADV_STOP)):
                 drain = 1  # the advance goes back before a block that has none
                 run = 0
             else:
@@ -622,8 +620,8 @@ def tick(io) -> int:
             if stopped == homing:
                 _finish(io[0])
                 run = 0
-        if run and (flags & F_ADVANCE) and mem[_S_EVENT] >= blk[B_N]:
-            drain = 2  # its lead-axis steps are made: it ends once _adv_done says so
+        if run and (flags & _F_ADVANCE) and mem[_S_EVENT] >= blk[B_N]:
+            drain = 2  # its lead-axis steps are made: it ends once _adv says so
             run = 0
         while run:
             # Velocity ramp, per tick so speed is linear in time.
@@ -653,7 +651,7 @@ def tick(io) -> int:
             mem[S_PHASE] = phase
             run = 0
             if clr_mask == 0:
-                if (flags & F_ADVANCE) and left == 0 and mem[S_ADV_OWED] != _ADV_BIAS and \
+                if (flags & _F_ADVANCE) and left == 0 and mem[_S_ADV_OWED] != _ADV_BIAS and \
                         phase + (rate << 2) < ONE:
                     # The follower steps between lead-axis steps too, where its pulse
                     # ends well before the next of them: the advance keeps up with a
@@ -765,48 +763,48 @@ def tick(io) -> int:
                             mem[S_POS + Z] += 1
                 mem[_S_ERR + Z] = err
             e_step = 0  # 1 forward, 2 back
-            if drain or (flags & F_ADVANCE):
-                owed = mem[S_ADV_OWED]
+            if drain or (flags & _F_ADVANCE):
+                owed = mem[_S_ADV_OWED]
                 if run:
                     # The target: the block's filament by Bresenham, and the advance
-                    # at the step's rate, at most ADV_MOST_STEPS.
+                    # at the step's rate, at most _ADV_MOST_STEPS.
                     err = mem[_S_ERR + E] + blk[B_STEPS + E]
                     if err > n:
                         err -= n
                         owed += 1
                     mem[_S_ERR + E] = err
-                    a = blk[B_ADV]
+                    a = blk[_B_ADV]
                     adv = 0
                     if a:
                         r = step_rate >> 13
                         adv = ((r * (a >> 8)) >> 15) + ((r * (a & 255)) >> 23)
-                        if adv > ADV_MOST_STEPS:
-                            adv = ADV_MOST_STEPS
-                    owed += adv - mem[S_ADV_NOW]
-                    mem[S_ADV_NOW] = adv
+                        if adv > _ADV_MOST_STEPS:
+                            adv = _ADV_MOST_STEPS
+                    owed += adv - mem[_S_ADV_NOW]
+                    mem[_S_ADV_NOW] = adv
                 # A step as the target is ahead or behind, once the drives' DIR pins
                 # point that way and have been set up; a step each lead-axis step, or
                 # a tick while no STEP pin is held.
                 if owed != _ADV_BIAS and (run or (left == 0 and clr_mask == 0)):
                     back = 1 if owed < _ADV_BIAS else 0
-                    if back != mem[S_ADV_BACK]:
-                        mem[S_ADV_BACK] = back
-                        mem[S_ADV_DIR_AT] = mem[S_TICKS]
-                        dset = mem[S_ADV_FWD_SET]
-                        dclr = mem[S_ADV_FWD_CLR]
+                    if back != mem[_S_ADV_BACK]:
+                        mem[_S_ADV_BACK] = back
+                        mem[_S_ADV_DIR_AT] = mem[S_TICKS]
+                        dset = mem[_S_ADV_FWD_SET]
+                        dclr = mem[_S_ADV_FWD_CLR]
                         if back:
                             dset = dclr
-                            dclr = mem[S_ADV_FWD_SET]
+                            dclr = mem[_S_ADV_FWD_SET]
                         mem[S_DIR] = (mem[S_DIR] & (0 - 1 - dclr)) | dset
-                    elif ((mem[S_TICKS] - mem[S_ADV_DIR_AT]) & _MASK30) > mem[S_DIR_TICKS]:
+                    elif ((mem[S_TICKS] - mem[_S_ADV_DIR_AT]) & _MASK30) > mem[S_DIR_TICKS]:
                         if back:
                             e_step = 2
                             owed += 1
-                        elif mem[_MIX_AHEAD] or mem[_MIX_Q] < mem[S_ADV_END] or \
-                                int(_adv_next(io[0])):
+                        elif mem[_MIX_AHEAD] or mem[_MIX_Q] < mem[_S_ADV_END] or \
+                                int(_adv(io[0], _ADV_NEXT)):
                             e_step = 1
                             owed -= 1
-                mem[S_ADV_OWED] = owed
+                mem[_S_ADV_OWED] = owed
             else:
                 err = mem[_S_ERR + E] + blk[B_STEPS + E]
                 if err > n:
@@ -954,9 +952,9 @@ def tick(io) -> int:
                 event = mem[_S_EVENT] + 1
                 mem[_S_EVENT] = event
                 if event >= n:
-                    if not (flags & F_ADVANCE) or int(_adv_done(io[0])):
+                    if not (flags & _F_ADVANCE) or int(_adv(io[0], _ADV_DONE)):
                         _finish(io[0])
-            elif drain == 2 and int(_adv_done(io[0])):
+            elif drain == 2 and int(_adv(io[0], _ADV_DONE)):
                 _finish(io[0])
         if (set_mask | clr_mask) == 0:
             if ring == 0:
@@ -1020,7 +1018,7 @@ def tick(io) -> int:
                         at += 1
                         last = t
                         lv = lv & ~mem[_S_PULSE_MASK]
-                if drain == 0 and mem[S_ADV_OWED] == _ADV_BIAS:
+                if drain == 0 and mem[_S_ADV_OWED] == _ADV_BIAS:
                     cruise = stepped & mem[S_ACTIVE]
                 continue
             if mem[_S_PIO_LEFT] == 0:
