@@ -504,11 +504,14 @@ def test_the_beds_option_rows_are_the_hot_ends():
     """options.py spells out both heaters' rows in literals (so they stay in flash on a
     frozen board); they must not drift apart."""
     from mixfw.options import SCHEMA
+    from mixfw.options_help import HELP
     hotend = [row for row in SCHEMA if row[0].startswith("hotend_")]
     bed = [row for row in SCHEMA if row[0].startswith("bed_")]
     assert len(hotend) == 16
-    assert bed == [("bed_" + r[0][len("hotend_"):],) + r[1:6] + ("bed " + r[6][len("hotend "):],)
-                   for r in hotend]
+    assert bed == [("bed_" + r[0][len("hotend_"):],) + r[1:] for r in hotend]
+    for r in hotend:
+        assert HELP["bed_" + r[0][len("hotend_"):]] == "bed " + HELP[r[0]][len("hotend "):]
+    assert sorted(HELP) == sorted(row[0] for row in SCHEMA)
 
 
 def test_the_option_table_is_a_constant():
