@@ -9,7 +9,9 @@
 #   on ADC1: 36 (VP, ADC1_CH0) and 39 (VN, ADC1_CH3).
 # That leaves 20 output-capable pins for 6 + 2 x drives STEP/DIR, a shared ENABLE,
 # two heaters and the fan (10 + 2 x drives), plus the Z endstop, which no longer fits
-# on 34-39: four drives use 19 of them, and GPIO 0 stays free.
+# on 34-39: four drives use 19 of them, and GPIO 0 stays free. A bed probe (z_probe)
+# has no pin: GPIO 0 would take one only if the probe can never hold it low at reset
+# (download mode), which a BLTouch or an NPN probe may; G29 and G30 answer an error.
 #
 # Strapping pins, and why each got what it got:
 #   0   BOOT button, low at reset = download mode: left free.

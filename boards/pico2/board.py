@@ -9,9 +9,11 @@
 #   X/Y/Z min endstops      3
 #   hot end, bed, part fan  3
 #   thermistors (ADC0/1)    2   GPIO 26, 27
-#   spare                   1   GPIO 28 (ADC2)
-# A sixth drive needs two more pins and only GPIO 28 is left, so this runs five; six
-# take the RP2350B (48 GPIOs) or drives on an I/O expander.
+#   bed probe input         1   GPIO 28 (ADC2): an inductive or capacitive probe
+#                               (z_probe); a BLTouch's servo would need one more
+#                               pin, and none is left
+# A sixth drive needs two more pins and only GPIO 28 (the probe's) is left, so this
+# runs five; six take the RP2350B (48 GPIOs) or drives on an I/O expander.
 # Heaters and fan sit on three different PWM slices, as on the Pico.
 # RP2350 erratum E9: an input with the internal pull-down enabled can latch high, so
 # the endstops need external pull resistors (or switches that drive both levels).
@@ -47,6 +49,7 @@ PINS = {
     "part_fan": 21,
     "z_min": 22,
     "hotend_thermistor": 26, "bed_thermistor": 27,
+    "z_probe": 28,
 }
 
 SHARED_PINS = (

@@ -1,5 +1,6 @@
 # The simulated board: a 30-GPIO chip like an RP2040, with X, Y, Z and six mixing
-# drives e0..e5 on external STEP/DIR drivers, one ENABLE per driver, and min endstops.
+# drives e0..e5 on external STEP/DIR drivers, one ENABLE per driver, min endstops and
+# a BLTouch bed probe (simbed.py puts a bed under it).
 # Plain data: how to step is the firmware's business, not the board's.
 from mixfw import defaults
 
@@ -21,6 +22,8 @@ PINS = {
     "x_min": 27, "y_min": 28, "z_min": 29,
     "hotend_heater": 30, "bed_heater": 31, "part_fan": 32,
     "hotend_thermistor": 33, "bed_thermistor": 34,
+    # A BLTouch: its input, and the servo pin that deploys and stows it.
+    "z_probe": 35, "probe_servo": 36,
 }
 
 SETTINGS = dict(

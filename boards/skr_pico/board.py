@@ -9,8 +9,11 @@
 # from it, or tie it low if the driver has none. Their DIR is not inverted: if a
 # motor turns the wrong way, add its drive to invert_dir. With the board alone
 # (no external drivers), set drives=1 and mixing is off.
-# Still free: GPIO 22 (BLTouch probe input) and 16 (filament runout input); both are
-# inputs on the board, so check the schematic for a filter before driving from them.
+# GPIO 22, the BLTouch header's probe input, is the bed probe's (z_probe). Its servo
+# pin carries e1's STEP, so a BLTouch can't be deployed and stowed: an inductive or
+# capacitive probe (no servo) goes there, or a board run with drives=2 gives GPIO 29
+# back as probe_servo. Still free: GPIO 16 (filament runout input), an input on the
+# board, so check the schematic for a filter before driving from it.
 # The fan outputs 18 and 20 are low-side MOSFETs (12/24 V loads), not logic pins.
 from mixfw import defaults
 
@@ -32,6 +35,7 @@ PINS = {
     "e1_step": 29, "e1_dir": 24, "e1_enable": 15,
     "e2_step": 0, "e2_dir": 1, "e2_enable": 15,
     "x_min": 4, "y_min": 3, "z_min": 25,
+    "z_probe": 22,  # the BLTouch header's probe input
     "hotend_heater": 23, "bed_heater": 21,
     "part_fan": 17,  # FAN1; FAN2 (18) and FAN3 (20) are left to the user
     "hotend_thermistor": 27, "bed_thermistor": 26,
