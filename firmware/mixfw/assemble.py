@@ -156,6 +156,10 @@ def build(config=None, pin_map=None, files_root=_FILES_ROOT):
     printer.add_lazy_command("M", 486, "mixfw.cmd_objects", "Objects",
                              (motion, printer.reply), "m486")
     cmd_config.register(printer, config)
+    cmd_trace.register(printer, cmd_trace.Trace(mem, settings, printer.reply))
+    config.appliers.append(motion.apply)
+    config.appliers.append(thermal.apply)
+    config.appliers.append(mixing.apply)
     # bed levelling: loaded at the first of its commands, or now if a saved mesh is on
     levelling = (printer, motion, pins, config, pin_map, machine)
     for letter, number, method, guarded in (
@@ -168,10 +172,6 @@ def build(config=None, pin_map=None, files_root=_FILES_ROOT):
     if settings["mesh_enabled"]:
         from mixfw import mesh
         mesh.shared(*levelling)
-    cmd_trace.register(printer, cmd_trace.Trace(mem, settings, printer.reply))
-    config.appliers.append(motion.apply)
-    config.appliers.append(thermal.apply)
-    config.appliers.append(mixing.apply)
     tmc_uart = getattr(board, "TMC_UART", None)
     if tmc_uart:  # the drivers' microsteps and current, before anything moves
         from mixfw import cmd_drivers

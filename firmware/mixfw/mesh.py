@@ -213,7 +213,8 @@ class Levelling:
         on = settings["mesh_enabled"] and settings["mesh_probed"]
         if self.stage is not None and self._lift_nm:
             steps = self.motion.machine_steps()
-            self.stage.position_steps[:3] = steps[:3]
+            for i in range(3):
+                self.stage.position_steps[i] = steps[i]
             at = list(self.planner.position_steps)
             at[2] = steps[2] + div_round(self._lift_nm * int(self.planner.steps_per_mm[2]
                                                               * 1000 + 0.5), 10 ** 9)
