@@ -236,7 +236,7 @@ DESCRIPTIONS = {
         "levelling", "mm", "How far a dive goes down from `probe_clearance_mm` before "
         "it gives up with an error (the probe never triggered)."),
     "mesh_points": (
-        "levelling", "-", "`G29`'s grid: points along X and along Y (2..7 each)."),
+        "levelling", "-", "`G29`'s grid: points along X and along Y (2..5 each)."),
     "mesh_min_mm": (
         "levelling", "mm", "`G29`'s grid: the probe's first point along X and Y, "
         "machine coordinates; the points are spread evenly to `mesh_max_mm`. Every point "

@@ -68,10 +68,10 @@ SETTINGS = {
     "mesh_max_mm": (230.0, 230.0),
     "mesh_fade_mm": 10.0,
     # The mesh G29 made (M500 saves it): its heights at the grid's points, X first
-    # then Y, a row of X per Y; up to 7 x 7.
+    # then Y, a row of X per Y; up to 5 x 5.
     "mesh_probed": False,
     "mesh_enabled": False,
-    "mesh_z_nm": (0,) * 49,
+    "mesh_z_nm": (0,) * 25,
     "fan_pwm_hz": 1000,
     "thermal_period_ms": 100,
     # Consoles: USB serial always; a UART (console_uart: its id, -1 for none) and, on

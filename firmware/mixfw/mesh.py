@@ -15,7 +15,7 @@ from mixfw.gcode import GcodeError
 from mixfw.filament import nm_from_mm, div_round, NM_PER_MM
 from mixfw import stepper as st
 
-_MAX_POINTS = const(7)
+_MAX_POINTS = const(5)
 _FRAC_BITS = const(12)  # a point's place in its cell, and the fade, in 1/4096
 _FRAC_ONE = const(4096)
 _FRAC_HALF = const(2048)

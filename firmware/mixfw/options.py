@@ -232,7 +232,7 @@ SCHEMA = (
      "height of the nozzle each dive starts from and each travel between points is at"),
     ("probe_dive_mm",              "",     "float", 0.1,     100,         False,
      "a dive that goes this far without the probe triggering is an error"),
-    ("mesh_points",                "xy",   "int",   2,       7,           False,
+    ("mesh_points",                "xy",   "int",   2,       5,           False,
      "G29's grid: points along the axis"),
     ("mesh_min_mm",                "xy",   "float", 0,       100000,      False,
      "G29's grid: the probe's first point (machine coordinates)"),
