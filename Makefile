@@ -37,7 +37,7 @@ CHIP32_TESTS := host_tests/test_mixer.py host_tests/test_planner.py \
 	host_tests/test_piodma.py host_tests/test_ramp.py host_tests/test_lookahead.py \
 	host_tests/test_geometry.py host_tests/test_arcs.py host_tests/test_objects.py \
 	host_tests/test_job_commands.py host_tests/test_pressure_advance.py \
-	host_tests/test_runout.py
+	host_tests/test_runout.py host_tests/test_mesh.py
 
 test: setup
 	$(PY) -m pytest -q -n auto --dist loadscope -m "not slow"

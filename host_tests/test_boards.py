@@ -136,9 +136,8 @@ def test_pin_the_board_keeps_for_itself():
 
 
 def test_thermistor_off_the_adc():
-    # ADC2: fine, once the runout input gives GPIO 28 up.
-    pico_pins = {k: v for k, v in paths.load_board("pico")["PINS"].items() if k != "e0_runout"}
-    assert broken("pico", PINS=dict(pico_pins, bed_thermistor=28)) == []
+    # ADC2 (the probe's GPIO 28, which takes 27 instead): fine
+    assert broken("pico", pins={"bed_thermistor": 28, "z_probe": 27}) == []
     assert_one(broken("pico", pins={"bed_thermistor": 22, "z_min": 27}),
                "bed_thermistor", "GPIO 22", "ADC")
     # GPIO 29 is an ADC pin of the chip, but the Pico keeps it for VSYS/3.
@@ -198,11 +197,12 @@ def test_pico_6drives_trades_the_part_fan_for_a_sixth_drive():
     six, five = paths.load_board("pico_6drives"), paths.load_board("pico")
     assert six["SETTINGS"]["drives"] == 6 and "part_fan" not in six["PINS"]
     # e5 next to e4, where pico has its ENABLE and hot end; those take the fan's GPIO
-    # and 28, pico's e0 runout input. The rest is wired as on pico.
+    # and pico's probe input 28 (pico_6drives has no probe). The rest is wired as on
+    # pico.
     assert (six["PINS"]["e5_step"], six["PINS"]["e5_dir"]) == (16, 17)
     assert six["PINS"]["x_enable"] == five["PINS"]["part_fan"]
-    assert six["PINS"]["hotend_heater"] == 28 == five["PINS"]["e0_runout"]
-    assert not any(k.endswith("_runout") for k in six["PINS"])
+    assert six["PINS"]["hotend_heater"] == five["PINS"]["z_probe"] == 28
+    assert "z_probe" not in six["PINS"]
     moved = {"hotend_heater"} | {k for k in six["PINS"] if k.endswith("_enable")}
     assert all(five["PINS"][k] == v for k, v in six["PINS"].items()
                if k in five["PINS"] and k not in moved)

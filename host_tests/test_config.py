@@ -108,6 +108,13 @@ def test_options_are_the_boards_settings_one_per_axis(mp, board):
     expected += ["%s_%d" % (k, t) for t in range(board["SETTINGS"]["virtual_tools"])
                  for k in ("tool_mixes", "tool_advance_k")]
     expected += ["transition_pairs_%d" % k for k in range(8)]
+    # The bed probe and the mesh (defaults.py): 5 x 5 heights at most.
+    expected += ["probe_active_high", "probe_feed_mm_s", "probe_travel_feed_mm_s",
+                 "probe_clearance_mm", "probe_dive_mm", "mesh_fade_mm", "mesh_probed",
+                 "mesh_enabled"]
+    expected += ["probe_offset_mm_" + a for a in "xyz"]
+    expected += ["mesh_%s_%s" % (k, a) for k in ("points", "min_mm", "max_mm") for a in "xy"]
+    expected += ["mesh_z_nm_%d" % k for k in range(25)]
     expected += ["%s_%d" % (k, d) for d in range(board["SETTINGS"]["drives"])
                  for k in ("drive_steps_per_mm", "filament_used_mm")]
     assert sorted(names) == sorted(expected)

@@ -22,6 +22,9 @@ THERMISTORS = ("hotend_thermistor", "bed_thermistor")
 # Pins a board may leave out: without a part fan the firmware answers M106 with an
 # error (boards/pico_6drives gives the fan's pin to a sixth drive).
 OPTIONAL = ("part_fan",)
+# A bed probe's input, and a BLTouch's servo (deploy and stow), where a board has pins
+# for them: G29/G30 answer an error on a board without z_probe.
+PROBE = ("z_probe", "probe_servo")
 OUTPUT_SUFFIXES = ("_step", "_dir", "_enable", "_heater")
 _MOTOR_KEY = re.compile(r"^(x|y|z|e[0-9])_(step|dir|enable)$")
 # A drive's filament runout input, which a board declares where it has a pin for it.
@@ -224,7 +227,7 @@ def _check_required(pins, drives, bad):
     for key in required:
         if key not in pins:
             bad("PINS has no %r" % key)
-    known = set(ENDSTOPS) | set(THERMAL)
+    known = set(ENDSTOPS) | set(THERMAL) | set(PROBE)
     for key in pins:
         m = _MOTOR_KEY.match(key)
         runout = _RUNOUT_KEY.match(key)
@@ -248,7 +251,7 @@ def _check_pio_run(pins, drives, bad):
 
 
 def _is_output(key):
-    return key.endswith(OUTPUT_SUFFIXES) or key in ("part_fan", "tmc_uart_tx")
+    return key.endswith(OUTPUT_SUFFIXES) or key in ("part_fan", "tmc_uart_tx", "probe_servo")
 
 
 def _check_pin(key, gpio, chip, rules, reserved, bad):

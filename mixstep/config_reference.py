@@ -41,6 +41,11 @@ GROUPS = (
      "in its `PINS`, see [Boards](Boards.md)): an input that reads the filament gone "
      "while its drive feeds starts `M600 D<n>` (see [G-Codes](G-Codes.md), `M412`). A "
      "board without such pins ignores these options."),
+    ("levelling", "Bed probe and levelling",
+     "The bed probe on a board's `z_probe` pin (a BLTouch is deployed and stowed by its "
+     "`probe_servo` pin), `G30` and `G29`'s grid, and the mesh `M420` levels by. `G29` "
+     "writes the mesh into these options and `M500` saves it (see "
+     "[G-Codes](G-Codes.md))."),
     ("step_path", "Step path and pins",
      "What the step loop runs at and how the drivers' and endstops' pins are read and "
      "driven (see [Step_Timing](Step_Timing.md) and [Boards](Boards.md))."),
@@ -236,6 +241,44 @@ DESCRIPTIONS = {
         "runout", "-",
         "1: turn on the chip's pull-ups on the runout inputs, for switches that only pull "
         "low; 0: none, for sensors that drive both levels or need a pull-down fitted."),
+    "probe_active_high": (
+        "levelling", "-", "1: the `z_probe` input reads high when the probe triggers "
+        "(a BLTouch, a PNP probe); 0: low (an NPN probe, with `endstop_pullup`)."),
+    "probe_offset_mm": (
+        "levelling", "mm",
+        "Where the probe is from the nozzle, as Marlin's `M851`: X and Y the probe's "
+        "place less the nozzle's; Z the nozzle's height when the probe triggers, "
+        "negated (a probe triggering 1.5 mm above the nozzle's tip: -1.5). A probed "
+        "height is the trigger's Z plus this Z."),
+    "probe_feed_mm_s": ("levelling", "mm/s", "Speed of a probe's dive toward the bed."),
+    "probe_travel_feed_mm_s": (
+        "levelling", "mm/s", "Speed of the moves between probed points."),
+    "probe_clearance_mm": (
+        "levelling", "mm", "Machine Z each dive starts from, and the travel between "
+        "points is at (Marlin's Z_CLEARANCE_BETWEEN_PROBES); `G29` and `G30` end there."),
+    "probe_dive_mm": (
+        "levelling", "mm", "How far a dive goes down from `probe_clearance_mm` before "
+        "it gives up with an error (the probe never triggered)."),
+    "mesh_points": (
+        "levelling", "-", "`G29`'s grid: points along X and along Y (2..5 each)."),
+    "mesh_min_mm": (
+        "levelling", "mm", "`G29`'s grid: the probe's first point along X and Y, "
+        "machine coordinates; the points are spread evenly to `mesh_max_mm`. Every point "
+        "must leave the nozzle within the travel."),
+    "mesh_max_mm": ("levelling", "mm", "`G29`'s grid: the probe's last point."),
+    "mesh_fade_mm": (
+        "levelling", "mm", "The correction shrinks linearly from its whole at Z 0 to "
+        "nothing at this Z (machine, unlevelled), as Marlin's `M420 Z`; 0: it never "
+        "fades."),
+    "mesh_probed": (
+        "levelling", "-", "1: `mesh_z_nm` holds a mesh `G29` made on the grid the "
+        "`mesh_*` options give; `M420 S1` needs it. Changing the grid (`M930`) clears it."),
+    "mesh_enabled": (
+        "levelling", "-", "1: moves are levelled by the mesh (`M420 S1`, `G29`); `G28`, "
+        "`G29` and `G30` turn it off as they start. Saved on, the mesh levels from boot."),
+    "mesh_z_nm": (
+        "levelling", "nm", "The mesh: the bed's height at each grid point, row by row "
+        "(X first, then the next Y), as `M420 V` prints it. `G29` writes them."),
     "retract_mm": ("retraction", "mm", "Length of `G10`; `G11` pushes it back."),
     "retract_feed_mm_s": ("retraction", "mm/s", "Speed of `G10`."),
     "unretract_feed_mm_s": ("retraction", "mm/s", "Speed of `G11`."),

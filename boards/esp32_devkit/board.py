@@ -9,9 +9,10 @@
 #   on ADC1: 36 (VP, ADC1_CH0) and 39 (VN, ADC1_CH3).
 # That leaves 20 output-capable pins for 6 + 2 x drives STEP/DIR, a shared ENABLE,
 # two heaters and the fan (10 + 2 x drives), plus the Z endstop, which no longer fits
-# on 34-39: four drives use 19 of them, and GPIO 0 stays free. So no drive has a
-# filament runout input: GPIO 0 is the BOOT strap below, and a sensor holding it low
-# at reset would start the download mode.
+# on 34-39: four drives use 19 of them, and GPIO 0 stays free. GPIO 0 is the BOOT strap
+# below: a filament runout sensor or a bed probe holding it low at reset would start
+# the download mode (a BLTouch or an NPN probe may), so no drive has a runout input and
+# there is no probe (z_probe): G29 and G30 answer an error.
 #
 # Strapping pins, and why each got what it got:
 #   0   BOOT button, low at reset = download mode: left free.

@@ -11,7 +11,8 @@
 #       at reset; the card's pull-up keeps it so)
 # Their drivers take EN from the shared ENABLE (GPIO 25, on the board's EN net).
 # Without them, set drives=1 and mixing is off. No pin is left for a filament runout
-# input, so no drive has one.
+# input, so no drive has one, nor for a bed probe (z_probe): G29 and G30 answer an
+# error; with drives=1, a TF card line (SCK, GPIO 18) could take one.
 # GPIO 12 (Z DIR) is the MTDI strap: it must be low at reset, as the board wires it.
 from mixfw import defaults
 

@@ -9,12 +9,13 @@
 #   X/Y/Z min endstops      3
 #   hot end, bed, part fan  3
 #   thermistors (ADC0/1)    2   GPIO 26, 27
-#   e0's filament runout    1   GPIO 28: the last pin, so drives 1-4 have no runout
-#                               input (runout_* options; a board needing GPIO 28 for
-#                               something else, a chamber thermistor on ADC2 or a UART
-#                               pin, drops e0_runout)
-# A sixth drive needs two more pins and none is left, so the Pico runs five;
-# six take boards/pico_6drives (no part fan), a board with more GPIOs (RP2350B has
+#   bed probe input         1   GPIO 28 (ADC2): an inductive or capacitive probe
+#                               (z_probe); a BLTouch's servo would need one more
+#                               pin, and none is left. The probe has it rather than
+#                               a filament runout input: G29 is in the start G-code
+#                               of nearly every printer with a probe
+# A sixth drive needs two more pins and only GPIO 28 (the probe's) is left, so the
+# Pico runs five; six take boards/pico_6drives (no part fan), a board with more GPIOs (RP2350B has
 # 48) or drives on an I/O expander.
 # The heaters and the fan sit on three different PWM slices (17: 0B, 19: 1B, 21: 2B),
 # because the two channels of a slice share one frequency and the heaters run at
@@ -50,7 +51,7 @@ PINS = {
     "part_fan": 21,
     "z_min": 22,
     "hotend_thermistor": 26, "bed_thermistor": 27,
-    "e0_runout": 28,
+    "z_probe": 28,
 }
 
 SHARED_PINS = (

@@ -9,10 +9,13 @@
 #   X/Y/Z min endstops      3
 #   hot end, bed, part fan  3
 #   thermistors (ADC0/1)    2   GPIO 26, 27
-#   e0's filament runout    1   GPIO 28: the last pin, so drives 1-4 have no runout
-#                               input (as on the Pico)
-# A sixth drive needs two more pins and none is left, so this runs five; six
-# take the RP2350B (48 GPIOs) or drives on an I/O expander.
+#   bed probe input         1   GPIO 28 (ADC2): an inductive or capacitive probe
+#                               (z_probe); a BLTouch's servo would need one more
+#                               pin, and none is left. The probe has it rather than
+#                               a filament runout input: G29 is in the start G-code
+#                               of nearly every printer with a probe
+# A sixth drive needs two more pins and only GPIO 28 (the probe's) is left, so this
+# runs five; six take the RP2350B (48 GPIOs) or drives on an I/O expander.
 # Heaters and fan sit on three different PWM slices, as on the Pico.
 # RP2350 erratum E9: an input with the internal pull-down enabled can latch high, so
 # the endstops need external pull resistors (or switches that drive both levels).
@@ -48,7 +51,7 @@ PINS = {
     "part_fan": 21,
     "z_min": 22,
     "hotend_thermistor": 26, "bed_thermistor": 27,
-    "e0_runout": 28,
+    "z_probe": 28,
 }
 
 SHARED_PINS = (

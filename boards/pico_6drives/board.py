@@ -13,7 +13,8 @@
 # 18 STEP/DIR pins are one run of GPIOs (0-17), as the PIO backends need; the shared
 # ENABLE moves to the part fan's GPIO 21 and the hot end to the spare GPIO 28. With no
 # fan output, M106 answers an error; run a part fan from the supply if the print needs
-# cooling. Everything else is wired as on boards/pico.
+# cooling. Everything else is wired as on boards/pico. No pin is left for a bed probe
+# (z_probe): G29 and G30 answer an error here; boards/pico gives its GPIO 28 to one.
 # The heaters are on two PWM slices (28: 6A, 19: 1B), both at 12 Hz.
 from mixfw import defaults
 

@@ -1,6 +1,7 @@
 # The simulated board: a 30-GPIO chip like an RP2040, with X, Y, Z and six mixing
 # drives e0..e5 on external STEP/DIR drivers, one ENABLE per driver, min endstops and
-# a filament runout input per drive (set by the sim-only M7107, simswitch.py).
+# a filament runout input per drive (set by the sim-only M7107, simswitch.py) and a
+# BLTouch bed probe (simbed.py puts a bed under it).
 # Plain data: how to step is the firmware's business, not the board's.
 from mixfw import defaults
 
@@ -24,6 +25,8 @@ PINS = {
     "hotend_thermistor": 33, "bed_thermistor": 34,
     "e0_runout": 35, "e1_runout": 36, "e2_runout": 37,
     "e3_runout": 38, "e4_runout": 39, "e5_runout": 40,
+    # A BLTouch: its input, and the servo pin that deploys and stows it.
+    "z_probe": 41, "probe_servo": 42,
 }
 
 SETTINGS = dict(

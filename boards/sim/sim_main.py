@@ -183,6 +183,7 @@ def main():
     import simfaults
     import simswitch
     import simtmc
+    import simbed
     # The configuration and the files are written through the simulated flash, which
     # holds the interrupts at each write as the chip does (M7103 F): the simulation's.
     flash = simfaults.Flash()
@@ -223,6 +224,7 @@ def main():
     simfaults.install(printer, flash)
     simswitch.install(printer)
     simtmc.install(printer)
+    simbed.install(printer, board)
     # The last STEP pulse ends a few ticks after the queue empties, and a PIO state
     # machine still holds its last words: let the chip finish them before stopping.
     printer.finish.append(simmachine.idle)

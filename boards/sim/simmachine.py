@@ -126,6 +126,7 @@ def pace(factor):
 _role = bytearray(GPIO_COUNT)  # 1 + index for STEP pins, 0 otherwise
 _dir_of = bytearray(GPIO_COUNT)  # STEP pin -> its DIR pin
 _endstop_axis = bytearray(GPIO_COUNT)  # 1 + axis for endstop inputs
+_inputs = [None] * GPIO_COUNT  # fn() -> level, for inputs a model drives (set_input)
 positions = array("i", bytes(4 * 16))  # steps per STEP pin index
 step_names = []
 
@@ -152,6 +153,12 @@ bounce_us = 0
 _BOUNCE_64THS = (5, 13, 22, 31, 45, 50)  # flips, in 64ths of bounce_us: irregular
 _bouncing = bytearray(3)
 _bounce_from_w = array("i", bytes(4 * 3))
+
+
+def set_input(gpio, fn):
+    """An input whose level a model of the printer gives: fn() -> 0 or 1, read when
+    the firmware reads the pin (simbed.py's bed probe)."""
+    _inputs[gpio] = fn
 
 
 def set_bounce(us):
@@ -401,6 +408,9 @@ class Pin:
             axis = _endstop_axis[g]
             if axis:
                 return _switch_level(axis - 1)
+            fn = _inputs[g]
+            if fn is not None:
+                return fn()
             return _levels[g]
         _set_level(g, 1 if v else 0)
 

@@ -10,8 +10,11 @@
 # motor turns the wrong way, add its drive to invert_dir. With the board alone
 # (no external drivers), set drives=1 and mixing is off.
 # The board's filament runout header (GPIO 16, which Klipper's example reads with the
-# chip's pull-up, as runout_pullup does) is e0's runout input, and the BLTouch header's
-# probe input (GPIO 22, free: mixstep has no probe) e1's; e2 has none.
+# chip's pull-up, as runout_pullup does) is e0's runout input; e1 and e2 have none.
+# GPIO 22, the BLTouch header's probe input, is the bed probe's (z_probe). Its servo
+# pin carries e1's STEP, so a BLTouch can't be deployed and stowed: an inductive or
+# capacitive probe (no servo) goes there, or a board run with drives=2 gives GPIO 29
+# back as probe_servo.
 # The fan outputs 18 and 20 are low-side MOSFETs (12/24 V loads), not logic pins.
 from mixfw import defaults
 
@@ -33,10 +36,11 @@ PINS = {
     "e1_step": 29, "e1_dir": 24, "e1_enable": 15,
     "e2_step": 0, "e2_dir": 1, "e2_enable": 15,
     "x_min": 4, "y_min": 3, "z_min": 25,
+    "z_probe": 22,  # the BLTouch header's probe input
     "hotend_heater": 23, "bed_heater": 21,
     "part_fan": 17,  # FAN1; FAN2 (18) and FAN3 (20) are left to the user
     "hotend_thermistor": 27, "bed_thermistor": 26,
-    "e0_runout": 16, "e1_runout": 22,
+    "e0_runout": 16,
 }
 
 SHARED_PINS = (

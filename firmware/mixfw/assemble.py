@@ -170,6 +170,18 @@ def build(config=None, pin_map=None, files_root=_FILES_ROOT):
     config.appliers.append(motion.apply)
     config.appliers.append(thermal.apply)
     config.appliers.append(mixing.apply)
+    # bed levelling: loaded at the first of its commands, or now if a saved mesh is on
+    levelling = (printer, motion, pins, config, pin_map, machine)
+    for letter, number, method, guarded in (
+            ("G", 29, "g29", True),  # probe a grid into the mesh, levelling on
+            ("G", 30, "g30", True),  # probe the bed once
+            ("M", 420, "m420", False),  # levelling S0/S1, fade Z, V reports the mesh
+            ("M", 851, "m851", False)):  # the probe's offsets X Y Z
+        printer.add_lazy_command(letter, number, "mixfw.mesh", "shared", levelling, method,
+                                 guarded)
+    if settings["mesh_enabled"]:
+        from mixfw import mesh
+        mesh.shared(*levelling)
     tmc_uart = getattr(board, "TMC_UART", None)
     if tmc_uart:  # the drivers' microsteps and current, before anything moves
         from mixfw import cmd_drivers

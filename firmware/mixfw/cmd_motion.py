@@ -379,6 +379,8 @@ class Motion:
         self.drives = settings["drives"]
         self.dir_masks = pins.axis_dir_masks()
         self.enabled = 0  # bit per driver: X Y Z then drives
+        self.homed = 0  # bit per axis homed since its driver was last off (G29 asks)
+        self.before_home = []  # fn() each, as G28 starts (levelling turns off: mesh.py)
         self._drive_bits = ((1 << self.drives) - 1) << 3
         if settings.get("soft_limits", True):  # in _xyz_spm's modes word (see there)
             self._xyz_spm[_SPM_MODES] = _MODE_SOFT | _MODE_SOFT_OPTION
@@ -460,7 +462,9 @@ class Motion:
     def resync(self):
         """After the queue was dropped: the logical X Y Z are where the axes are. E keeps
         its logical value; the drives' own positions were taken by the planner."""
-        steps = self.planner.position_steps
+        # The queue's: a levelling stage in front of the planner keeps the position
+        # unlevelled (mesh.py).
+        steps = self.queue.position_steps
         for i in range(3):
             # Back to the same steps when planned again: half a nanometre is far below
             # a step at any steps/mm the options allow.
@@ -499,6 +503,7 @@ class Motion:
             if (want >> i) & 1:
                 self.pins.set_enabled(i, False)
         self.enabled &= ~want
+        self.homed &= ~want  # a motor off may be moved by hand, as Marlin takes it
 
     # G0/G1 X Y Z E F: straight move. Example: G1 X10 Y5 E0.4 F1800
     # Native code, as the planner's methods a line runs (see planner.py).
@@ -878,6 +883,8 @@ class Motion:
     # G28 [X] [Y] [Z]: home the named axes, or all, to their min endstops. Example: G28 X Y
     def g28(self, line):
         axes = [i for i in range(3) if line.has(_AXIS_LETTERS[i])] or [0, 1, 2]
+        for fn in self.before_home:
+            fn()
         planner = self.planner
         mem = planner.mem
         feed = self.feed
@@ -908,6 +915,7 @@ class Motion:
             planner.set_position_steps(steps)
             self.pos_nm[i] = 0
             self.offset_nm[i] = 0
+            self.homed |= 1 << i
         return None
 
     def _home_on_feed(self, axis):

@@ -53,6 +53,25 @@ SETTINGS = {
     "bed_watch_s": 60.0, "bed_watch_rise_c": 2.0,
     "bed_runaway_c": 5.0, "bed_runaway_s": 30.0,
     "min_extrude_c": 170.0,  # E moves are refused below this hot end temperature
+    # Bed probe (a board's z_probe pin; BLTouch deploy and stow on probe_servo), as
+    # Marlin's defaults: the probe 10 mm right of and behind the nozzle (M851), each
+    # dive from 5 mm (Z_CLEARANCE_BETWEEN_PROBES), a 3 x 3 mesh 10 mm inside what the
+    # probe reaches, its correction faded out by Z 10 mm.
+    "probe_active_high": True,
+    "probe_offset_mm": (10.0, 10.0, 0.0),
+    "probe_feed_mm_s": 4.0,
+    "probe_travel_feed_mm_s": 100.0,
+    "probe_clearance_mm": 5.0,
+    "probe_dive_mm": 10.0,
+    "mesh_points": (3, 3),
+    "mesh_min_mm": (20.0, 20.0),
+    "mesh_max_mm": (230.0, 230.0),
+    "mesh_fade_mm": 10.0,
+    # The mesh G29 made (M500 saves it): its heights at the grid's points, X first
+    # then Y, a row of X per Y; up to 5 x 5.
+    "mesh_probed": False,
+    "mesh_enabled": False,
+    "mesh_z_nm": (0,) * 25,
     "fan_pwm_hz": 1000,
     "thermal_period_ms": 100,
     # Consoles: USB serial always; a UART (console_uart: its id, -1 for none) and, on

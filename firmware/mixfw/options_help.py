@@ -101,4 +101,22 @@ HELP = {
     "console_baud": "serial console baud rate",
     "tcp_port": "TCP G-code console port",
     "tcp_max_clients": "TCP G-code connections at once",
+    "probe_active_high": "the z_probe input reads high when triggered",
+    "probe_offset_mm":
+        "the probe from the nozzle (M851); Z: the nozzle's height when the probe "
+        "triggers, negated (negative: the probe triggers above the nozzle's tip)",
+    "probe_feed_mm_s": "speed of a probe's dive",
+    "probe_travel_feed_mm_s": "speed between probed points (G29, G30)",
+    "probe_clearance_mm":
+        "height of the nozzle each dive starts from and each travel between points is at",
+    "probe_dive_mm": "a dive that goes this far without the probe triggering is an error",
+    "mesh_points": "G29's grid: points along the axis",
+    "mesh_min_mm": "G29's grid: the probe's first point (machine coordinates)",
+    "mesh_max_mm": "G29's grid: the probe's last point",
+    "mesh_fade_mm": "levelling fades out linearly up to this Z (M420 Z; 0: never fades)",
+    "mesh_probed":
+        "mesh_z_nm holds a mesh G29 made on the grid mesh_points, mesh_min_mm, "
+        "mesh_max_mm",
+    "mesh_enabled": "levelling by the mesh is on (M420 S; G28 turns it off)",
+    "mesh_z_nm": "the mesh's height at this point, X first then Y (G29 writes them, M500 saves)",
 }

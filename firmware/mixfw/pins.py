@@ -76,12 +76,15 @@ class Pins:
         for i, name in enumerate(names):
             if name in inverted:
                 self.dir_invert_mask |= self.dir_masks[i]
-        e0, e1, e2 = self.endstop_pins
-        lvl = self.endstop_level
+        # What homing moves stop at, X Y Z, and the level each reads when triggered:
+        # a probing move puts the probe in Z's place (mesh.py), as the step loop calls
+        # endstops() and cannot be handed another reader.
+        stops = self.stops = list(self.endstop_pins)
+        levels = self.stop_levels = [self.endstop_level] * 3
 
         def endstops():
-            return ((e0.value() == lvl) | ((e1.value() == lvl) << 1)
-                    | ((e2.value() == lvl) << 2))
+            return ((stops[0].value() == levels[0]) | ((stops[1].value() == levels[1]) << 1)
+                    | ((stops[2].value() == levels[2]) << 2))
 
         self.endstops = endstops
 

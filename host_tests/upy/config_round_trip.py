@@ -7,8 +7,10 @@ import board
 from config_unit import Commands, Flash, PATH
 from mixfw.config import Config
 
-out = []
-for pairs in json.loads(sys.stdin.read()):
+# Streamed, one configuration at a time: the whole answer as one string would need a
+# block of about a megabyte.
+sys.stdout.write("[")
+for k, pairs in enumerate(json.loads(sys.stdin.read())):
     a = Commands(Config(board.SETTINGS, PATH, Flash()))
     for name, text in pairs:
         a.send("M926 I%s V%s" % (name, text))
@@ -17,5 +19,7 @@ for pairs in json.loads(sys.stdin.read()):
     for line in a.lines:
         b.send(line[len("echo:"):])
     b.send("M503")
-    out.append((a.lines, b.lines))
-print(json.dumps(out))
+    if k:
+        sys.stdout.write(",")
+    json.dump((a.lines, b.lines), sys.stdout)
+print("]")
