@@ -219,7 +219,7 @@ def test_runout_inputs_are_checked_as_other_pins():
     assert broken("esp32_devkit", pins={"e0_runout": 37}) == []  # input only: fine
     assert_one(broken("skr_pico", pins={"e2_runout": 4}), "GPIO 4", "x_min", "e2_runout")
     assert_one(broken("pico", pins={"e1_runout": 25}), "e1_runout", "GPIO 25", "LED")
-    assert_one(broken("sim", pins={"e6_runout": 41}), "e6_runout", "up to e5")
+    assert_one(broken("sim", pins={"e6_runout": 43}), "e6_runout", "up to e5")
 
 
 def test_pwm_slice_shared_at_two_frequencies():

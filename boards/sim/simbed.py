@@ -81,6 +81,6 @@ def install(printer, board):
     if "z_probe" not in board.PINS:
         return None
     bed = Bed(printer, board.PINS)
-    simmachine.set_input(board.PINS["z_probe"], bed.level)
+    simmachine.model_input(board.PINS["z_probe"], bed.level)
     printer.register("M7108", bed.m7108)  # simulation: the bed's surface, the probe
     return bed

@@ -126,7 +126,7 @@ def pace(factor):
 _role = bytearray(GPIO_COUNT)  # 1 + index for STEP pins, 0 otherwise
 _dir_of = bytearray(GPIO_COUNT)  # STEP pin -> its DIR pin
 _endstop_axis = bytearray(GPIO_COUNT)  # 1 + axis for endstop inputs
-_inputs = [None] * GPIO_COUNT  # fn() -> level, for inputs a model drives (set_input)
+_inputs = [None] * GPIO_COUNT  # fn() -> level, for inputs a model drives (model_input)
 positions = array("i", bytes(4 * 16))  # steps per STEP pin index
 step_names = []
 
@@ -155,7 +155,7 @@ _bouncing = bytearray(3)
 _bounce_from_w = array("i", bytes(4 * 3))
 
 
-def set_input(gpio, fn):
+def model_input(gpio, fn):
     """An input whose level a model of the printer gives: fn() -> 0 or 1, read when
     the firmware reads the pin (simbed.py's bed probe)."""
     _inputs[gpio] = fn
