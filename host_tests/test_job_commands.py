@@ -120,13 +120,13 @@ def test_m73_words_and_refusals(printer):
 
 
 def test_an_unknown_g_code_is_refused_and_an_unknown_m_code_passed_over(printer):
-    """A G-code the firmware lacks is motion the file needed (a probe's G29, a G5
-    spline): an error, so a host stops the print rather than print it wrong; an unknown
+    """A G-code the firmware lacks is motion the file needed (a G5 spline, G12's nozzle
+    clean): an error, so a host stops the print rather than print it wrong; an unknown
     M-code is a setting or a report, passed over with Marlin's echo."""
-    assert printer.send("G29") == [
-        'Error:Unknown command: "G29" (a motion command this firmware lacks; the print '
+    assert printer.send("G5 I1 J2 P3 Q4 X5 Y6") == [
+        'Error:Unknown command: "G5" (a motion command this firmware lacks; the print '
         'would go wrong without it)', "ok"]
-    assert printer.send("G5 I1 J2 P3 Q4 X5 Y6")[0].startswith('Error:Unknown command: "G5"')
+    assert printer.send("G12 P1 S2")[0].startswith('Error:Unknown command: "G12"')
     assert printer.send("M355 S1 P255") == ['echo:Unknown command: "M355"', "ok"]
     assert printer.send("M9999 S1") == ['echo:Unknown command: "M9999"', "ok"]
     assert printer.finish()["steps"]["x"] == 0

@@ -44,7 +44,7 @@ _S_ADV_NOW = const(116)
 _S_ADV_SLOT = const(117)
 _S_ADV_FWD_SET = const(121)
 _S_ADV_FWD_CLR = const(122)
-_ADV_OFF = const(0xFFFF)
+_ADV_OFF = const(0)
 _ADV_BIAS = const(0x20000000)
 # lookahead.py's: the floats, the slots, and the words of plan_words and recalculate
 # in the io array they share with ramp.py's helpers (_RAMP_IO), which _plan_move

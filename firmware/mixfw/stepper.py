@@ -129,7 +129,9 @@ R_LEVEL_BITS = const(114)  # the state machine's pins
 # its picks begin (mix_load keeping the ring), and walks back over the picks it made.
 _S_ADV_OWED = const(115)  # E steps the drives owe the target, plus _ADV_BIAS
 _S_ADV_NOW = const(116)  # the advance in the target, E steps
-_S_ADV_SLOT = const(117)  # the block whose mix the follower has loaded; _ADV_OFF: none
+# The slot of the block whose mix the follower has loaded, plus 1; _ADV_OFF (0, as a
+# memory made afresh is): the follower is off.
+_S_ADV_SLOT = const(117)
 _S_ADV_END = const(118)  # the mixer's position where that block's picks end
 _S_ADV_DIR_AT = const(119)  # S_TICKS when the follower last changed the drives' DIR
 _S_ADV_BACK = const(120)  # 1 while the drives' DIR pins are set backward
@@ -198,7 +200,7 @@ F_RATES = const(4096)
 # The block's drives run by pressure advance's follower (see _S_ADV_OWED): its DIR words
 # leave the drives' pins to it.
 _F_ADVANCE = const(8192)
-_ADV_OFF = const(0xFFFF)  # _S_ADV_SLOT with no block's mix loaded by the follower (no slot)
+_ADV_OFF = const(0)
 _ADV_BIAS = const(0x20000000)
 # The most advance the target takes, E steps: the mixer's ring walks back twice that.
 _ADV_MOST_STEPS = const(1024)
@@ -374,7 +376,7 @@ def _start(mem_buf, b: int) -> int:
             slot = mem[S_TAIL] - 1
             if slot < 0:
                 slot = mem[S_QUEUE] - 1
-            mem[_S_ADV_SLOT] = slot
+            mem[_S_ADV_SLOT] = slot + 1
             mem[_MIX_Q] = _MIX_BIAS
             mem[_MIX_QMIN] = _MIX_BIAS
             mem[_MIX_AHEAD] = 0
@@ -421,7 +423,7 @@ def _adv(mem_buf, job: int) -> int:
     mem = ptr32(mem_buf)
     queue = mem[S_QUEUE]
     if job == _ADV_NEXT:
-        slot = mem[_S_ADV_SLOT]
+        slot = mem[_S_ADV_SLOT] - 1
         while True:
             slot += 1
             if slot >= queue:
@@ -431,7 +433,7 @@ def _adv(mem_buf, job: int) -> int:
             b = BLOCK_BASE + slot * B_WORDS
             if not (mem[b + B_FLAGS] & _F_ADVANCE):
                 return 0
-            mem[_S_ADV_SLOT] = slot
+            mem[_S_ADV_SLOT] = slot + 1
             e = mem[b + B_STEPS + E]
             if e > 0:
                 mix_load(mem_buf, MIX_BASE, b + B_MIX, 1)
@@ -447,7 +449,7 @@ def _adv(mem_buf, job: int) -> int:
         mem[_S_ADV_SLOT] = _ADV_OFF
         return 1
     tail = mem[S_TAIL]
-    slot = mem[_S_ADV_SLOT]
+    slot = mem[_S_ADV_SLOT] - 1
     if slot == tail:
         if mem[_MIX_Q] < mem[_S_ADV_END]:
             return 0
@@ -461,7 +463,7 @@ def _adv(mem_buf, job: int) -> int:
         if ahead >= queued:  # behind: the follower has not reached this block's picks
             if mem[BLOCK_BASE + tail * B_WORDS + B_STEPS + E] > 0:
                 return 0
-            mem[_S_ADV_SLOT] = tail
+            mem[_S_ADV_SLOT] = tail + 1
     nxt = tail + 1
     if nxt >= queue:
         nxt = 0
