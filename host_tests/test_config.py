@@ -474,9 +474,10 @@ print(json.dumps(sweep(%r, %r, True, "old file", every_byte=False)))
 
 @pytest.mark.slow
 def test_save_interrupted_at_every_point_loads_old_or_new(mp):
-    got = run_unit(mp, """
-print(json.dumps([sweep(%r, %r, fat, start, every) for fat, start, every in %r]))
-""" % (OLD, NEW, SWEEPS))
+    # A run each: a sweep's time grows with the square of the file's size.
+    got = [run_unit(mp, """
+print(json.dumps(sweep(%r, %r, %r, %r, %r)))
+""" % (OLD, NEW, fat, start, every)) for fat, start, every in SWEEPS]
     total = 0
     for (fat, start, every), r in zip(SWEEPS, got):
         # open + every byte + close + rename (FAT: + the remove inside rename)
