@@ -288,3 +288,30 @@ def test_a_first_layer_follows_the_bed(tmp_path):
     assert off_bed.max() <= 2 * Z_STEP_MM + interp_mm + twist_mm + 1e-9, off_bed.max()
     # Not by chance: the bed under the print varies by many steps.
     assert truth.max() - truth.min() > 20 * Z_STEP_MM
+
+
+def test_probing_and_levelled_moves_on_the_pio_dma_path_with_the_heap_locked():
+    """The Pico's step path (PIO fed by DMA) stops a probing dive on the probe's input
+    as the timer path does, and levelled moves across the grid's lines run with the
+    step path's heap locked (a step path that allocated would raise here)."""
+    p = SimPrinter(board="pico", heap_lock=True)
+    try:
+        assert p.send(M7108) == ["ok"]
+        assert p.send("G28")[-1] == "ok"
+        line = [r for r in p.send("G30 X100 Y100") if r.startswith("Bed X:")]
+        assert abs(float(line[0].split("Z: ")[1]) - bed_mm(100, 100)) <= Z_STEP_MM + 0.005
+        grid = grid_of(p.send("G29"))
+        xs = ys = grid_points(3)
+        for j, y in enumerate(ys):
+            for i, x in enumerate(xs):
+                assert abs(grid[j][i] - bed_mm(x, y)) <= Z_STEP_MM + 0.0005, (i, j)
+        p.send("M420 S1 Z0")
+        # A diagonal over all four cells, then to a point: Z there is the mesh's.
+        for text in ("G1 X30 Y30 Z0.2 F6000", "G1 X220 Y220 F6000", "G1 X60 Y170 F6000"):
+            assert p.send(text) == ["ok"]
+        p.send("M400")
+        want_mm = 0.2 + bilinear(grid, xs, ys, 60, 170)
+        assert abs(count_z(p)[2] / SPM[2] - want_mm) <= Z_STEP_MM + 0.0005
+    finally:
+        report = p.finish()
+    assert report["heap_locked"]

@@ -161,6 +161,23 @@ def model_input(gpio, fn):
     _inputs[gpio] = fn
 
 
+def _model_level(fn):
+    """fn(), a model of the world outside the chip (simbed's floats are the bed's
+    physics, not the firmware's). The firmware's step path reads the pin under
+    --heap-lock, and what the model allocates there is no fault of the firmware's:
+    it runs again with the heap open (the lock is a depth, so only where it is held)."""
+    try:
+        return fn()
+    except MemoryError:
+        if not heap_lock_ticks:
+            raise
+    micropython.heap_unlock()
+    try:
+        return fn()
+    finally:
+        micropython.heap_lock()
+
+
 def set_bounce(us):
     """Bounce every min endstop for `us` after each contact and release (0: never)."""
     global bounce_us
@@ -410,7 +427,7 @@ class Pin:
                 return _switch_level(axis - 1)
             fn = _inputs[g]
             if fn is not None:
-                return fn()
+                return _model_level(fn)
             return _levels[g]
         _set_level(g, 1 if v else 0)
 
