@@ -349,6 +349,17 @@ DESCRIPTIONS = {
         "Port of the TCP G-code console, on boards connected to a network. The "
         "simulation takes `mixstep serve --tcp HOST:PORT` instead."),
     "tcp_max_clients": ("consoles", "connections", "TCP G-code connections at once."),
+    "net_password": (
+        "consoles", "text",
+        "Password a network connection must send as its first line before any "
+        "G-code. Empty (the default): the network console is off, except "
+        "`mixstep serve --tcp` on a loopback address. 8 to 64 printable characters "
+        "without spaces or `;`. Kept by M500, compared in constant time, never shown "
+        "by M503, M925 or any report."),
+    "net_idle_timeout_s": (
+        "consoles", "s",
+        "A network connection that sends no complete line for this long is closed, "
+        "so a forgotten client doesn't hold one of `tcp_max_clients`; 0: never."),
 }
 DESCRIPTIONS.update({
     "%s_%s" % (heater, key): (heater, unit, text.replace("{h}", heater))
@@ -483,6 +494,8 @@ def _range_cell(row, configs):
         return "weights ≥ 0, not all 0, one per drive"
     if kind == options.PAIR:
         return "tools 0..virtual_tools-1; lengths %r..%r mm" % (float(lo), float(hi))
+    if kind == options.SECRET:
+        return "empty, or %d..%d characters" % (lo, hi)
     # Limits a board's chip narrows (PWM frequencies), once per chip and clock.
     narrowed = {}
     for c in configs.values():

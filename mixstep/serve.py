@@ -179,7 +179,8 @@ class _Terminated(Exception):
 def _sources(config, files, settings):
     """Where the settings come from, in their order: the board's, the saved file, --set."""
     return "mixstep: the board's settings, then configuration %s, then --set %s; files in %s" % (
-        config, " ".join("%s=%s" % kv for kv in (settings or {}).items()) or "(none)", files)
+        config, " ".join("%s=%s" % (k, "(not shown)" if k == "net_password" else v)
+                         for k, v in (settings or {}).items()) or "(none)", files)
 
 
 def _on_sigterm(signum, frame):

@@ -130,8 +130,8 @@ class LoggedListener:
         self.listener = listener
         self.log = log
 
-    def accept(self):
-        console = self.listener.accept()
+    def accept(self, room):
+        console = self.listener.accept(room)
         return console if console is None else LoggedConsole(console, self.log)
 
 
@@ -173,7 +173,12 @@ def main():
     from mixfw import safety
     from mixfw.console import StreamConsole
     if opts["tcp"]:
+        from mixfw import netconsole
         from mixfw.netconsole import TcpListener
+        # The network is this machine's, and so are a host's waits: its timeouts
+        # (password, idle, slow sender, lockout) run on the real clock, not the
+        # simulated one, which runs free between lines at --realtime 0.
+        netconsole.time = simmachine.walltime
     heap_code += _heap_bytes() - before
     firmware_modules = sorted(name for name in sys.modules
                               if name in ("board", "main") or name.startswith("mixfw"))
@@ -193,14 +198,6 @@ def main():
     if opts["stdio"]:
         consoles.append(StreamConsole(sys.stdin.buffer, sys.stdout.buffer,
                                       blocking=not interactive))
-    listeners = []
-    if opts["tcp"]:
-        host, port = opts["tcp"].rsplit(":", 1)
-        listeners.append(TcpListener(host, int(port)))
-    if opts["console_log"]:
-        log = ConsoleLog(opts["console_log"])
-        consoles = [LoggedConsole(c, log) for c in consoles]
-        listeners = [LoggedListener(l, log) for l in listeners]
     if interactive:
         simmachine.pace(float(opts["realtime"] or 0))
     warnings = []
@@ -218,6 +215,19 @@ def main():
         for key, _ in opts["set"]:
             config.settings[key] = asked[key]
     printer = firmware.build(config, files_root=opts["files"])
+    listeners = []
+    if opts["tcp"]:
+        host, port = opts["tcp"].rsplit(":", 1)
+        try:
+            listeners.append(TcpListener(host, int(port), printer.settings))
+        except ValueError as err:
+            print("mixstep: %s" % err)
+            sys.exit(2)
+        printer.max_channels = len(consoles) + printer.settings["tcp_max_clients"]
+    if opts["console_log"]:
+        log = ConsoleLog(opts["console_log"])
+        consoles = [LoggedConsole(c, log) for c in consoles]
+        listeners = [LoggedListener(l, log) for l in listeners]
     heap_data_at_rest = _heap_bytes() - data_from
     before = _heap_bytes()
     simthermal.install(simmachine, board, printer)

@@ -207,8 +207,9 @@ def build(config=None, pin_map=None, files_root=_FILES_ROOT):
     return printer
 
 
-def board_consoles(settings):
-    """USB serial, a UART if configured, and TCP if the board is on a network."""
+def board_consoles(settings, warnings):
+    """USB serial, a UART if configured, and TCP if the board is on a network and a
+    password is set (what stops it goes to warnings)."""
     consoles = [StreamConsole(sys.stdin.buffer, sys.stdout.buffer)]
     if settings.get("console_uart", -1) >= 0:
         uart = machine.UART(settings["console_uart"], settings["console_baud"])
@@ -218,8 +219,12 @@ def board_consoles(settings):
         import network
         wlan = network.WLAN(network.STA_IF)
         if wlan.isconnected() and settings.get("tcp_port"):
-            from mixfw.netconsole import TcpListener
-            listeners.append(TcpListener("0.0.0.0", settings["tcp_port"]))
+            if settings.get("net_password"):
+                from mixfw.netconsole import TcpListener
+                listeners.append(TcpListener("0.0.0.0", settings["tcp_port"], settings))
+            else:
+                warnings.append("//network console off: no password set (M926 "
+                                "Inet_password V<8 to 64 characters>, M500, restart)")
     except ImportError:
         pass  # no network on this board
     return consoles, listeners
@@ -242,10 +247,11 @@ def start(consoles=None, listeners=(), printer=None, warnings=None, repl_flag=_R
     printer.repl_flag = repl_flag
     printer.add_background(safety.StepWatch(printer, printer.mem, settings["step_stall_ms"]))
     safety.start_watchdog(machine, printer, settings["watchdog_ms"])
+    warnings = warnings or []
     if consoles is None:
-        consoles, listeners = board_consoles(printer.settings)
+        consoles, listeners = board_consoles(printer.settings, warnings)
         printer.max_channels = len(consoles) + printer.settings.get("tcp_max_clients", 4)
-    printer.warnings = warnings or []
+    printer.warnings = warnings
     for console in consoles:
         printer.add_channel(console)
     printer.listeners.extend(listeners)

@@ -11,7 +11,8 @@
 #
 # Pure logic: no `machine`; the file system is passed in (see FileStorage).
 import os
-from mixfw.options import SCHEMA, FIRMWARE_DEFAULTS, FLOAT, INT, BOOL, MIX, PAIR, EACH, POW2
+from mixfw.options import (SCHEMA, FIRMWARE_DEFAULTS, FLOAT, INT, BOOL, MIX, PAIR, EACH, POW2,
+                           SECRET)
 from mixfw.mixer import normalize, default_tool_mixes
 from mixfw.pwm import CLOCK_HZ, HEATER_OPTIONS, range_hz, clock_text
 
@@ -101,6 +102,8 @@ class Option:
 
     def parse(self, text):
         """The typed value of text as M926 or the file gives it."""
+        if self.kind == SECRET:
+            return self.check(text)
         if self.kind == PAIR:
             words = text.split(":")
             try:
@@ -124,6 +127,13 @@ class Option:
         return self.check(v)
 
     def check(self, v):
+        if self.kind == SECRET:
+            # What a G-code line can carry as one word and a config line keeps.
+            if not isinstance(v, str) or (v and not self.lo <= len(v) <= self.hi) or \
+                    [c for c in v if not 32 < ord(c) < 127 or c == ";"]:
+                raise ConfigError("%s: must be empty or %d to %d printable characters "
+                                  "without spaces or ';'" % (self.name, self.lo, self.hi))
+            return v
         if self.kind == PAIR:
             tools = self.width
             if len(v) != 4 or not (0 <= v[0] < tools and 0 <= v[1] < tools):
@@ -156,6 +166,8 @@ class Option:
         return v
 
     def format(self, v):
+        if self.kind == SECRET:
+            return v
         if self.kind == PAIR:
             return "%d:%d:%r:%r" % (v[0], v[1], float(v[2]), float(v[3]))
         if self.kind == MIX:
@@ -320,6 +332,9 @@ class Config:
         comment."""
         o = self.option(name)
         text = texts.get(o.key, "")
+        if o.kind == SECRET:  # a comment, so M503's lines sent back leave it as it is
+            return "; M926 I%s V... ; %s (%s)" % (
+                name, text, "set" if self._read_setting(o) else "not set")
         if o.index >= 0:
             text = o.axis.upper() + ": " + text
         limits = "" if o.kind in (MIX, PAIR) else ", %s..%s" % (o.format(o.lo), o.format(o.hi))

@@ -80,4 +80,8 @@ SETTINGS = {
     "console_baud": 115200,
     "tcp_port": 8888,
     "tcp_max_clients": 4,
+    # The network console is off until a password is set (M926 Inet_password V...).
+    # A connection that sends no line for net_idle_timeout_s is closed (0: never).
+    "net_password": "",
+    "net_idle_timeout_s": 600,
 }

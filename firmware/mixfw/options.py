@@ -15,6 +15,9 @@ MIX = "mix"  # drive weights w0:w1:..., normalised to integers (mixer.normalize)
 PAIR = "pair"  # a tool pair's transition from:to:l1_mm:l2_mm; 0:0:0:0 is an empty slot
 EACH = "each"  # axes of a row whose setting is a tuple of any length: _0, _1, ...
 POW2 = "pow2"  # a whole number that is a power of two (microsteps)
+# Text kept by M500 and never shown (the network password): lo..hi is its length, or
+# empty for none. M503 and M925 say whether it is set, never what it is.
+SECRET = "secret"
 LIVE = False  # takes effect with M930
 RESTART = True  # takes effect after a restart
 
@@ -180,4 +183,6 @@ SCHEMA = (
     ("console_baud",               "",     "int",   300,     4000000,     True),
     ("tcp_port",                   "",     "int",   1,       65535,       True),
     ("tcp_max_clients",            "",     "int",   1,       8,           True),
+    ("net_password",               "",     "secret", 8,      64,          False),
+    ("net_idle_timeout_s",         "",     "int",   0,       86400,       False),
 )

@@ -101,6 +101,10 @@ HELP = {
     "console_baud": "serial console baud rate",
     "tcp_port": "TCP G-code console port",
     "tcp_max_clients": "TCP G-code connections at once",
+    "net_password":
+        "password a network connection sends as its first line; empty: network "
+        "console off. 8 to 64 characters, no spaces or ';'. Never shown",
+    "net_idle_timeout_s": "a network connection silent this long is closed; 0: never",
     "probe_active_high": "the z_probe input reads high when triggered",
     "probe_offset_mm":
         "the probe from the nozzle (M851); Z: the nozzle's height when the probe "

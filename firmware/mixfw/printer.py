@@ -362,10 +362,11 @@ class Printer:
 
     def accept(self):
         for lst in self.listeners:
-            if len(self.channels) < self.max_channels:
-                console = lst.accept()
-                if console is not None:
-                    self.add_channel(console)
+            # Called when full too: a connection beyond max_channels is turned away
+            # with a reason, not left waiting in the backlog.
+            console = lst.accept(self.max_channels - len(self.channels))
+            if console is not None:
+                self.add_channel(console)
 
     def idle(self):
         """Let time pass inside a command: the step loop runs, background tasks run,
