@@ -30,7 +30,7 @@ def _sim(args):
 def _serve(args):
     from mixstep import serve
     settings = _settings(args)
-    return serve.main(tcp=args.tcp, pty=args.pty, realtime=args.realtime, settings=settings,
+    return serve.main(tcp=args.tcp, http=args.http, pty=args.pty, realtime=args.realtime, settings=settings,
                       config=args.config, files=args.files, console_log=args.console_log)
 
 
@@ -66,6 +66,7 @@ def parser():
     p.set_defaults(run=_sim)
     p = sub.add_parser("serve", help="run the simulated printer for host software (TCP or PTY)")
     p.add_argument("--tcp", metavar="HOST:PORT", help="serve the TCP G-code console here")
+    p.add_argument("--http", metavar="HOST:PORT", help="serve the web page here")
     p.add_argument("--pty", action="store_true", help="serve a pseudo-terminal; prints its path")
     p.add_argument("--realtime", type=float, default=1.0,
                    help="simulated seconds per wall second (0: as fast as possible)")

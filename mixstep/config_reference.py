@@ -349,6 +349,12 @@ DESCRIPTIONS = {
         "Port of the TCP G-code console, on boards connected to a network. The "
         "simulation takes `mixstep serve --tcp HOST:PORT` instead."),
     "tcp_max_clients": ("consoles", "connections", "TCP G-code connections at once."),
+    "drive_rgb": (
+        "mixing", "0xRRGGBB",
+        "The colour of the filament each drive feeds, as a whole number (0xFF0000 = "
+        "16711680 is red). The web page shows the colour each mix prints from them: "
+        "each channel the weights' mean of the filaments' (`mixer.mix_rgb`, as "
+        "`mixstep preview` draws it). Defaults: `mixstep preview`'s colours."),
     "net_password": (
         "consoles", "text",
         "Password a network connection must send as its first line before any "

@@ -32,9 +32,9 @@ import numpy as np
 
 from mixstep import gcodeio
 from mixstep.outfile import temporary_path
-from mixfw.mixer import MAX_DRIVES
+from mixfw.mixer import DRIVE_RGB, MAX_DRIVES
 
-DEFAULT_COLORS = "#e03030,#30a0e0,#f0d020,#40c040,#a050d0,#f0f0f0"
+DEFAULT_COLORS = ",".join("#%06x" % c for c in DRIVE_RGB)
 EXTRUDATE_WIDTH_MM = 0.45  # drawn line width; slicers' usual width for a 0.4 mm nozzle
 BLEND_TOLERANCE = 0.05  # 5 % of a filament: below what a viewer can tell apart
 _ARC_CHORD_MM = 0.5  # arcs are drawn as chords at most this long

@@ -1,7 +1,12 @@
 """`mixstep serve`: the simulated printer as a network or serial printer, for hosts
 such as Pronterface/printcore and OctoPrint.
 
---tcp HOST:PORT     the firmware's own TCP console (several connections at once);
+--tcp HOST:PORT     the firmware's own TCP console (several connections at once); on
+                    an address beyond this machine only with a password
+                    (--set net_password=...), which a loopback address goes without
+                    unless one is set;
+--http HOST:PORT    the firmware's web page (the same password rule), its files
+                    gzipped from firmware/web/ into the flash's web/ folder;
 --pty               a pseudo-terminal, bridged to the firmware's serial console; the
                     device path is printed, and hosts open it like a USB printer.
 --config FILE       the simulated flash's configuration file (M500/M501);
@@ -25,7 +30,7 @@ import time
 import tty
 from pathlib import Path
 
-from mixstep import paths
+from mixstep import paths, webfiles
 from mixstep.simprinter import SIM_MAIN, set_args
 
 # The simulated printer's flash, relative to where mixstep runs (as `make` does).
@@ -43,11 +48,13 @@ def default_flash(config=None, files=None):
 
 
 def _command(tcp, realtime, stdio, edges=None, settings=None, config=None, files=None,
-             console_log=None):
+             console_log=None, http=None, web=None):
     cmd = [paths.micropython(), "-X", "heapsize=2M", str(SIM_MAIN),
            "--realtime", str(realtime)] + set_args(settings)
     if tcp:
         cmd += ["--tcp", tcp]
+    if http:
+        cmd += ["--http", http, "--web", str(web)]
     if not stdio:
         cmd.append("--no-stdio")
     if edges:
@@ -104,12 +111,22 @@ def _check_free(address):
 
 
 def serve_tcp(address, realtime=1.0, announce=print, settings=None, config=None, files=None,
-              console_log=None):
-    _check_free(address)
+              console_log=None, http=None):
+    """address: the TCP console's HOST:PORT (None: none); http: the web page's."""
+    web = None
+    for where in (address, http):
+        if where:
+            _check_free(where)
+    if http:
+        web = Path(config or default_flash()[0]).parent / "web"
+        webfiles.build(web)
     proc = _start(_command(address, realtime, stdio=False, settings=settings, config=config,
-                           files=files, console_log=console_log),
+                           files=files, console_log=console_log, http=http, web=web),
                   stdin=subprocess.DEVNULL)
-    announce("mixstep: simulated printer on tcp %s" % address)
+    if address:
+        announce("mixstep: simulated printer on tcp %s" % address)
+    if http:
+        announce("mixstep: its web page on http://%s/" % http)
     return proc
 
 
@@ -188,20 +205,21 @@ def _on_sigterm(signum, frame):
 
 
 def main(tcp=None, pty=False, realtime=1.0, settings=None, config=None, files=None,
-         console_log=None):
+         console_log=None, http=None):
     """settings: board settings to override, {key: value text}. Returns the exit
     status: 0 when stopped by Ctrl-C or SIGTERM, else the firmware's."""
-    if bool(tcp) == bool(pty):
-        raise SystemExit("mixstep serve: give either --tcp HOST:PORT or --pty")
+    if bool(tcp or http) == bool(pty):
+        raise SystemExit("mixstep serve: give --tcp HOST:PORT and/or --http HOST:PORT, "
+                         "or --pty")
     config, files = default_flash(config, files)
     flash = dict(config=config, files=files, console_log=console_log)
     in_main_thread = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _on_sigterm) if in_main_thread else None
     proc = bridge = None
     try:
-        if tcp:
+        if tcp or http:
             proc = serve_tcp(tcp, realtime, announce=lambda s: print(s, flush=True),
-                             settings=settings, **flash)
+                             settings=settings, http=http, **flash)
             print(_sources(config, files, settings), flush=True)
             return proc.wait()
         bridge = PtyBridge(realtime, settings, **flash)

@@ -1,12 +1,14 @@
 # Runs the firmware on the unix port against the simulated chip. Usage:
 #   micropython sim_main.py [--edges FILE] [--heap-lock] [--quantum-us N]
 #                           [--jitter-us N [--jitter-seed N]]
-#                           [--tcp HOST:PORT] [--no-stdio] [--realtime FACTOR]
+#                           [--tcp HOST:PORT] [--http HOST:PORT --web DIR]
+#                           [--no-stdio] [--realtime FACTOR]
 #                           [--config FILE] [--files DIR] [--set KEY=VALUE ...]
 #                           [--console-log FILE] [--clock-hz N]
 # By default it takes G-code on stdin and answers on stdout like a serial printer, in
 # lockstep (virtual time passes only when the firmware waits). With --tcp it also
-# serves TCP connections; --realtime paces virtual time against the wall clock (0:
+# serves TCP connections, and with --http the web page, its files (gzipped) from
+# --web DIR, as a board's from its flash; --realtime paces virtual time against the wall clock (0:
 # as fast as possible). When every console has closed, the queue drains and one
 # `//sim {json}` line reports the run. --config is the simulated flash file of the
 # configuration (M500/M501); without it the printer has no configuration storage.
@@ -39,12 +41,14 @@ sys.modules["time"] = simtime
 
 def _args(argv):
     opts = {"edges": None, "heap_lock": False, "quantum_us": 1000, "tcp": None,
+            "http": None, "web": None,
             "stdio": True, "realtime": None, "config": None, "files": None, "set": [],
             "jitter_us": 0, "jitter_seed": 1, "console_log": None, "clock_hz": None}
     i = 1
     while i < len(argv):
         a = argv[i]
-        if a in ("--edges", "--quantum-us", "--tcp", "--realtime", "--config", "--files",
+        if a in ("--edges", "--quantum-us", "--tcp", "--http", "--web", "--realtime",
+                 "--config", "--files",
                  "--jitter-us", "--jitter-seed", "--console-log", "--clock-hz"):
             i += 1
             opts[a[2:].replace("-", "_")] = argv[i]
@@ -172,7 +176,7 @@ def main():
     from mixfw import assemble as firmware
     from mixfw import safety
     from mixfw.console import StreamConsole
-    if opts["tcp"]:
+    if opts["tcp"] or opts["http"]:
         from mixfw import netconsole
         from mixfw.netconsole import TcpListener
         # The network is this machine's, and so are a host's waits: its timeouts
@@ -193,7 +197,7 @@ def main():
     # holds the interrupts at each write as the chip does (M7103 F): the simulation's.
     flash = simfaults.Flash()
     data_from = _heap_bytes()
-    interactive = opts["tcp"] is not None or opts["realtime"] is not None
+    interactive = opts["tcp"] or opts["http"] or opts["realtime"] is not None
     consoles = []
     if opts["stdio"]:
         consoles.append(StreamConsole(sys.stdin.buffer, sys.stdout.buffer,
@@ -216,13 +220,23 @@ def main():
             config.settings[key] = asked[key]
     printer = firmware.build(config, files_root=opts["files"])
     listeners = []
-    if opts["tcp"]:
-        host, port = opts["tcp"].rsplit(":", 1)
-        try:
+    try:
+        gate = None
+        if opts["tcp"]:
+            host, port = opts["tcp"].rsplit(":", 1)
             listeners.append(TcpListener(host, int(port), printer.settings))
-        except ValueError as err:
-            print("mixstep: %s" % err)
-            sys.exit(2)
+            gate = listeners[-1].gate
+        if opts["http"]:
+            from mixfw import webserver
+            from mixfw.webserver import HttpListener
+            webserver.time = simmachine.walltime  # as the network console's, above
+            host, port = opts["http"].rsplit(":", 1)
+            listeners.append(HttpListener(host, int(port), printer, opts["web"] or "web",
+                                          gate))
+    except ValueError as err:
+        print("mixstep: %s" % err)
+        sys.exit(2)
+    if listeners:
         printer.max_channels = len(consoles) + printer.settings["tcp_max_clients"]
     if opts["console_log"]:
         log = ConsoleLog(opts["console_log"])

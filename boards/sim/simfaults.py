@@ -13,6 +13,8 @@
 #                they hold. F0: none, the default
 #   M7103 W1     one such flash write now, without waiting for the moves, as the
 #                firmware must never do: the stall it causes
+#   M7103 C<bytes>  the flash takes only this many bytes more (C-1: no limit, the
+#                default); a write beyond raises OSError ENOSPC, as a full one does
 #   M7104        stopping the step path raises from now on, as one that allocates does
 #                on an exhausted heap: the step timer's deinit, a DMA feed's stop
 #                (step_backend pio_dma), and a halt hook that runs first
@@ -34,6 +36,7 @@ class Flash(FileStorage):
     interrupts."""
 
     hold_us = 0
+    room_bytes = -1  # what the flash takes before it is full (-1: no limit)
 
     def hold(self):
         if self.hold_us:
@@ -41,7 +44,7 @@ class Flash(FileStorage):
 
     def open(self, path, mode):
         f = FileStorage.open(self, path, mode)
-        return f if "r" in mode else _Written(f, self.hold)
+        return f if "r" in mode else _Written(f, self.hold, self)
 
     def rename(self, old, new):
         FileStorage.rename(self, old, new)
@@ -55,11 +58,17 @@ class Flash(FileStorage):
 class _Written:
     """A file open for writing on Flash: each write and the close program flash."""
 
-    def __init__(self, f, hold):
+    def __init__(self, f, hold, flash):
         self.f = f
         self.hold = hold
+        self.flash = flash
 
     def write(self, data):
+        room = self.flash.room_bytes
+        if room >= 0:
+            if len(data) > room:
+                raise OSError(28)  # ENOSPC
+            self.flash.room_bytes = room - len(data)
         n = self.f.write(data)
         self.hold()
         return n
@@ -86,13 +95,17 @@ class Faults:
         while simmachine.now_us < end_us:
             simmachine.idle()
 
-    # M7103 [S<us> P<n>] [F<us>] [W1]: hold back every n-th DMA IRQ by S us (S0:
-    # none); every flash write holds the interrupts F us; W1: one flash write now.
-    # Simulation only. Example: M7103 S3000 P5, M7103 F400000
+    # M7103 [S<us> P<n>] [F<us>] [W1] [C<bytes>]: hold back every n-th DMA IRQ by S us
+    # (S0: none); every flash write holds the interrupts F us; W1: one flash write
+    # now; C: the bytes the flash still takes (-1: any). Simulation only. Example:
+    # M7103 S3000 P5, M7103 F400000, M7103 C10000
     def m7103(self, line):
         if line.has("F"):
             self.flash.hold_us = line.int("F", lo=0, hi=1000000)
-        if line.has("S") or line.has("P") or not (line.has("F") or line.has("W")):
+        if line.has("C"):
+            self.flash.room_bytes = line.int("C", lo=-1, hi=1 << 30)
+        if line.has("S") or line.has("P") or not (line.has("F") or line.has("W")
+                                                  or line.has("C")):
             import rp2
             rp2.set_irq_delay(line.int("S", 0, lo=0, hi=1000000),
                               line.int("P", 1, lo=1, hi=1000))

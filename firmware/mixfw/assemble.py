@@ -198,6 +198,7 @@ def build(config=None, pin_map=None, files_root=_FILES_ROOT):
     printer.pins = pins
     printer.motion = motion
     printer.thermal = thermal
+    printer.mixing = mixing
     printer.reports = reports
     printer.irq = irq
     printer.feed = feed

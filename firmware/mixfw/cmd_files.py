@@ -62,6 +62,15 @@ class FileCommands:
         self.files.end_upload()
         self.printer.reply("Done saving file.")
 
+    # M524: stop printing the file from flash, as Marlin's; the moves already queued
+    # run, the heaters stay as they are. Example: M524
+    def m524(self, line):
+        if self.files.selected is None:
+            raise GcodeError("no file is printing")
+        name = self.files.selected.name
+        self.files.cancel()
+        self.printer.broadcast("echo:print of %s cancelled" % name)
+
     # M30 <name>: delete a file, after the queued moves have run; the file printing
     # from flash is refused (M25 pauses it). Example: M30 part.gcode
     def m30(self, line):
@@ -80,6 +89,7 @@ def register(printer, files):
         ("M", 28, c.m28),  # write lines to a file until M29
         ("M", 29, c.m29),  # end of upload
         ("M", 30, c.m30),  # delete a file
+        ("M", 524, c.m524),  # stop the file print
     ):
         printer.add_command(letter, number, fn)
     printer.add_command("M", 24, c.m24, guarded=True)  # start or resume the file print

@@ -13,7 +13,7 @@
 import os
 from mixfw.options import (SCHEMA, FIRMWARE_DEFAULTS, FLOAT, INT, BOOL, MIX, PAIR, EACH, POW2,
                            SECRET)
-from mixfw.mixer import normalize, default_tool_mixes
+from mixfw.mixer import normalize, default_tool_mixes, DRIVE_RGB
 from mixfw.pwm import CLOCK_HZ, HEATER_OPTIONS, range_hz, clock_text
 
 _HEADER = const("# mixstep configuration, version 1\n")
@@ -231,6 +231,8 @@ class Config:
         if "drives" in defaults and "tool_mixes" not in defaults:
             defaults["tool_mixes"] = default_tool_mixes(
                 defaults["drives"], defaults.get("virtual_tools", 16))
+        if "drives" in defaults and "drive_rgb" not in defaults:
+            defaults["drive_rgb"] = (DRIVE_RGB * 2)[:defaults["drives"]]
         if "tool_mixes" in defaults and "tool_advance_k" not in defaults:
             defaults["tool_advance_k"] = (0.0,) * len(defaults["tool_mixes"])
         return defaults

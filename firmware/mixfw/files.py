@@ -146,12 +146,20 @@ class Files:
         # A refused upload takes the lines that follow all the same, up to M29, which
         # then says nothing was saved: a host that sends the file anyway must never
         # have it run as G-code.
+        self.printer.sink = self._write
+        try:
+            self.open_upload(name)
+        except FileError as e:
+            raise FileError("%s; the lines up to M29 are not run" % e)
+
+    def open_upload(self, name):
+        """An upload of name begins (M28's, or the web page's bytes through
+        write_bytes); end_upload puts it in place, abort_upload drops it."""
         self.chunk = None
         self.chunk_n = 0
         self.part_written = False
         self.upload_failed = None
         self.upload_name = name
-        self.printer.sink = self._write
         try:
             job = self.printing()
             if job is not None:
@@ -161,7 +169,31 @@ class Files:
             self.chunk = bytearray(_UPLOAD_CHUNK_BYTES)
         except (FileError, MemoryError) as e:
             self.upload_failed = str(e) or "out of memory"
-            raise FileError("%s; the lines up to M29 are not run" % self.upload_failed)
+            raise FileError(self.upload_failed)
+
+    def write_bytes(self, data):
+        """Bytes of the upload as they come (a web page's file): into the chunk, which
+        goes to flash each time it is full. Raises FileError if flash refuses."""
+        at = 0
+        while at < len(data):
+            if self.chunk_n == len(self.chunk):
+                self._flush()
+            n = min(len(data) - at, len(self.chunk) - self.chunk_n)
+            self.chunk[self.chunk_n:self.chunk_n + n] = data[at:at + n]
+            self.chunk_n += n
+            at += n
+
+    def abort_upload(self):
+        """Drop the upload and what of it reached flash: a file of the same name
+        stays as it was."""
+        name = self.upload_name
+        self.printer.sink = None
+        self.upload_name = self.chunk = None
+        if name is not None and self.part_written:
+            try:
+                self.storage.remove(self.path(name) + ".part")
+            except OSError:
+                pass
 
     def _write(self, data):
         """One received line into the chunk, the chunk to flash when it is full. After
@@ -185,8 +217,10 @@ class Files:
                 f.close()
         except OSError as e:
             self.upload_failed = str(e)
+            if e.args and e.args[0] == 28:  # ENOSPC
+                self.upload_failed = "flash full"
             raise FileError("could not write %s: %s; M29 ends the upload"
-                            % (self.upload_name, e))
+                            % (self.upload_name, self.upload_failed))
         except Exception as e:  # a halt or M410 while waiting for the moves
             self.upload_failed = str(e)
             raise
@@ -204,12 +238,12 @@ class Files:
                 self._flush()
                 # The upload replaces a file of the same name only once it is complete.
                 self.storage.rename(path + ".part", path)
-        except OSError as e:
-            raise FileError("%s not saved: %s" % (name, e))
-        finally:
-            self.upload_name = self.chunk = None
+        except (OSError, FileError) as e:
+            self.upload_failed = self.upload_failed or str(e)
         if self.upload_failed is not None:
+            self.abort_upload()  # what reached flash goes: the space is the old files'
             raise FileError("%s not saved: %s" % (name, self.upload_failed))
+        self.upload_name = self.chunk = None
         return name
 
     def delete(self, name):

@@ -165,7 +165,7 @@ class _Login:
         self.n = 0
 
 
-def _turn_away(sock, why):
+def turn_away(sock, text):
     try:
         # What it sent and was not read, read first: a socket closed with unread
         # bytes resets the connection, and the client would not see why.
@@ -174,7 +174,7 @@ def _turn_away(sock, why):
     except OSError:
         pass
     try:
-        sock.write(b"Error:" + why.encode() + b"\n")
+        sock.write(text.encode())
     except OSError:
         pass
     try:
@@ -212,11 +212,11 @@ class TcpListener:
             conn = None
         if conn is not None:
             if room - len(self.logins) <= 0:
-                _turn_away(conn, "too many connections (tcp_max_clients)")
+                turn_away(conn, "Error:too many connections (tcp_max_clients)\n")
             elif self.gate.open():
                 return SocketConsole(conn, self.settings)  # Printer.add_channel says `start`
             elif len(self.logins) >= _LOGINS_AT_ONCE:
-                _turn_away(conn, "too many connections logging in; try again")
+                turn_away(conn, "Error:too many connections logging in; try again\n")
             else:
                 conn.setblocking(False)
                 try:
@@ -251,16 +251,16 @@ class TcpListener:
         end = login.buf.find(b"\n", 0, login.n)
         if end < 0:
             if login.n >= _PASSWORD_BYTES:
-                _turn_away(sock, "password line too long")
+                turn_away(sock, "Error:password line too long\n")
                 return None
             if time.ticks_diff(now, login.since_ms) > _LOGIN_MS:
-                _turn_away(sock, "no password within %d s" % (_LOGIN_MS // 1000))
+                turn_away(sock, "Error:no password within %d s\n" % (_LOGIN_MS // 1000))
                 return None
             return False
         given = bytes(login.buf[:end]).strip()
         why = self.gate.refusal(given, now)
         if why is not None:
-            _turn_away(sock, why)
+            turn_away(sock, "Error:%s\n" % why)
             return None
         console = SocketConsole(sock, self.settings)
         console.early = bytes(login.buf[end + 1:login.n])

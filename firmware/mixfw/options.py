@@ -176,6 +176,7 @@ SCHEMA = (
     ("filament_used_mm",           "each", "float", -1000000000,1000000000,  False),
     ("tool_mixes",                 "each", "mix",   0,       0,           False),
     ("tool_advance_k",             "each", "float", 0,       10,          False),
+    ("drive_rgb",                  "each", "int",   0,       0xFFFFFF,    False),
     ("trace_records",              "",     "int",   0,       100000,      True),
     ("watchdog_ms",                "",     "int",   1000,    8388,        True),
     ("step_stall_ms",              "",     "int",   10,      10000,       True),

@@ -101,6 +101,9 @@ HELP = {
     "console_baud": "serial console baud rate",
     "tcp_port": "TCP G-code console port",
     "tcp_max_clients": "TCP G-code connections at once",
+    "drive_rgb":
+        "the colour of the filament this drive feeds, 0xRRGGBB as a whole number (the "
+        "web page shows each mix's colour from them)",
     "net_password":
         "password a network connection sends as its first line; empty: network "
         "console off. 8 to 64 characters, no spaces or ';'. Never shown",
