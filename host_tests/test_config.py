@@ -117,7 +117,7 @@ def test_options_are_the_boards_settings_one_per_axis(mp, board):
     expected += ["mesh_%s_%s" % (k, a) for k in ("points", "min_mm", "max_mm") for a in "xy"]
     expected += ["mesh_z_nm_%d" % k for k in range(25)]
     expected += ["%s_%d" % (k, d) for d in range(board["SETTINGS"]["drives"])
-                 for k in ("drive_steps_per_mm", "filament_used_mm")]
+                 for k in ("drive_steps_per_mm", "filament_used_mm", "drive_rgb")]
     assert sorted(names) == sorted(expected)
     assert len(names) == len(set(names))
     assert got["soft_limits"] is True  # the firmware's default; the board names none
