@@ -55,11 +55,12 @@ sim: setup
 	@mkdir -p $(dir $(TRACE)) $(dir $(REPORT))
 	$(VENV)/bin/mixstep sim $(GCODE) --trace $(TRACE) --report $(REPORT)
 
-# make serve TCP=127.0.0.1:8888, or make serve PTY=1 (prints the device path);
-# REALTIME=0 runs as fast as it can, CONFIG=FILE and FILES=DIR move the simulated
-# flash (default out/printer/).
+# make serve TCP=127.0.0.1:8888 and/or HTTP=127.0.0.1:8080 (the web page), or make
+# serve PTY=1 (prints the device path); REALTIME=0 runs as fast as it can,
+# CONFIG=FILE and FILES=DIR move the simulated flash (default out/printer/).
 serve: setup
-	$(VENV)/bin/mixstep serve $(if $(TCP),--tcp $(TCP)) $(if $(PTY),--pty) \
+	$(VENV)/bin/mixstep serve $(if $(TCP),--tcp $(TCP)) $(if $(HTTP),--http $(HTTP)) \
+		$(if $(PTY),--pty) \
 		$(if $(REALTIME),--realtime $(REALTIME)) $(if $(CONFIG),--config $(CONFIG)) \
 		$(if $(FILES),--files $(FILES))
 

@@ -105,7 +105,7 @@ def test_options_are_the_boards_settings_one_per_axis(mp, board):
         "min_extrude_c", "fan_pwm_hz", "thermal_period_ms", "console_uart", "console_baud", "tcp_port",
         "tcp_max_clients"]
     expected += [n for n in optional if n in board["SETTINGS"]]
-    expected += ["net_password", "net_idle_timeout_s"]
+    expected += ["net_password", "net_idle_timeout_s", "http_port"]
     expected += ["%s_%d" % (k, t) for t in range(board["SETTINGS"]["virtual_tools"])
                  for k in ("tool_mixes", "tool_advance_k")]
     expected += ["transition_pairs_%d" % k for k in range(8)]

@@ -362,6 +362,11 @@ DESCRIPTIONS = {
         "`mixstep serve --tcp` on a loopback address. 8 to 64 printable characters "
         "without spaces or `;`. Kept by M500, compared in constant time, never shown "
         "by M503, M925 or any report."),
+    "http_port": (
+        "consoles", "port",
+        "Port of the web page, on boards connected to a network, behind "
+        "`net_password`; 0: off. The simulation takes `mixstep serve --http HOST:PORT` "
+        "instead."),
     "net_idle_timeout_s": (
         "consoles", "s",
         "A network connection that sends no complete line for this long is closed, "

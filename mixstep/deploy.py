@@ -15,7 +15,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from mixstep import boards, paths
+from mixstep import boards, paths, webfiles
 from mixfw import inram
 
 # mpy-cross -march per chip: viper and native code are machine code for this core.
@@ -32,6 +32,8 @@ PLATFORM = {"rp2040": "rp2", "rp2350": "rp2", "esp32": "esp32"}
 PORT_BOARD = {"rp2040": ("rp2", "RPI_PICO"), "rp2350": ("rp2", "RPI_PICO2"),
               "esp32": ("esp32", "ESP32_GENERIC")}
 SOURCE_FILES = ("boot.py", "main.py", "board.py")
+# Chips whose boards have a network: the web page's files go onto their flash (web/).
+NETWORK_CHIPS = ("esp32",)
 
 # Run on the board: what MicroPython it is, as one JSON line.
 INFO_CODE = ("import sys, json; i = sys.implementation; print(json.dumps({"
@@ -114,6 +116,8 @@ def build(board, out_dir=None):
     for name in ("boot.py", "main.py"):
         shutil.copy(paths.FIRMWARE / name, out / name)
     shutil.copy(paths.BOARDS / board / "board.py", out / "board.py")
+    if chip in NETWORK_CHIPS:
+        webfiles.build(out / "web")
     return out
 
 
@@ -306,9 +310,14 @@ def deploy_commands(out, port, board_py="copy"):
     return ([c + ["exec", REMOVE_CODE],
              c + ["cp"] + sources + [":"]]
             + _board_py_commands(out, c, board_py)
-            + [c + ["cp", "-r", out / "mixfw", ":"],
-               c + ["exec", DROP_BACKUP_CODE],
+            + [c + ["cp", "-r", out / "mixfw", ":"]]
+            + _web_commands(out, c)
+            + [c + ["exec", DROP_BACKUP_CODE],
                c + ["reset"]])
+
+
+def _web_commands(out, c):
+    return [c + ["cp", "-r", out / "web", ":"]] if (out / "web").exists() else []
 
 
 def frozen_commands(out, port, board_py="copy"):
@@ -321,8 +330,9 @@ def frozen_commands(out, port, board_py="copy"):
             + _board_py_commands(out, c, board_py)
             + [c + ["mkdir", ":" + ram_dir],
                c + ["cp"] + [out / "mixfw" / (name + ".mpy") for name in inram.STEP_PATH]
-               + [":" + ram_dir + "/"],
-               c + ["exec", DROP_BACKUP_CODE],
+               + [":" + ram_dir + "/"]]
+            + _web_commands(out, c)
+            + [c + ["exec", DROP_BACKUP_CODE],
                c + ["reset"]])
 
 

@@ -42,6 +42,8 @@ RAW_COMMANDS = (cmd_config.RAW_COMMANDS + cmd_files.RAW_COMMANDS + cmd_mixing.RA
 _FILES_ROOT = const("/")
 # Where the configuration lives on the board's flash filesystem.
 _CONFIG_PATH = const("/mixstep.cfg")
+# The web page's files (gzipped), as `mixstep deploy` puts them.
+_WEB_ROOT = const("/web")
 # Left by M997: the next boot skips the firmware once and leaves the REPL to mpremote.
 _REPL_FLAG = const("/mixstep.repl")
 
@@ -208,9 +210,10 @@ def build(config=None, pin_map=None, files_root=_FILES_ROOT):
     return printer
 
 
-def board_consoles(settings, warnings):
-    """USB serial, a UART if configured, and TCP if the board is on a network and a
-    password is set (what stops it goes to warnings)."""
+def board_consoles(printer, warnings):
+    """USB serial, a UART if configured, and the TCP console and the web page if the
+    board is on a network and a password is set (what stops them goes to warnings)."""
+    settings = printer.settings
     consoles = [StreamConsole(sys.stdin.buffer, sys.stdout.buffer)]
     if settings.get("console_uart", -1) >= 0:
         uart = machine.UART(settings["console_uart"], settings["console_baud"])
@@ -219,13 +222,20 @@ def board_consoles(settings, warnings):
     try:
         import network
         wlan = network.WLAN(network.STA_IF)
-        if wlan.isconnected() and settings.get("tcp_port"):
-            if settings.get("net_password"):
-                from mixfw.netconsole import TcpListener
-                listeners.append(TcpListener("0.0.0.0", settings["tcp_port"], settings))
+        if wlan.isconnected():
+            if not settings.get("net_password"):
+                warnings.append("//network console and web page off: no password set "
+                                "(M926 Inet_password V<8 to 64 characters>, M500, restart)")
             else:
-                warnings.append("//network console off: no password set (M926 "
-                                "Inet_password V<8 to 64 characters>, M500, restart)")
+                gate = None
+                if settings.get("tcp_port"):
+                    from mixfw.netconsole import TcpListener
+                    listeners.append(TcpListener("0.0.0.0", settings["tcp_port"], settings))
+                    gate = listeners[-1].gate
+                if settings.get("http_port"):
+                    from mixfw.webserver import HttpListener
+                    listeners.append(HttpListener("0.0.0.0", settings["http_port"], printer,
+                                                  _WEB_ROOT, gate))
     except ImportError:
         pass  # no network on this board
     return consoles, listeners
@@ -250,7 +260,7 @@ def start(consoles=None, listeners=(), printer=None, warnings=None, repl_flag=_R
     safety.start_watchdog(machine, printer, settings["watchdog_ms"])
     warnings = warnings or []
     if consoles is None:
-        consoles, listeners = board_consoles(printer.settings, warnings)
+        consoles, listeners = board_consoles(printer, warnings)
         printer.max_channels = len(consoles) + printer.settings.get("tcp_max_clients", 4)
     printer.warnings = warnings
     for console in consoles:

@@ -84,4 +84,6 @@ SETTINGS = {
     # A connection that sends no line for net_idle_timeout_s is closed (0: never).
     "net_password": "",
     "net_idle_timeout_s": 600,
+    # The web page, on boards with a network, behind the same password (0: off).
+    "http_port": 80,
 }

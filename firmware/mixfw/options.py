@@ -186,4 +186,5 @@ SCHEMA = (
     ("tcp_max_clients",            "",     "int",   1,       8,           True),
     ("net_password",               "",     "secret", 8,      64,          False),
     ("net_idle_timeout_s",         "",     "int",   0,       86400,       False),
+    ("http_port",                  "",     "int",   0,       65535,       True),
 )

@@ -108,6 +108,7 @@ HELP = {
         "password a network connection sends as its first line; empty: network "
         "console off. 8 to 64 characters, no spaces or ';'. Never shown",
     "net_idle_timeout_s": "a network connection silent this long is closed; 0: never",
+    "http_port": "web page port, behind net_password; 0: off",
     "probe_active_high": "the z_probe input reads high when triggered",
     "probe_offset_mm":
         "the probe from the nozzle (M851); Z: the nozzle's height when the probe "
