@@ -93,6 +93,30 @@ class _Request:
         self.new_cookie = None  # a session opened by this request
 
 
+def _unquote(path):
+    """A URL's path as text: %XX escapes decoded (a browser sends a file name's spaces
+    and accents so), the bytes read as UTF-8."""
+    if "%" not in path:
+        return path
+    raw = path.encode()
+    out = bytearray()
+    i = 0
+    while i < len(raw):
+        if raw[i] == 37 and i + 2 < len(raw):  # "%"
+            try:
+                out.append(int(raw[i + 1:i + 3], 16))
+                i += 3
+                continue
+            except ValueError:
+                pass
+        out.append(raw[i])
+        i += 1
+    try:
+        return out.decode()
+    except UnicodeError:
+        raise HttpError(400, "the path is not UTF-8")
+
+
 def _token():
     try:
         raw = os.urandom(16)
@@ -227,7 +251,7 @@ class HttpListener:
         words = lines[0].split(" ")
         if len(words) != 3 or not words[2].startswith("HTTP/"):
             raise HttpError(400, "bad request line")
-        r.method, r.path = words[0], words[1].split("?")[0]
+        r.method, r.path = words[0], _unquote(words[1].split("?")[0])
         for line in lines[1:]:
             name, _, value = line.partition(":")
             name = name.strip().lower()
@@ -440,6 +464,8 @@ class HttpListener:
         state = "idle"
         if job is not None:
             state = "paused" if job.paused or p.job is not job else "printing"
+            if job.pos() >= job.size:
+                state = "done"  # read to its end; M26 rewinds it
         progress = reports.progress
         return {
             "position_mm": {"x": pos[0], "y": pos[1], "z": pos[2], "e": pos[3]},

@@ -1,9 +1,11 @@
 """A print streamed over the firmware's network console while others misbehave on the
-network: the time the print takes in the simulation, against the same print with the
-network quiet. The misbehaving: connections opened and dropped as fast as this
-machine can (a flood), wrong passwords, and a logged-in sender of a byte a second.
+network, and while the web page is open: the time the print takes in the simulation,
+and on this machine's clock, against the same print with the network quiet. The
+misbehaving: connections opened and dropped as fast as this machine can (a flood),
+wrong passwords, and a logged-in sender of a byte a second. The page: a browser's
+polls, the status every second and the console every half second.
 
-    python bench/net_flood.py [FILE] [--realtime FACTOR]
+    python bench/net_load.py [FILE] [--realtime FACTOR]
 
 The firmware runs on the unix port under `mixstep serve --tcp` (the simulated
 printer), paced at FACTOR times real time, and a host streams the file as printcore
@@ -12,6 +14,7 @@ simulated time stamps, from the first line sent to the last `ok`. Prints JSON. T
 emulated Pico has no network (the rp2040js emulator models no Wi-Fi chip), so these
 figures come from the simulation alone."""
 import argparse
+import http.client
 import json
 import re
 import socket
@@ -84,22 +87,53 @@ def _misbehave(port, stop, counts):
     return threads
 
 
-def print_once(path, realtime, flood):
+def _poll_page(port, stop, counts):
+    def get(path, cookie=None, body=None):
+        c = http.client.HTTPConnection("127.0.0.1", port, timeout=30)
+        c.request("POST" if body else "GET", path, body=body,
+                  headers={"Cookie": cookie} if cookie else {})
+        r = c.getresponse()
+        r.read()
+        c.close()
+        return r
+
+    cookie = get("/api/login", body=PASSWORD).getheader("Set-Cookie").split(";")[0]
+
+    def poll():
+        k = 0
+        while not stop.is_set():
+            get("/api/console", cookie)
+            if k % 2 == 0:
+                get("/api/status", cookie)
+            counts["polls"] += 1
+            k += 1
+            time.sleep(0.5)
+
+    t = threading.Thread(target=poll)
+    t.start()
+    return [t]
+
+
+def print_once(path, realtime, load):
     port = free_port()
+    http_port = free_port()
     with tempfile.TemporaryDirectory() as tmp:
         log = Path(tmp) / "console.log"
         proc = serve.serve_tcp("127.0.0.1:%d" % port, realtime=realtime,
                                announce=lambda s: None, console_log=log,
                                config=Path(tmp) / "c.cfg", files=Path(tmp),
+                               http="127.0.0.1:%d" % http_port,
                                settings={"net_password": PASSWORD,
                                          "net_idle_timeout_s": 600})
         stop = threading.Event()
-        counts = {"floods": 0, "slow_bytes": 0}
+        counts = {"floods": 0, "slow_bytes": 0, "polls": 0}
         threads = []
         try:
             s, f = _log_in(port)
-            if flood:
+            if load == "flood":
                 threads = _misbehave(port, stop, counts)
+            elif load == "page":
+                threads = _poll_page(http_port, stop, counts)
             t0 = time.time()
             lines = host_lines(path) + ["M400"]
             for line in lines:
@@ -126,11 +160,13 @@ def main(argv=None):
     ap.add_argument("file", nargs="?", default=str(FILE))
     ap.add_argument("--realtime", type=float, default=4.0)
     args = ap.parse_args(argv)
-    quiet = print_once(Path(args.file), args.realtime, flood=False)
-    flooded = print_once(Path(args.file), args.realtime, flood=True)
-    print(json.dumps({"file": Path(args.file).name, "realtime": args.realtime,
-                      "quiet": quiet, "flooded": flooded,
-                      "print_time_ratio": flooded["print_s"] / quiet["print_s"]}, indent=1))
+    runs = {load: print_once(Path(args.file), args.realtime, load)
+            for load in ("quiet", "flood", "page")}
+    for load in ("flood", "page"):
+        runs[load]["print_time_ratio"] = runs[load]["print_s"] / runs["quiet"]["print_s"]
+        runs[load]["wall_time_ratio"] = runs[load]["wall_s"] / runs["quiet"]["wall_s"]
+    print(json.dumps({"file": Path(args.file).name, "realtime": args.realtime, **runs},
+                     indent=1))
 
 
 if __name__ == "__main__":
