@@ -103,9 +103,8 @@ def test_options_are_the_boards_settings_one_per_axis(mp, board):
               "runaway_s"]
     optional = ["%s_%s" % (h, k) for h in ("hotend", "bed") for k in heater] + [
         "min_extrude_c", "fan_pwm_hz", "thermal_period_ms", "console_uart", "console_baud", "tcp_port",
-        "tcp_max_clients"]
+        "tcp_max_clients", "net_password", "net_idle_timeout_s", "web_page_port"]
     expected += [n for n in optional if n in board["SETTINGS"]]
-    expected += ["net_password", "net_idle_timeout_s", "http_port"]
     expected += ["%s_%d" % (k, t) for t in range(board["SETTINGS"]["virtual_tools"])
                  for k in ("tool_mixes", "tool_advance_k")]
     expected += ["transition_pairs_%d" % k for k in range(8)]
@@ -117,7 +116,8 @@ def test_options_are_the_boards_settings_one_per_axis(mp, board):
     expected += ["mesh_%s_%s" % (k, a) for k in ("points", "min_mm", "max_mm") for a in "xy"]
     expected += ["mesh_z_nm_%d" % k for k in range(25)]
     expected += ["%s_%d" % (k, d) for d in range(board["SETTINGS"]["drives"])
-                 for k in ("drive_steps_per_mm", "filament_used_mm", "drive_rgb")]
+                 for k in ("drive_steps_per_mm", "filament_used_mm")
+                 + (("drive_colour_rgb",) if "drive_colour_rgb" in board["SETTINGS"] else ())]
     assert sorted(names) == sorted(expected)
     assert len(names) == len(set(names))
     assert got["soft_limits"] is True  # the firmware's default; the board names none
@@ -186,7 +186,7 @@ def configurations(draw, options):
 
 def test_random_configurations_round_trip_through_m926_and_m503(mp):
     # Not the password: M503 never shows it (test_netconsole.py).
-    options = [o for o in schema(mp) if o[1] != "secret"]
+    options = [o for o in schema(mp) if o[1] != "secret_text"]
 
     @settings(max_examples=5, deadline=None,
               suppress_health_check=[HealthCheck.function_scoped_fixture])

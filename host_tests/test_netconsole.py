@@ -140,7 +140,7 @@ def test_the_password_is_never_shown(printer):
     assert not [line for line in shown if PASSWORD in line]
     assert "echo:; M926 Inet_password V... ; " in "\n".join(shown)
     assert [line for line in shown if line.startswith("echo:; M926 Inet_password")
-            and line.endswith("(set)")]
+            and line.endswith("(set, not shown)")]
 
 
 def test_an_oversize_password_line_and_a_silent_login_are_turned_away(printer):

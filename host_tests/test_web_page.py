@@ -15,6 +15,7 @@ import urllib.request
 
 import pytest
 
+from mixfw.colours import mix_rgb
 from mixstep import paths, serve
 from net import free_port
 
@@ -195,13 +196,8 @@ def _background(page, selector):
 
 
 def _mix_rgb(weights, drive_rgb):
-    """The colour a mix prints, as the firmware works it out (mixer.mix_rgb)."""
-    total = sum(weights)
-    out = "#"
-    for i in (1, 3, 5):
-        level = sum(w * int(c[i:i + 2], 16) for w, c in zip(weights, drive_rgb))
-        out += "%02x" % ((2 * level + total) // (2 * total))
-    return out
+    """The colour a mix prints, as the firmware works it out, from "#rrggbb" colours."""
+    return "#%06x" % mix_rgb(weights, [int(c[1:], 16) for c in drive_rgb])
 
 
 def _upload(page, path):
@@ -336,7 +332,7 @@ def test_a_mix_edited_on_the_page_is_what_the_next_extrusion_feeds(open_page):
     assert fed == pytest.approx([2.5, 7.5] + [0.0] * (drives - 2), abs=0.02), fed
 
     # A drive's filament colour: the tool's colour follows, on the server and the page.
-    page.tab.fill("#drive-rgb1", "#000000")  # M926 Idrive_rgb_1 V0, M930
+    page.tab.fill("#drive-rgb1", "#000000")  # M926 Idrive_colour_rgb_1 V0, M930
     page.wait("() => fetch('/api/status').then((r) => r.json())"
               ".then((s) => s.drive_rgb[1] === '#000000')")
     s = page.status()

@@ -139,7 +139,7 @@ def test_a_mix_edited_on_the_page_is_the_next_extrusion_s(printer):
     page.log_in()
     status = page.ok("GET", "/api/status")
     assert status["tools"][0] == {"mix": [1, 0, 0, 0, 0, 0], "rgb": status["drive_rgb"][0]}
-    page.gcode("M926 Idrive_rgb_0 V16711680", "M926 Idrive_rgb_1 V255", "M930")
+    page.gcode("M926 Idrive_colour_rgb_0 V16711680", "M926 Idrive_colour_rgb_1 V255", "M930")
     page.gcode("M567 P0 E1:3:0:0:0:0", "M500")
     status = page.ok("GET", "/api/status")
     # A quarter red, three quarters blue, each channel rounded.
@@ -185,8 +185,7 @@ def test_a_full_flash_is_an_error_and_the_old_file_survives(tmp_path, printer):
     page.gcode("M7103 C5000")  # the simulated flash takes 5 kB more
     data = PRINT.read_bytes()
     status, got, _ = page.call("PUT", "/api/files/part.gcode", data)
-    assert (status, got) == (507, {"error": "could not write part.gcode: flash full; M29 "
-                                            "ends the upload"})
+    assert (status, got) == (507, {"error": "could not write part.gcode: the flash is full"})
     assert sorted(p.name for p in (tmp_path / "files").iterdir()) == ["part.gcode"]
     assert (tmp_path / "files" / "part.gcode").read_bytes() == old
 

@@ -349,7 +349,7 @@ DESCRIPTIONS = {
         "Port of the TCP G-code console, on boards connected to a network. The "
         "simulation takes `mixstep serve --tcp HOST:PORT` instead."),
     "tcp_max_clients": ("consoles", "connections", "TCP G-code connections at once."),
-    "drive_rgb": (
+    "drive_colour_rgb": (
         "mixing", "0xRRGGBB",
         "The colour of the filament each drive feeds, as a whole number (0xFF0000 = "
         "16711680 is red). The web page shows the colour each mix prints from them: "
@@ -362,7 +362,7 @@ DESCRIPTIONS = {
         "`mixstep serve --tcp` on a loopback address. 8 to 64 printable characters "
         "without spaces or `;`. Kept by M500, compared in constant time, never shown "
         "by M503, M925 or any report."),
-    "http_port": (
+    "web_page_port": (
         "consoles", "port",
         "Port of the web page, on boards connected to a network, behind "
         "`net_password`; 0: off. The simulation takes `mixstep serve --http HOST:PORT` "

@@ -32,7 +32,8 @@ import numpy as np
 
 from mixstep import gcodeio
 from mixstep.outfile import temporary_path
-from mixfw.mixer import DRIVE_RGB, MAX_DRIVES
+from mixfw.colours import DRIVE_RGB
+from mixfw.mixer import MAX_DRIVES
 
 DEFAULT_COLORS = ",".join("#%06x" % c for c in DRIVE_RGB)
 EXTRUDATE_WIDTH_MM = 0.45  # drawn line width; slicers' usual width for a 0.4 mm nozzle

@@ -60,6 +60,7 @@ TMC_UART = None  # external drivers, set up by their own jumpers
 
 SETTINGS = dict(
     defaults.SETTINGS,
+    **defaults.NETWORK,
     chip="esp32",
     # ESP32 timer callbacks are always soft (scheduled by the interpreter), so the
     # tick is slower than on rp2: 10 kHz. `make board-check` shows the real rate and
@@ -68,6 +69,8 @@ SETTINGS = dict(
     step_backend="timer",
     pin_writer="registers",  # GPIO_OUT_W1TS/W1TC, and OUT1 for GPIO 32/33
     drives=4,
+    # The filaments' colours, which the web page shows mixed (M926 Idrive_colour_rgb_<n>).
+    drive_colour_rgb=defaults.DRIVE_RGB[:4],
     enable_active_low=True,
     steps_per_mm=(80.0, 80.0, 400.0, 415.0),
     console_uart=-1,  # UART0 is the USB console already; no pins left for another

@@ -237,7 +237,7 @@ def main():
         print("mixstep: %s" % err)
         sys.exit(2)
     if listeners:
-        printer.max_channels = len(consoles) + printer.settings["tcp_max_clients"]
+        printer.max_channels = len(consoles) + printer.settings.get("tcp_max_clients", 4)
     if opts["console_log"]:
         log = ConsoleLog(opts["console_log"])
         consoles = [LoggedConsole(c, log) for c in consoles]

@@ -218,27 +218,13 @@ def board_consoles(printer, warnings):
     if settings.get("console_uart", -1) >= 0:
         uart = machine.UART(settings["console_uart"], settings["console_baud"])
         consoles.append(StreamConsole(uart, uart))
-    listeners = []
     try:
-        import network
-        wlan = network.WLAN(network.STA_IF)
-        if wlan.isconnected():
-            if not settings.get("net_password"):
-                warnings.append("//network console and web page off: no password set "
-                                "(M926 Inet_password V<8 to 64 characters>, M500, restart)")
-            else:
-                gate = None
-                if settings.get("tcp_port"):
-                    from mixfw.netconsole import TcpListener
-                    listeners.append(TcpListener("0.0.0.0", settings["tcp_port"], settings))
-                    gate = listeners[-1].gate
-                if settings.get("http_port"):
-                    from mixfw.webserver import HttpListener
-                    listeners.append(HttpListener("0.0.0.0", settings["http_port"], printer,
-                                                  _WEB_ROOT, gate))
+        import network  # noqa: F401 (a board without a network has none)
     except ImportError:
-        pass  # no network on this board
-    return consoles, listeners
+        return consoles, []
+    # Only now: the network's code and names stay off a board without one.
+    from mixfw.netconsole import board_listeners
+    return consoles, board_listeners(printer, _WEB_ROOT, warnings)
 
 
 def start(consoles=None, listeners=(), printer=None, warnings=None, repl_flag=_REPL_FLAG):

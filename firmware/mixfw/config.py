@@ -13,7 +13,7 @@
 import os
 from mixfw.options import (SCHEMA, FIRMWARE_DEFAULTS, FLOAT, INT, BOOL, MIX, PAIR, EACH, POW2,
                            SECRET)
-from mixfw.mixer import normalize, default_tool_mixes, DRIVE_RGB
+from mixfw.mixer import normalize, default_tool_mixes
 from mixfw.pwm import CLOCK_HZ, HEATER_OPTIONS, range_hz, clock_text
 
 _HEADER = const("# mixstep configuration, version 1\n")
@@ -130,7 +130,7 @@ class Option:
         if self.kind == SECRET:
             # What a G-code line can carry as one word and a config line keeps.
             if not isinstance(v, str) or (v and not self.lo <= len(v) <= self.hi) or \
-                    [c for c in v if not 32 < ord(c) < 127 or c == ";"]:
+                    [c for c in v if not 32 < ord(c) < 127 or ord(c) == 59]:  # ";"
                 raise ConfigError("%s: must be empty or %d to %d printable characters "
                                   "without spaces or ';'" % (self.name, self.lo, self.hi))
             return v
@@ -231,8 +231,6 @@ class Config:
         if "drives" in defaults and "tool_mixes" not in defaults:
             defaults["tool_mixes"] = default_tool_mixes(
                 defaults["drives"], defaults.get("virtual_tools", 16))
-        if "drives" in defaults and "drive_rgb" not in defaults:
-            defaults["drive_rgb"] = (DRIVE_RGB * 2)[:defaults["drives"]]
         if "tool_mixes" in defaults and "tool_advance_k" not in defaults:
             defaults["tool_advance_k"] = (0.0,) * len(defaults["tool_mixes"])
         return defaults
@@ -336,7 +334,7 @@ class Config:
         text = texts.get(o.key, "")
         if o.kind == SECRET:  # a comment, so M503's lines sent back leave it as it is
             return "; M926 I%s V... ; %s (%s)" % (
-                name, text, "set" if self._read_setting(o) else "not set")
+                name, text, "set, not shown" if self._read_setting(o) else "none set yet")
         if o.index >= 0:
             text = o.axis.upper() + ": " + text
         limits = "" if o.kind in (MIX, PAIR) else ", %s..%s" % (o.format(o.lo), o.format(o.hi))

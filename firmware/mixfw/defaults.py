@@ -1,3 +1,7 @@
+# The filaments' colours a board with a web page starts from, 0xRRGGBB, as its
+# drive_colour_rgb (`mixstep preview`'s defaults too).
+DRIVE_RGB = (0xE03030, 0x30A0E0, 0xF0D020, 0x40C040, 0xA050D0, 0xF0F0F0)
+
 # Settings every board starts from: a typical printer (16x microstepping, GT2 belts on
 # X/Y, an 8 mm lead screw on Z, a geared extruder) with a 100k-NTC hot end and bed.
 # A board's board.py takes these and overrides what its hardware decides:
@@ -74,16 +78,20 @@ SETTINGS = {
     "mesh_z_nm": (0,) * 25,
     "fan_pwm_hz": 1000,
     "thermal_period_ms": 100,
-    # Consoles: USB serial always; a UART (console_uart: its id, -1 for none) and, on
-    # boards with a network, a TCP console.
+    # Consoles: USB serial always, and a UART (console_uart: its id, -1 for none).
     "console_uart": -1,
     "console_baud": 115200,
+}
+
+# What a board with a network adds (SETTINGS = dict(defaults.SETTINGS,
+# **defaults.NETWORK, ...)): the TCP console and the web page, both off until a
+# password is set (M926 Inet_password V...). A connection that sends no whole line for
+# net_idle_timeout_s is closed (0: never). A board without a network leaves them out,
+# and keeps their RAM.
+NETWORK = {
     "tcp_port": 8888,
     "tcp_max_clients": 4,
-    # The network console is off until a password is set (M926 Inet_password V...).
-    # A connection that sends no line for net_idle_timeout_s is closed (0: never).
     "net_password": "",
     "net_idle_timeout_s": 600,
-    # The web page, on boards with a network, behind the same password (0: off).
-    "http_port": 80,
+    "web_page_port": 80,
 }

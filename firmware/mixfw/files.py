@@ -142,24 +142,20 @@ class Files:
         job = self.printer.job
         return job if job is not None and not job.paused else None
 
-    def begin_upload(self, name):
+    def begin_upload(self, name, sink=True):
+        """An upload of name begins; end_upload puts it in place. sink: the lines
+        the consoles send next are its (M28's; else the web page's bytes come through
+        webserver.py)."""
         # A refused upload takes the lines that follow all the same, up to M29, which
         # then says nothing was saved: a host that sends the file anyway must never
         # have it run as G-code.
-        self.printer.sink = self._write
-        try:
-            self.open_upload(name)
-        except FileError as e:
-            raise FileError("%s; the lines up to M29 are not run" % e)
-
-    def open_upload(self, name):
-        """An upload of name begins (M28's, or the web page's bytes through
-        write_bytes); end_upload puts it in place, abort_upload drops it."""
         self.chunk = None
         self.chunk_n = 0
         self.part_written = False
         self.upload_failed = None
         self.upload_name = name
+        if sink:
+            self.printer.sink = self._write
         try:
             job = self.printing()
             if job is not None:
@@ -169,31 +165,8 @@ class Files:
             self.chunk = bytearray(_UPLOAD_CHUNK_BYTES)
         except (FileError, MemoryError) as e:
             self.upload_failed = str(e) or "out of memory"
-            raise FileError(self.upload_failed)
-
-    def write_bytes(self, data):
-        """Bytes of the upload as they come (a web page's file): into the chunk, which
-        goes to flash each time it is full. Raises FileError if flash refuses."""
-        at = 0
-        while at < len(data):
-            if self.chunk_n == len(self.chunk):
-                self._flush()
-            n = min(len(data) - at, len(self.chunk) - self.chunk_n)
-            self.chunk[self.chunk_n:self.chunk_n + n] = data[at:at + n]
-            self.chunk_n += n
-            at += n
-
-    def abort_upload(self):
-        """Drop the upload and what of it reached flash: a file of the same name
-        stays as it was."""
-        name = self.upload_name
-        self.printer.sink = None
-        self.upload_name = self.chunk = None
-        if name is not None and self.part_written:
-            try:
-                self.storage.remove(self.path(name) + ".part")
-            except OSError:
-                pass
+            raise FileError(self.upload_failed + ("; the lines up to M29 are not run"
+                                                  if sink else ""))
 
     def _write(self, data):
         """One received line into the chunk, the chunk to flash when it is full. After
@@ -218,7 +191,7 @@ class Files:
         except OSError as e:
             self.upload_failed = str(e)
             if e.args and e.args[0] == 28:  # ENOSPC
-                self.upload_failed = "flash full"
+                self.upload_failed = "the flash is full"
             raise FileError("could not write %s: %s; M29 ends the upload"
                             % (self.upload_name, self.upload_failed))
         except Exception as e:  # a halt or M410 while waiting for the moves
@@ -240,10 +213,14 @@ class Files:
                 self.storage.rename(path + ".part", path)
         except (OSError, FileError) as e:
             self.upload_failed = self.upload_failed or str(e)
-        if self.upload_failed is not None:
-            self.abort_upload()  # what reached flash goes: the space is the old files'
-            raise FileError("%s not saved: %s" % (name, self.upload_failed))
         self.upload_name = self.chunk = None
+        if self.upload_failed is not None:
+            if self.part_written:  # what reached flash goes: the space is the old files'
+                try:
+                    self.storage.remove(self.path(name) + ".part")
+                except OSError:
+                    pass
+            raise FileError("%s not saved: %s" % (name, self.upload_failed))
         return name
 
     def delete(self, name):

@@ -117,22 +117,6 @@ def mix_load(mem: ptr32, base: int, src: int, ring: int):
         mem[base + _M_QMIN] = _MIX_BIAS
 
 
-# The filaments' colours a new printer assumes, 0xRRGGBB (drive_rgb sets them):
-# `mixstep preview`'s default too.
-DRIVE_RGB = (0xE03030, 0x30A0E0, 0xF0D020, 0x40C040, 0xA050D0, 0xF0F0F0)
-
-
-def mix_rgb(weights, drive_rgb):
-    """The colour a mix prints, 0xRRGGBB: each channel the weights' mean of the
-    filaments' (a linear mix, as `mixstep preview` draws it), rounded."""
-    total = sum(weights)
-    out = 0
-    for shift in (16, 8, 0):
-        level = sum(w * (c >> shift & 255) for w, c in zip(weights, drive_rgb))
-        out |= ((2 * level + total) // (2 * total) if total else 0) << shift
-    return out
-
-
 def default_tool_mixes(drives, count=16):
     """T<n> is 100 % drive n below the drive count, an equal mix of all drives above."""
     return tuple(tuple(1 if i == t else 0 for i in range(drives)) if t < drives

@@ -101,14 +101,14 @@ HELP = {
     "console_baud": "serial console baud rate",
     "tcp_port": "TCP G-code console port",
     "tcp_max_clients": "TCP G-code connections at once",
-    "drive_rgb":
+    "drive_colour_rgb":
         "the colour of the filament this drive feeds, 0xRRGGBB as a whole number (the "
         "web page shows each mix's colour from them)",
     "net_password":
         "password a network connection sends as its first line; empty: network "
         "console off. 8 to 64 characters, no spaces or ';'. Never shown",
     "net_idle_timeout_s": "a network connection silent this long is closed; 0: never",
-    "http_port": "web page port, behind net_password; 0: off",
+    "web_page_port": "web page port, behind net_password; 0: off",
     "probe_active_high": "the z_probe input reads high when triggered",
     "probe_offset_mm":
         "the probe from the nozzle (M851); Z: the nozzle's height when the probe "

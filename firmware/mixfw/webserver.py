@@ -15,7 +15,7 @@ import os
 import socket
 import time
 
-from mixfw.mixer import mix_rgb
+from mixfw.colours import drive_rgb, mix_rgb
 from mixfw.netconsole import Gate, is_loopback, turn_away, _EAGAIN
 from mixfw.planner import waiting_blocks
 
@@ -115,6 +115,20 @@ def _unquote(path):
         return out.decode()
     except UnicodeError:
         raise HttpError(400, "the path is not UTF-8")
+
+
+def _upload(files, data):
+    """A page's upload as its bytes come: into the upload's chunk (files.py), which
+    goes to flash a sector at a time, as M28's lines do."""
+    chunk = files.chunk
+    at = 0
+    while at < len(data):
+        if files.chunk_n == len(chunk):
+            files._flush()
+        n = min(len(data) - at, len(chunk) - files.chunk_n)
+        chunk[files.chunk_n:files.chunk_n + n] = data[at:at + n]
+        files.chunk_n += n
+        at += n
 
 
 def _token():
@@ -295,7 +309,7 @@ class HttpListener:
             files = self._files()
             name = path[len("/api/files/"):]
             try:
-                files.open_upload(name)
+                files.begin_upload(name, False)
             except ValueError as e:  # files.FileError
                 raise HttpError(409 if "prints" in str(e) else 400, str(e))
             r.upload = name
@@ -308,16 +322,22 @@ class HttpListener:
             raise HttpError(400, "body longer than its Content-Length")
         if r.upload is not None:
             try:
-                self._files().write_bytes(data)
-            except ValueError as e:
-                raise HttpError(507 if "full" in str(e) else 409, str(e))
+                _upload(self._files(), data)
+            except ValueError as e:  # M28's words: the upload ends here, with no M29
+                raise HttpError(507 if "full" in str(e) else 409,
+                                str(e).replace("; M29 ends the upload", ""))
         else:
             r.body.extend(data)
 
     def _abort_upload(self, r):
         if r.upload is not None:
             r.upload = None
-            self._files().abort_upload()
+            files = self._files()
+            files.upload_failed = files.upload_failed or "the upload was cut short"
+            try:
+                files.end_upload()  # drops what reached flash
+            except ValueError:
+                pass
 
     def _finish(self, r):
         method, path = r.method, r.path
@@ -456,7 +476,7 @@ class HttpListener:
         p.thermal.refresh()
         heaters = [{"name": h.name, "c": round(h.temp_c, 1), "target_c": h.target_c}
                    for h in p.thermal.heaters]
-        rgb = s["drive_rgb"]
+        rgb = drive_rgb(s)
         tools = [{"mix": list(m), "rgb": "#%06x" % mix_rgb(m, rgb)} for m in s["tool_mixes"]]
         reports = p.reports
         files = reports.files

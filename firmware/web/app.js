@@ -510,7 +510,7 @@ $('mix-save').onclick = async () => {
 
 async function sendColour(drive, hex) {
   colourPending[drive] = {rgb: hex, until: Date.now() + 5000};
-  if (!await gcode('M926 Idrive_rgb_' + drive + ' V' + parseInt(hex.slice(1), 16) + '\nM930')) {
+  if (!await gcode('M926 Idrive_colour_rgb_' + drive + ' V' + parseInt(hex.slice(1), 16) + '\nM930')) {
     delete colourPending[drive];
   }
 }
