@@ -353,15 +353,15 @@ DESCRIPTIONS = {
         "mixing", "0xRRGGBB",
         "The colour of the filament each drive feeds, as a whole number (0xFF0000 = "
         "16711680 is red). The web page shows the colour each mix prints from them: "
-        "each channel the weights' mean of the filaments' (`mixer.mix_rgb`, as "
+        "each channel the weights' mean of the filaments' (`colours.mix_rgb`, as "
         "`mixstep preview` draws it). Defaults: `mixstep preview`'s colours."),
     "net_password": (
         "consoles", "text",
         "Password a network connection must send as its first line before any "
         "G-code. Empty (the default): the network console is off, except "
-        "`mixstep serve --tcp` on a loopback address. 8 to 64 printable characters "
-        "without spaces or `;`. Kept by M500, compared in constant time, never shown "
-        "by M503, M925 or any report."),
+        "`mixstep serve --tcp` on a loopback address. 8 to 64 characters without "
+        "spaces. Kept by M500, compared in constant time, never shown by M503, M925 "
+        "or any report."),
     "web_page_port": (
         "consoles", "port",
         "Port of the web page, on boards connected to a network, behind "

@@ -69,8 +69,6 @@ SETTINGS = dict(
     step_backend="timer",
     pin_writer="registers",  # GPIO_OUT_W1TS/W1TC, and OUT1 for GPIO 32/33
     drives=4,
-    # The filaments' colours, which the web page shows mixed (M926 Idrive_colour_rgb_<n>).
-    drive_colour_rgb=defaults.DRIVE_RGB[:4],
     enable_active_low=True,
     steps_per_mm=(80.0, 80.0, 400.0, 415.0),
     console_uart=-1,  # UART0 is the USB console already; no pins left for another

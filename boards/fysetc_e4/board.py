@@ -63,8 +63,6 @@ SETTINGS = dict(
     step_backend="timer",
     pin_writer="registers",
     drives=3,
-    # The filaments' colours, which the web page shows mixed (M926 Idrive_colour_rgb_<n>).
-    drive_colour_rgb=defaults.DRIVE_RGB[:3],
     enable_active_low=True,  # TMC2209 EN is active low
     # 16 microsteps (the drivers' setting below), GT2 belts on 20-tooth pulleys on X/Y,
     # an 8 mm lead screw on Z.

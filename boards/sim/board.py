@@ -35,8 +35,6 @@ SETTINGS = dict(
     chip="sim",
     tick_us=20,  # step-loop period: 50 kHz
     drives=6,
-    # The filaments' colours, which the web page shows mixed (M926 Idrive_colour_rgb_<n>).
-    drive_colour_rgb=defaults.DRIVE_RGB[:6],
     enable_active_low=True,
     # The simulation takes its consoles from sim_main, not from a UART.
     console_uart=-1,

@@ -65,11 +65,7 @@ class FileCommands:
     # M524: stop printing the file from flash, as Marlin's; the moves already queued
     # run, the heaters stay as they are. Example: M524
     def m524(self, line):
-        if self.files.selected is None:
-            raise GcodeError("no file is printing")
-        name = self.files.selected.name
         self.files.cancel()
-        self.printer.broadcast("echo:print of %s cancelled" % name)
 
     # M30 <name>: delete a file, after the queued moves have run; the file printing
     # from flash is refused (M25 pauses it). Example: M30 part.gcode

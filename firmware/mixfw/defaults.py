@@ -1,7 +1,3 @@
-# The filaments' colours a board with a web page starts from, 0xRRGGBB, as its
-# drive_colour_rgb (`mixstep preview`'s defaults too).
-DRIVE_RGB = (0xE03030, 0x30A0E0, 0xF0D020, 0x40C040, 0xA050D0, 0xF0F0F0)
-
 # Settings every board starts from: a typical printer (16x microstepping, GT2 belts on
 # X/Y, an 8 mm lead screw on Z, a geared extruder) with a 100k-NTC hot end and bed.
 # A board's board.py takes these and overrides what its hardware decides:
@@ -86,9 +82,12 @@ SETTINGS = {
 # What a board with a network adds (SETTINGS = dict(defaults.SETTINGS,
 # **defaults.NETWORK, ...)): the TCP console and the web page, both off until a
 # password is set (M926 Inet_password V...). A connection that sends no whole line for
-# net_idle_timeout_s is closed (0: never). A board without a network leaves them out,
-# and keeps their RAM.
+# net_idle_timeout_s is closed (0: never). The filaments' colours, 0xRRGGBB, one per
+# drive (the rest dropped), which the web page shows mixed (`mixstep preview`'s
+# defaults too). A board without a network leaves them out, and keeps their RAM (a
+# name more here costs a Pico more than its bytes: its names' pool).
 NETWORK = {
+    "drive_colour_rgb": (0xE03030, 0x30A0E0, 0xF0D020, 0x40C040, 0xA050D0, 0xF0F0F0),
     "tcp_port": 8888,
     "tcp_max_clients": 4,
     "net_password": "",

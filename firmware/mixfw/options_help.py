@@ -106,7 +106,7 @@ HELP = {
         "web page shows each mix's colour from them)",
     "net_password":
         "password a network connection sends as its first line; empty: network "
-        "console off. 8 to 64 characters, no spaces or ';'. Never shown",
+        "console off. 8 to 64 characters, no spaces. Never shown",
     "net_idle_timeout_s": "a network connection silent this long is closed; 0: never",
     "web_page_port": "web page port, behind net_password; 0: off",
     "probe_active_high": "the z_probe input reads high when triggered",
