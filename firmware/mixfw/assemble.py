@@ -223,7 +223,7 @@ def board_consoles(printer, warnings):
     except ImportError:
         return consoles, []
     # Only now: the network's code and names stay off a board without one.
-    from mixfw.netconsole import board_listeners
+    from mixfw.webserver import board_listeners
     return consoles, board_listeners(printer, _WEB_ROOT, warnings)
 
 

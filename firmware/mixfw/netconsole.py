@@ -266,25 +266,3 @@ class TcpListener:
         console.early = bytes(login.buf[end + 1:login.n])
         return console
 
-
-def board_listeners(printer, web_root, warnings):
-    """A board's TCP console and web page, once it is on a network and a password is
-    set; what stops them goes to warnings."""
-    import network
-    settings = printer.settings
-    if not network.WLAN(network.STA_IF).isconnected():
-        return []
-    if not settings.get("net_password"):
-        warnings.append("//network console and web page off: no password set "
-                        "(M926 Inet_password V<8 to 64 characters>, M500, restart)")
-        return []
-    listeners = []
-    gate = None
-    if settings.get("tcp_port"):
-        listeners.append(TcpListener("0.0.0.0", settings["tcp_port"], settings))
-        gate = listeners[-1].gate
-    if settings.get("web_page_port"):
-        from mixfw.webserver import HttpListener
-        listeners.append(HttpListener("0.0.0.0", settings["web_page_port"], printer,
-                                      web_root, gate))
-    return listeners

@@ -10,13 +10,15 @@
 # away with 503), a request's head within _HEAD_BYTES and _HEAD_MS, a body sent at
 # a byte a second or never given up at _BODY_MS of silence, _MOST_SESSIONS pages
 # logged in (the oldest idle one makes room), G-code posts within _GCODE_BYTES.
+# board_listeners sets up a board's network console and page: the one place that
+# loads this module (and netconsole's), only on a board with a network.
 import json
 import os
 import socket
 import time
 
 from mixfw.colours import drive_rgb, mix_rgb
-from mixfw.netconsole import Gate, is_loopback, turn_away, _EAGAIN
+from mixfw.netconsole import Gate, TcpListener, is_loopback, turn_away, _EAGAIN
 from mixfw.planner import waiting_blocks
 
 _MOST_CONNECTIONS = const(4)
@@ -500,3 +502,25 @@ class HttpListener:
             "queue_moves": waiting_blocks(p.mem),
             "halted": bool(p.halted),
         }
+
+
+def board_listeners(printer, web_root, warnings):
+    """A board's TCP console and web page, once it is on a network and a password is
+    set; what stops them goes to warnings."""
+    import network
+    settings = printer.settings
+    if not network.WLAN(network.STA_IF).isconnected():
+        return []
+    if not settings.get("net_password"):
+        warnings.append("//network console and web page off: no password set "
+                        "(M926 Inet_password V<8 to 64 characters>, M500, restart)")
+        return []
+    listeners = []
+    gate = None
+    if settings.get("tcp_port"):
+        listeners.append(TcpListener("0.0.0.0", settings["tcp_port"], settings))
+        gate = listeners[-1].gate
+    if settings.get("web_page_port"):
+        listeners.append(HttpListener("0.0.0.0", settings["web_page_port"], printer,
+                                      web_root, gate))
+    return listeners
