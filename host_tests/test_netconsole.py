@@ -110,26 +110,22 @@ def test_g_code_before_the_password_runs_nothing(printer):
     assert ok.ask("M114")[0].startswith("X:0.00 Y:0.00 Z:0.00")
 
 
-def test_a_wrong_password_closes_and_the_next_try_waits(printer):
-    c = Client(printer, password=None)
+def _try(port, password):
+    """What the printer answers a connection that sends this password, then closes."""
+    c = Client(port, password=None)
     c.readline()
-    c.send(PASSWORD[:-1] + "X")
-    assert c.rest() == ["Error:wrong password"]
+    c.send(password)
+    return c.rest()
+
+
+def test_a_wrong_password_closes_and_the_next_try_waits(printer):
+    assert _try(printer, PASSWORD[:-1] + "X") == ["Error:wrong password"]
     # Right away, even the right password is not looked at: a guesser gains nothing
     # from a new connection per guess.
-    c = Client(printer, password=None)
-    c.readline()
-    c.send(PASSWORD)
-    assert c.rest() == ["Error:too many wrong passwords: try again in 1 s"]
+    assert _try(printer, PASSWORD) == ["Error:too many wrong passwords: try again in 1 s"]
     time.sleep(1.1)
-    c = Client(printer, password=None)
-    c.readline()
-    c.send("wrong-again")
-    assert c.rest() == ["Error:wrong password"]
-    c = Client(printer, password=None)
-    c.readline()
-    c.send(PASSWORD)
-    assert c.rest() == ["Error:too many wrong passwords: try again in 2 s"]
+    assert _try(printer, "wrong-again") == ["Error:wrong password"]
+    assert _try(printer, PASSWORD) == ["Error:too many wrong passwords: try again in 2 s"]
     time.sleep(2.1)
     Client(printer).close()  # and right, once the wait is over
 

@@ -183,24 +183,28 @@ def turn_away(sock, text):
         pass
 
 
+def listening_socket(what, host, port, settings):
+    """A socket listening on host:port, taking connections without waiting. Raises
+    ValueError on an address beyond this machine with no password set."""
+    if not is_loopback(host) and not settings.get("net_password"):
+        raise ValueError(
+            "the %s on %s needs a password first: set net_password "
+            "(M926 Inet_password V<8 to 64 characters>, then M500)" % (what, host))
+    addr = socket.getaddrinfo(host, port)[0][-1]
+    s = socket.socket()
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    s.bind(addr)
+    s.listen(4)
+    s.setblocking(False)
+    return s
+
+
 class TcpListener:
-    def __init__(self, host, port, settings, backlog=4):
-        """settings: the printer's (net_password, net_idle_timeout_s). Raises
-        ValueError on an address beyond this machine with no password set."""
-        loopback = is_loopback(host)
-        if not loopback and not settings.get("net_password"):
-            raise ValueError(
-                "the network console on %s needs a password first: set net_password "
-                "(M926 Inet_password V<8 to 64 characters>, then M500)" % host)
-        addr = socket.getaddrinfo(host, port)[0][-1]
-        s = socket.socket()
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        s.bind(addr)
-        s.listen(backlog)
-        s.setblocking(False)
-        self.sock = s
+    def __init__(self, host, port, settings):
+        """settings: the printer's (net_password, net_idle_timeout_s)."""
+        self.sock = listening_socket("network console", host, port, settings)
         self.settings = settings
-        self.gate = Gate(settings, loopback)
+        self.gate = Gate(settings, is_loopback(host))
         self.logins = []
 
     def accept(self, room):

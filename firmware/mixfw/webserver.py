@@ -14,11 +14,11 @@
 # loads this module (and netconsole's), only on a board with a network.
 import json
 import os
-import socket
 import time
 
 from mixfw.colours import drive_rgb, mix_rgb
-from mixfw.netconsole import Gate, TcpListener, is_loopback, turn_away, _EAGAIN
+from mixfw.netconsole import (Gate, TcpListener, is_loopback, listening_socket, turn_away,
+                              _EAGAIN)
 from mixfw.planner import waiting_blocks
 
 _MOST_CONNECTIONS = const(4)
@@ -147,17 +147,7 @@ class HttpListener:
         """web_root: where the page's files are (each as <name>.gz). gate: the network
         console's, if it runs too (one wait after a wrong password for both)."""
         settings = printer.settings
-        if not is_loopback(host) and not settings.get("net_password"):
-            raise ValueError(
-                "the web page on %s needs a password first: set net_password "
-                "(M926 Inet_password V<8 to 64 characters>, then M500)" % host)
-        addr = socket.getaddrinfo(host, port)[0][-1]
-        s = socket.socket()
-        s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        s.bind(addr)
-        s.listen(4)
-        s.setblocking(False)
-        self.sock = s
+        self.sock = listening_socket("web page", host, port, settings)
         self.printer = printer
         self.web_root = web_root.rstrip("/")
         self.gate = gate or Gate(settings, is_loopback(host))
