@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from mixstep import paths, serve
+from mixstep import paths, serve, tracecheck, tracepull
 from net import free_port
 
 PASSWORD = "mixing-is-fun"
@@ -134,19 +134,40 @@ def test_the_page_and_a_console_see_one_printer(tmp_path):
         serve.stop(proc)
 
 
-def test_a_mix_edited_on_the_page_is_the_next_extrusion_s(printer):
-    page = Page(printer)
-    page.log_in()
-    status = page.ok("GET", "/api/status")
-    assert status["tools"][0] == {"mix": [1, 0, 0, 0, 0, 0], "rgb": status["drive_rgb"][0]}
-    page.gcode("M926 Idrive_colour_rgb_0 V16711680", "M926 Idrive_colour_rgb_1 V255", "M930")
-    page.gcode("M567 P0 E1:3:0:0:0:0", "M500")
-    status = page.ok("GET", "/api/status")
-    # A quarter red, three quarters blue, each channel rounded.
-    assert status["tools"][0] == {"mix": [1, 3, 0, 0, 0, 0], "rgb": "#4000bf"}
-    got = page.gcode("M302 P1", "T0", "G92 E0", "M167 R", "G1 E40 F600", "M400", "M167")
-    fed = [float(v) for v in re.findall(r"e\d:(\S+)", got[-2])]
-    assert fed[:2] == pytest.approx([10.0, 30.0], abs=0.01) and sum(fed[2:]) == 0, got
+def test_a_mix_edited_on_the_page_is_the_next_extrusion_s(tmp_path, monkeypatch):
+    """The mix the page saves (M567, M500) is what the next extrusion feeds: the step
+    capture pulled from the board (`mixstep trace pull`, over the TCP console with
+    its password) counts each drive's steps, and trace check holds them to the lines
+    the page sent."""
+    proc, port, tcp_port = start(tmp_path, {"trace_records": 60000}, tcp=True)
+    try:
+        page = Page(port)
+        page.log_in()
+        status = page.ok("GET", "/api/status")
+        assert status["tools"][0] == {"mix": [1, 0, 0, 0, 0, 0], "rgb": status["drive_rgb"][0]}
+        page.gcode("M926 Idrive_colour_rgb_0 V16711680", "M926 Idrive_colour_rgb_1 V255",
+                   "M930")
+        page.gcode("M302 P1", "M7300 S1")  # cold extrusion allowed; the capture on
+        lines = ["M567 P0 E1:3:0:0:0:0", "M500", "T0", "G92 E0", "M167 R", "G1 E40 F600",
+                 "M400", "M167"]
+        got = page.gcode(*lines)
+        status = page.ok("GET", "/api/status")
+        # A quarter red, three quarters blue, each channel rounded.
+        assert status["tools"][0] == {"mix": [1, 3, 0, 0, 0, 0], "rgb": "#4000bf"}
+        fed = [float(v) for v in re.findall(r"e\d:(\S+)", got[-2])]
+        assert fed[:2] == pytest.approx([10.0, 30.0], abs=0.01) and sum(fed[2:]) == 0, got
+        monkeypatch.setenv("MIXSTEP_NET_PASSWORD", PASSWORD)
+        pulled = tmp_path / "pulled.vcd"
+        assert tracepull.pull(pulled, tcp="127.0.0.1:%d" % tcp_port)["overrun"] == 0
+    finally:
+        serve.stop(proc)
+    sent = tmp_path / "sent.gcode"
+    sent.write_text("\n".join(lines) + "\n")
+    checks = {c["name"]: c for c in tracecheck.check(pulled, sent)["checks"]}
+    assert [c["name"] for c in checks.values() if c["ok"] is False] == []
+    spm = 415  # the simulated board's filament steps per mm
+    assert (checks["steps_e0"]["measured"], checks["steps_e1"]["measured"]) == (
+        10 * spm, 30 * spm)
 
 
 def test_an_upload_streams_to_flash_and_prints(tmp_path, printer):

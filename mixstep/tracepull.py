@@ -15,6 +15,7 @@ ignored. In the VCD (timescale 1 us, time = tick * tick_us) every STEP, DIR and 
 signal starts at 0 at #0; within a tick the masks apply in order, set before clear as
 the register writes go, and only each tick's final level is written.
 """
+import os
 import re
 import socket
 import sys
@@ -137,9 +138,14 @@ def fetch_serial(port, baud=115200, timeout_s=30.0):
         return list(_lines_from(s.readline, timeout_s))
 
 
-def fetch_tcp(address, timeout_s=30.0):
+def fetch_tcp(address, timeout_s=30.0, password=None):
+    """password: the board's net_password (default: the environment's
+    MIXSTEP_NET_PASSWORD, so it stays off the command line), sent first if set."""
     host, _, port = address.rpartition(":")
+    password = password or os.environ.get("MIXSTEP_NET_PASSWORD")
     with socket.create_connection((host or "127.0.0.1", int(port)), timeout=timeout_s) as c:
+        if password:
+            c.sendall(password.encode() + b"\n")
         c.sendall(b"M7301\n")
         with c.makefile("rb") as f:
             return list(_lines_from(f.readline, timeout_s))
@@ -165,7 +171,9 @@ def add_parser(sub):
     p = sub.add_parser("pull", help="fetch the board's step capture (M7301) and write a VCD")
     src = p.add_mutually_exclusive_group(required=True)
     src.add_argument("--port", help="serial port of the board, e.g. /dev/ttyACM0")
-    src.add_argument("--tcp", metavar="HOST:PORT", help="the board's TCP console")
+    src.add_argument("--tcp", metavar="HOST:PORT",
+                     help="the board's TCP console (its password: MIXSTEP_NET_PASSWORD in "
+                          "the environment)")
     src.add_argument("--log", help="a saved console log holding an M7301 dump")
     p.add_argument("-o", "--output", required=True, help="VCD file to write")
     p.add_argument("--board", default="sim", help="board whose PINS name the mask bits")
