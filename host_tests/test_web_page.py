@@ -16,7 +16,7 @@ import urllib.request
 import pytest
 
 from mixfw.colours import mix_rgb
-from mixstep import paths, serve
+from mixstep import paths, serve, tracecheck, tracepull
 from net import free_port
 
 PASSWORD = "mixing-is-fun"
@@ -66,16 +66,19 @@ def browser():
 
 @pytest.fixture
 def printer(tmp_path):
-    """The simulated printer's web page, password set: its address."""
+    """The simulated printer's web page, password set, and its TCP console (for the
+    step capture, M7300/M7301): (the page's address, the console's HOST:PORT)."""
     port = free_port()
+    tcp = "127.0.0.1:%d" % free_port()
     (tmp_path / "files").mkdir()
-    proc = serve.serve_tcp(None, realtime=REALTIME, announce=lambda s: None,
-                           http="127.0.0.1:%d" % port, settings={"net_password": PASSWORD},
+    proc = serve.serve_tcp(tcp, realtime=REALTIME, announce=lambda s: None,
+                           http="127.0.0.1:%d" % port,
+                           settings={"net_password": PASSWORD, "trace_records": 60000},
                            config=tmp_path / "printer.cfg", files=tmp_path / "files")
     url = "http://127.0.0.1:%d/" % port
     try:
         _wait_for_page(url)
-        yield url
+        yield url, tcp
     finally:
         serve.stop(proc)
 
@@ -178,7 +181,7 @@ def open_page(browser, printer):
     pages = []
 
     def make(viewport=DESKTOP):
-        pages.append(Page(browser, printer, viewport))
+        pages.append(Page(browser, printer[0], viewport))
         return pages[-1]
 
     yield make
@@ -277,7 +280,8 @@ def test_watch_a_print_then_cancel_it(open_page):
     page.wait_text("#state", "^idle$")
     assert page.text("#job") == "no file"
     page.wait_text("#queue", "^0 moves$")
-    assert any("cancelled" in l for l in page.console_lines())
+    log = page.console_lines()
+    assert "> M524" in log and "ok" in log[log.index("> M524"):], log[-10:]
     assert page.status()["job"]["state"] == "idle"
 
 
@@ -300,9 +304,14 @@ def test_upload_a_file_print_it_and_delete_it(open_page, tmp_path):
 
 
 @pytest.mark.slow
-def test_a_mix_edited_on_the_page_is_what_the_next_extrusion_feeds(open_page):
+def test_a_mix_edited_on_the_page_is_what_the_next_extrusion_feeds(open_page, printer,
+                                                                   tmp_path, monkeypatch):
+    """The mix saved in the editor is what the next extrusion feeds: M167's counts,
+    and each drive's steps in the capture pulled from the printer (`mixstep trace
+    pull`), which trace check holds to the lines the page sent."""
     page = open_page()
     page.log_in()
+    page.ask("M7300 S1", "^ok")  # the step capture on: what follows is checked
     page.wait("() => document.querySelectorAll('#mix-sliders input[type=range]').length > 1")
     s = page.status()
     drives = s["drives"]
@@ -325,11 +334,25 @@ def test_a_mix_edited_on_the_page_is_what_the_next_extrusion_feeds(open_page):
     # The next extrusion with T0 feeds 25 % from e0 and 75 % from e1.
     page.ask("M302 P1", "^ok")  # cold extrusion: the hot end needn't heat for this
     before = _fed(page.ask("M167", "^echo:filament used mm"))
-    for line in ("T0", "G92 E0", "G1 E10 F300", "M400"):
+    for line in ("T0", "G92 E0", "G1 E40 F600", "M400"):
         page.ask(line, "^ok")
     after = _fed(page.ask("M167", "^echo:filament used mm"))
     fed = [a - b for a, b in zip(after, before)]
-    assert fed == pytest.approx([2.5, 7.5] + [0.0] * (drives - 2), abs=0.02), fed
+    assert fed == pytest.approx([10.0, 30.0] + [0.0] * (drives - 2), abs=0.02), fed
+    # The capture: each line the page sent since M7300 (its console echoes them).
+    log = page.console_lines()
+    sent = [l[2:] for l in log[log.index("> M7300 S1") + 1:] if l.startswith("> ")]
+    assert "M567 P0 E25:75:%s" % ":".join(["0"] * (drives - 2)) in sent, sent
+    monkeypatch.setenv("MIXSTEP_NET_PASSWORD", PASSWORD)
+    pulled = tmp_path / "pulled.vcd"
+    assert tracepull.pull(pulled, tcp=printer[1])["overrun"] == 0
+    gcode = tmp_path / "sent.gcode"
+    gcode.write_text("\n".join(sent) + "\n")
+    checks = {c["name"]: c for c in tracecheck.check(pulled, gcode)["checks"]}
+    assert [c["name"] for c in checks.values() if c["ok"] is False] == []
+    spm = 415  # the simulated board's filament steps per mm
+    assert (checks["steps_e0"]["measured"], checks["steps_e1"]["measured"]) == (
+        10 * spm, 30 * spm)
 
     # A drive's filament colour: the tool's colour follows, on the server and the page.
     page.tab.fill("#drive-rgb1", "#000000")  # M926 Idrive_colour_rgb_1 V0, M930
