@@ -16,6 +16,8 @@ from net import free_port
 PASSWORD = "mixing-is-fun"
 # Real slicer output with progress (M73) in it.
 PRINT = paths.ROOT / "testdata" / "tc_top_bambustudio_arcs.gcode"
+# Real slicer output that heats up first (G28, M190, M109).
+HEATED = paths.ROOT / "testdata" / "short_3tool_m117_prusaslicer.gcode"
 
 
 class Page:
@@ -62,11 +64,11 @@ class Page:
         return got
 
 
-def start(tmp_path, settings=None, tcp=False):
+def start(tmp_path, settings=None, tcp=False, realtime=0):
     port = free_port()
     tcp_port = free_port() if tcp else None
     (tmp_path / "files").mkdir(exist_ok=True)
-    proc = serve.serve_tcp("127.0.0.1:%d" % tcp_port if tcp else None, realtime=0,
+    proc = serve.serve_tcp("127.0.0.1:%d" % tcp_port if tcp else None, realtime=realtime,
                            announce=lambda s: None, http="127.0.0.1:%d" % port,
                            settings=dict({"net_password": PASSWORD}, **(settings or {})),
                            config=tmp_path / "printer.cfg", files=tmp_path / "files")
@@ -196,6 +198,28 @@ def test_an_upload_streams_to_flash_and_prints(tmp_path, printer):
                                       "pause it (M25) first"})
     assert page.gcode("M524")[-1] == "ok"
     assert page.ok("GET", "/api/status")["job"]["state"] == "idle"
+
+
+def test_cancel_ends_the_print_during_its_heat_up(tmp_path):
+    """M524 acts as its line arrives, as Marlin's emergency parser has it: a print
+    waiting for its hot end (M109) stops at once, not once it is hot."""
+    proc, port, _ = start(tmp_path, realtime=1)
+    try:
+        page = Page(port)
+        page.log_in()
+        page.ok("PUT", "/api/files/part.gcode", HEATED.read_bytes())
+        page.gcode("M23 part.gcode", "M24")
+        deadline = time.time() + 30
+        while page.ok("GET", "/api/status")["heaters"][0]["target_c"] < 200:
+            assert time.time() < deadline
+            time.sleep(0.1)
+        t0 = time.time()
+        page.gcode("M524")
+        status = page.ok("GET", "/api/status")
+        assert status["job"]["state"] == "idle" and time.time() - t0 < 3
+        assert status["heaters"][0]["c"] < 150  # far from hot: the wait had ended
+    finally:
+        serve.stop(proc)
 
 
 def test_a_full_flash_is_an_error_and_the_old_file_survives(tmp_path, printer):

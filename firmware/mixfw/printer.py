@@ -156,12 +156,12 @@ _EMERGENCY = array("i", bytes(4 * _FRAME_WORDS))
 
 def _emergency(scan, n):
     """The M number if this line starts (after an optional N<number>) with an emergency
-    command, else 0: M112, M108, M410 and M876, acted on as soon as their line arrives,
-    before the lines queued ahead of them (when their turn comes they do nothing
-    more)."""
+    command, else 0: M112, M108, M410, M876 and M524, acted on as soon as their line
+    arrives, before the lines queued ahead of them (when their turn comes they do
+    nothing more, but M524, which then cancels the file)."""
     _frame(scan, n, _EMERGENCY, 0)
     number = _EMERGENCY[_M_NUMBER]
-    if number == 112 or number == 108 or number == 410 or number == 876:
+    if number == 112 or number == 108 or number == 410 or number == 876 or number == 524:
         return number
     return 0
 
@@ -435,6 +435,13 @@ class Printer:
         elif number == 410:
             # Done between commands or at a wait, never inside the planner's work.
             self._stop_pending = True
+        elif number == 524:
+            # Cancel the file print, as Marlin's emergency parser: no line of it runs
+            # from now on, and a wait of one (M109 heating) ends; M524's own line
+            # cancels it when its turn comes.
+            if self.job is not None:
+                self.job.paused = True
+                self.breaks_received += 1
         elif self.prompt_open:  # M876: the answer to the prompt a wait showed (M600)
             self.breaks_received += 1
 
