@@ -521,7 +521,8 @@ def test_the_beds_option_rows_are_the_hot_ends():
     assert bed == [("bed_" + r[0][len("hotend_"):],) + r[1:] for r in hotend]
     for r in hotend:
         assert HELP["bed_" + r[0][len("hotend_"):]] == "bed " + HELP[r[0]][len("hotend "):]
-    assert sorted(HELP) == sorted(row[0] for row in SCHEMA)
+    from mixfw.options_net import NETWORK_ROWS
+    assert sorted(HELP) == sorted(row[0] for row in SCHEMA + NETWORK_ROWS)
 
 
 def test_the_option_table_is_a_constant():
@@ -529,6 +530,7 @@ def test_the_option_table_is_a_constant():
     row naming FLOAT or LIVE would be built at import: 11 KB on this port)."""
     from mixstep import sim
     assert sim.code_heap(["mixfw.options"])["module_body_bytes"] < 1024
+    assert sim.code_heap(["mixfw.options_net"])["module_body_bytes"] < 1024
 
 
 def test_a_refused_file_is_told_to_every_host_until_a_save_replaces_it(mp, tmp_path):

@@ -6,7 +6,7 @@ from mixfw import options
 from mixfw.config import Config
 from mixstep import boards, config_reference, paths
 
-SCHEMA_KEYS = [row[0] for row in options.SCHEMA]
+SCHEMA_KEYS = [row[0] for row in config_reference.ALL_ROWS]
 
 
 def test_the_document_is_what_the_schema_gives():
@@ -37,7 +37,7 @@ def test_every_option_of_every_board_is_in_the_document():
     for name in boards.board_names():
         config = Config(paths.load_board(name)["SETTINGS"], None)
         for o in config.options:
-            each = dict((row[0], row[1]) for row in options.SCHEMA)[o.key] == options.EACH
+            each = dict((row[0], row[1]) for row in config_reference.ALL_ROWS)[o.key] == options.EACH
             shown = "`%s_<n>`" % o.key if each else "`%s`" % o.name
             assert shown in text, "%s's option %s" % (name, o.name)
 

@@ -18,12 +18,14 @@ import sys
 import textwrap
 
 from mixstep import boards, paths
-from mixfw import defaults, options
+from mixfw import defaults, options, options_net
 from mixfw.config import Config, Option
 from mixfw.pwm import clock_text
 
 DOC = paths.ROOT / "docs" / "Config_Reference.md"
 REGENERATE = ".venv/bin/python -m mixstep.config_reference"
+# Every option's row: the firmware's, and those a board with a network adds.
+ALL_ROWS = options.SCHEMA + options_net.NETWORK_ROWS
 
 # (key, title, what the group is): the document's sections, in order.
 GROUPS = (
@@ -557,7 +559,7 @@ def _row_line(row, configs, texts):
 
 def undocumented():
     """What keeps DESCRIPTIONS from matching the schema, one text each; empty if none."""
-    keys = [row[0] for row in options.SCHEMA]
+    keys = [row[0] for row in ALL_ROWS]
     groups = [g[0] for g in GROUPS]
     return (["%s: in the schema, not described" % k for k in keys if k not in DESCRIPTIONS]
             + ["%s: described, not in the schema" % k for k in DESCRIPTIONS if k not in keys]
@@ -577,9 +579,9 @@ def render():
     out = [INTRO]
     for group, title, intro in GROUPS:
         out += ["", "## " + title, "", _wrap(intro), "", _HEAD]
-        out += [_row_line(row, configs, texts) for row in options.SCHEMA
+        out += [_row_line(row, configs, texts) for row in ALL_ROWS
                 if DESCRIPTIONS[row[0]][0] == group]
-    schema_keys = {row[0] for row in options.SCHEMA}
+    schema_keys = {row[0] for row in ALL_ROWS}
     plain = sorted({k for c in configs.values() for k in c.board_settings} - schema_keys)
     out += ["", "## Board settings that are not options", "", _wrap(
             "`board.py` also holds settings read only there (and by `--set` in "

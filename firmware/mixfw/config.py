@@ -128,12 +128,7 @@ class Option:
 
     def check(self, v):
         if self.kind == SECRET:
-            # One word, as M926 carries it (a ";" would begin a comment there).
-            if not isinstance(v, str) or v and not (self.lo <= len(v) <= self.hi
-                                                    and v.split() == [v]):
-                raise ConfigError("%s: must be empty or %d to %d characters without "
-                                  "spaces" % (self.name, self.lo, self.hi))
-            return v
+            return getattr(_network(), "check_secret")(self, v, ConfigError)
         if self.kind == PAIR:
             tools = self.width
             if len(v) != 4 or not (0 <= v[0] < tools and 0 <= v[1] < tools):
@@ -196,6 +191,13 @@ def _put(settings, o, v):
         settings[o.key] = tuple(t)
 
 
+def _network():
+    """options_net.py, for a board with a network. Its names are strings here, which
+    a chip interns only when this runs: a board without a network never pays for
+    them (see that module)."""
+    return __import__("mixfw.options_net", None, None, ("NETWORK_ROWS",))
+
+
 class Config:
     def __init__(self, board_settings, path, storage=None, warn=None, clock_hz=None):
         """board_settings: the board's SETTINGS (not modified; kept for the defaults).
@@ -209,6 +211,9 @@ class Config:
         self.appliers = []  # fn(settings) each, called by apply() (M930)
         self.before_save = []  # fn() each: bring running state (counters) into settings
         self.board_settings = board_settings
+        self.schema = SCHEMA
+        if "tcp_port" in board_settings:  # defaults.NETWORK's: its options too
+            self.schema = SCHEMA + getattr(_network(), "NETWORK_ROWS")
         defaults = self._board_defaults()
         self.chip = defaults.get("chip", "sim")
         self.clock_hz = (clock_hz or defaults.get("clock_hz")
@@ -267,7 +272,7 @@ class Config:
 
     def _options_of(self, settings):
         """Every option of these settings in schema order, made one at a time."""
-        for row in SCHEMA:
+        for row in self.schema:
             if row[0] not in settings:
                 continue  # the board has no such setting (e.g. no bed)
             if not row[1]:
@@ -283,7 +288,7 @@ class Config:
     # --- values ---
     def option(self, name):
         settings = self.settings
-        for row in SCHEMA:
+        for row in self.schema:
             key = row[0]
             if key not in settings or not name.startswith(key):
                 continue
@@ -334,9 +339,8 @@ class Config:
         comment."""
         o = self.option(name)
         text = texts.get(o.key, "")
-        if o.kind == SECRET:  # a comment, so M503's lines sent back leave it as it is
-            return "; M926 I%s V... ; %s (%s)" % (
-                name, text, "set, not shown" if self._read_setting(o) else "none set yet")
+        if o.kind == SECRET:
+            return getattr(_network(), "describe_secret")(name, text, self._read_setting(o))
         if o.index >= 0:
             text = o.axis.upper() + ": " + text
         limits = "" if o.kind in (MIX, PAIR) else ", %s..%s" % (o.format(o.lo), o.format(o.hi))
@@ -347,7 +351,7 @@ class Config:
     def _mark_running(self):
         """Keep the restart settings the machine is built with (the values are shared
         with the settings, which replace rather than change them)."""
-        self.running = {row[0]: self.settings[row[0]] for row in SCHEMA
+        self.running = {row[0]: self.settings[row[0]] for row in self.schema
                         if row[5] and row[0] in self.settings}
 
     def pending_restart(self):

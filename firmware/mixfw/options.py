@@ -15,8 +15,8 @@ MIX = "mix"  # drive weights w0:w1:..., normalised to integers (mixer.normalize)
 PAIR = "pair"  # a tool pair's transition from:to:l1_mm:l2_mm; 0:0:0:0 is an empty slot
 EACH = "each"  # axes of a row whose setting is a tuple of any length: _0, _1, ...
 POW2 = "pow2"  # a whole number that is a power of two (microsteps)
-# Text kept by M500 and never shown (the network password): lo..hi is its length, or
-# empty for none. M503 and M925 say whether it is set, never what it is.
+# Text kept by M500 and never shown (the network password, options_net.py): lo..hi is
+# its length, or empty for none. M503 and M925 say whether it is set, never what it is.
 SECRET = "secret_text"  # 10 characters or more: a string object, not a name the chip keeps
 LIVE = False  # takes effect with M930
 RESTART = True  # takes effect after a restart
@@ -176,7 +176,6 @@ SCHEMA = (
     ("filament_used_mm",           "each", "float", -1000000000,1000000000,  False),
     ("tool_mixes",                 "each", "mix",   0,       0,           False),
     ("tool_advance_k",             "each", "float", 0,       10,          False),
-    ("drive_colour_rgb",           "each", "int",   0,       0xFFFFFF,    False),
     ("trace_records",              "",     "int",   0,       100000,      True),
     ("watchdog_ms",                "",     "int",   1000,    8388,        True),
     ("step_stall_ms",              "",     "int",   10,      10000,       True),
@@ -184,7 +183,4 @@ SCHEMA = (
     ("console_baud",               "",     "int",   300,     4000000,     True),
     ("tcp_port",                   "",     "int",   1,       65535,       True),
     ("tcp_max_clients",            "",     "int",   1,       8,           True),
-    ("net_password",               "",     "secret_text", 8,  64,          False),
-    ("net_idle_timeout_s",         "",     "int",   0,       86400,       False),
-    ("web_page_port",              "",     "int",   0,       65535,       True),
 )
