@@ -326,8 +326,8 @@ def test_the_six_drive_board_boots_with_room_in_its_heap(settings, tmp_path):
     answers and keeps 24.5 kB free after a collection for printing (with its 48-block
     queue, the arc code, the job commands, pressure advance's follower, and what the
     network's password checks, web uploads and M524 leave in the modules every board
-    loads: about 24.8 kB; the whole USB print's rows, bench/chip_print.py, hold with it). boot.py
-    has set the board's clock first."""
+    loads: about 24.8 kB; the whole USB print's rows, bench/chip_print.py, hold with
+    it). boot.py has set the board's clock first."""
     _emulator_or_skip()
     with emu.Chip("pico_6drives", settings=settings, max_emu_s=30, max_wall_s=600) as c:
         c.profile()
