@@ -174,6 +174,7 @@ class HttpListener:
             else:
                 conn.setblocking(False)
                 self.requests.append(_Request(conn, time.ticks_ms()))
+                self._sweep_sessions()
         if self.requests:
             self.busy = True
             try:
@@ -187,18 +188,22 @@ class HttpListener:
                         self._close(r)
             finally:
                 self.busy = False
-        idle_s = self.printer.settings.get("net_idle_timeout_s", 0)
-        for s in self.sessions:
-            if s.closed or (idle_s and time.ticks_diff(time.ticks_ms(), s.seen_ms)
-                            > idle_s * 1000):
-                s.closed = True  # the printer drops its channel at its next read
-                self.sessions.remove(s)
-                break
         console, self.new_console = self.new_console, None
         if console is not None and room <= 0:
             console.closed = True
             return None
         return console
+
+    def _sweep_sessions(self):
+        """Sessions idle for net_idle_timeout_s end. Looked at as a connection comes,
+        not every turn: the main loop turns between G-code lines, and a session that
+        outlives its time harms nothing until a page asks with it."""
+        idle_s = self.printer.settings.get("net_idle_timeout_s", 0)
+        now = time.ticks_ms()
+        for s in self.sessions[:]:
+            if s.closed or (idle_s and time.ticks_diff(now, s.seen_ms) > idle_s * 1000):
+                s.closed = True  # the printer drops its channel at its next read
+                self.sessions.remove(s)
 
     def _close(self, r):
         self._abort_upload(r)
