@@ -181,6 +181,17 @@ def test_an_upload_streams_to_flash_and_prints(tmp_path, printer):
     assert (tmp_path / "files" / "part.gcode").read_bytes() == data
     listing = page.ok("GET", "/api/files")
     assert listing["files"] == [{"name": "part.gcode", "bytes": len(data)}]
+    # One upload at a time: a second, begun while the first's body comes, waits.
+    slow = socket.create_connection(("127.0.0.1", printer), timeout=30)
+    slow.sendall(b"PUT /api/files/a.gcode HTTP/1.1\r\nCookie: %s\r\n"
+                 b"Content-Length: 100\r\n\r\nG1 X1\n" % page.cookie.encode())
+    time.sleep(0.3)
+    assert page.call("PUT", "/api/files/b.gcode", b"G1 X2\n")[:2] == (
+        409, {"error": "a.gcode is being uploaded; try again after it"})
+    slow.close()
+    time.sleep(0.3)  # the cut upload dropped: the next one is taken
+    assert page.call("PUT", "/api/files/b.gcode", b"G1 X2\n")[0] == 201
+    assert "a.gcode" not in [f["name"] for f in page.ok("GET", "/api/files")["files"]]
     page.gcode("M23 part.gcode", "M24")
     deadline = time.time() + 120
     seen = set()

@@ -165,6 +165,8 @@ class Files:
             self.chunk = bytearray(_UPLOAD_CHUNK_BYTES)
         except (FileError, MemoryError) as e:
             self.upload_failed = str(e) or "out of memory"
+            if not sink:  # no M29 follows to end it
+                self.upload_name = None
             raise FileError(self.upload_failed + ("; the lines up to M29 are not run"
                                                   if sink else ""))
 

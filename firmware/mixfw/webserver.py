@@ -305,6 +305,9 @@ class HttpListener:
                 raise HttpError(411, "Content-Length needed")
             files = self._files()
             name = path[len("/api/files/"):]
+            if files.upload_name is not None:  # the files keep one upload at a time
+                raise HttpError(409, "%s is being uploaded; try again after it"
+                                % files.upload_name)
             try:
                 files.begin_upload(name, False)
             except ValueError as e:  # files.FileError
