@@ -18,7 +18,7 @@ import sys
 import textwrap
 
 from mixstep import boards, paths
-from mixfw import defaults, options, options_net
+from mixfw import defaults, defaults_net, options, options_net
 from mixfw.config import Config, Option
 from mixfw.pwm import clock_text
 
@@ -416,7 +416,8 @@ The tables give, for each option:
 - **range**: what `M926` takes; where a chip's PWM narrows it, per chip at its clock;
 - **default** and where it comes from: `firmware` (`FIRMWARE_DEFAULTS` in `options.py`,
   unless a board sets it), `defaults.py` (`firmware/mixfw/defaults.py`, unless a board
-  overrides it: the boards that do are named), `board.py` (each board states it) or
+  overrides it: the boards that do are named), `defaults_net.py` (the same, for the
+  options of boards with a network), `board.py` (each board states it) or
   `derived` (from other settings when the board gives none); values per axis or index
   in the order of the names;
 - **applies**: `M930` (or at once, by the Marlin commands named) or `restart`."""
@@ -461,28 +462,36 @@ def _source(key, configs):
         return "firmware"
     if key in defaults.SETTINGS:
         return "defaults.py"
+    if key in defaults_net.NETWORK:
+        return "defaults_net.py"
     if any(key in c.board_settings for c in configs.values()):
         return "board.py"
     return "derived"
 
 
+def _option(row, index):
+    """An option of the row, of its own kind if it names one (as Config._option)."""
+    return (Option if len(row) < 7 else row[6])(row, index, "", 0)
+
+
 def _base_text(row, value):
     """A firmware or defaults.py value as M503 prints it, before any board's say."""
     if not row[1]:
-        return Option(row, -1, "", 0).format(value)
-    return _join([Option(row, i, "", 0).format(v) for i, v in enumerate(value)],
+        return _option(row, -1).format(value)
+    return _join([_option(row, i).format(v) for i, v in enumerate(value)],
                  row[1] == options.EACH)
 
 
 def _default_cell(row, source, texts_of):
     """texts_of: {board: its default text} of the boards that have the option."""
     key = row[0]
-    base = {"firmware": options.FIRMWARE_DEFAULTS, "defaults.py": defaults.SETTINGS}.get(source)
+    base = {"firmware": options.FIRMWARE_DEFAULTS, "defaults.py": defaults.SETTINGS,
+            "defaults_net.py": defaults_net.NETWORK}.get(source)
     if base is not None:
         common = _base_text(row, base[key])
         others = {b: t for b, t in texts_of.items() if t != common}
         if not others:
-            return common
+            return common or "none"
         return "%s; %s" % (common, _by_value(others))
     if len(set(texts_of.values())) == 1:
         text = next(iter(texts_of.values()))
@@ -498,7 +507,7 @@ def _limits(o):
 
 def _range_cell(row, configs):
     key, _axes, kind, lo, hi = row[:5]
-    base = Option(row, -1, "", 0)
+    base = _option(row, -1)
     if kind == options.BOOL:
         return "0 or 1"
     if kind == options.POW2:
@@ -507,7 +516,7 @@ def _range_cell(row, configs):
         return "weights ≥ 0, not all 0, one per drive"
     if kind == options.PAIR:
         return "tools 0..virtual_tools-1; lengths %r..%r mm" % (float(lo), float(hi))
-    if kind == options.SECRET:
+    if kind == "text":  # options_net.SecretOption's
         return "empty, or %d..%d characters" % (lo, hi)
     # Limits a board's chip narrows (PWM frequencies), once per chip and clock.
     narrowed = {}

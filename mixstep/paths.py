@@ -69,11 +69,15 @@ def _plain_module(path, name):
 def load_board(board="sim"):
     """A board's pin map and settings, read as plain data: the names board.py defines.
 
-    Every board.py starts `from mixfw import defaults`. On the chip that is an import;
-    here board.py gets firmware/mixfw/defaults.py's data read the same plain way, read
+    Every board.py starts `from mixfw import defaults` (and defaults_net, on a board
+    with a network). On the chip that is an import; here board.py gets
+    firmware/mixfw/defaults.py's (and defaults_net.py's) data read the same plain way, read
     again for each board so no caller's changes reach another, and any other import
     fails. So reading a board imports nothing from firmware/."""
-    defaults = _plain_module(FIRMWARE / "mixfw" / "defaults.py", "mixfw.defaults")
     mixfw = types.ModuleType("mixfw")
-    mixfw.defaults = defaults
-    return _exec_plain(BOARDS / board / "board.py", {"mixfw": mixfw, "mixfw.defaults": defaults})
+    modules = {"mixfw": mixfw}
+    for name in ("defaults", "defaults_net"):  # defaults_net: a board with a network's
+        module = _plain_module(FIRMWARE / "mixfw" / (name + ".py"), "mixfw." + name)
+        setattr(mixfw, name, module)
+        modules["mixfw." + name] = module
+    return _exec_plain(BOARDS / board / "board.py", modules)

@@ -26,7 +26,7 @@
 # GPIO 16/17 are free on WROOM modules; on WROVER modules they belong to the PSRAM,
 # so move e0 elsewhere there.
 # STEP/DIR on 32/33 works: the step path maps them onto mask bits 28/29.
-from mixfw import defaults
+from mixfw import defaults, defaults_net
 
 NAME = "esp32_devkit"
 CHIP = "esp32"
@@ -60,7 +60,7 @@ TMC_UART = None  # external drivers, set up by their own jumpers
 
 SETTINGS = dict(
     defaults.SETTINGS,
-    **defaults.NETWORK,
+    **defaults_net.NETWORK,
     chip="esp32",
     # ESP32 timer callbacks are always soft (scheduled by the interpreter), so the
     # tick is slower than on rp2: 10 kHz. `make board-check` shows the real rate and

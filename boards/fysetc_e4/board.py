@@ -14,7 +14,7 @@
 # input, so no drive has one, nor for a bed probe (z_probe): G29 and G30 answer an
 # error; with drives=1, a TF card line (SCK, GPIO 18) could take one.
 # GPIO 12 (Z DIR) is the MTDI strap: it must be low at reset, as the board wires it.
-from mixfw import defaults
+from mixfw import defaults, defaults_net
 
 NAME = "fysetc_e4"
 CHIP = "esp32"
@@ -57,7 +57,7 @@ TMC_UART = {
 
 SETTINGS = dict(
     defaults.SETTINGS,
-    **defaults.NETWORK,
+    **defaults_net.NETWORK,
     chip="esp32",
     tick_us=100,  # soft timer callbacks on ESP32: 10 kHz (see boards/esp32_devkit)
     step_backend="timer",

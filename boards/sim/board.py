@@ -3,7 +3,7 @@
 # a filament runout input per drive (set by the sim-only M7107, simswitch.py) and a
 # BLTouch bed probe (simbed.py puts a bed under it).
 # Plain data: how to step is the firmware's business, not the board's.
-from mixfw import defaults
+from mixfw import defaults, defaults_net
 
 NAME = "sim"
 
@@ -31,7 +31,7 @@ PINS = {
 
 SETTINGS = dict(
     defaults.SETTINGS,
-    **defaults.NETWORK,
+    **defaults_net.NETWORK,
     chip="sim",
     tick_us=20,  # step-loop period: 50 kHz
     drives=6,

@@ -3,7 +3,6 @@
 # M926 and friends change the settings only; M930 applies them. The Marlin aliases
 # apply at once, as Marlin users expect.
 from mixfw.gcode import GcodeError
-from mixfw.options import SECRET
 
 # Option names are text, so the parser hands these commands their arguments raw.
 RAW_COMMANDS = (("M", 925), ("M", 926))
@@ -47,13 +46,12 @@ class ConfigCommands:
             ch + self.config.format(n) for ch, n in zip(letters, names)))
 
     # M503: print every option as an M926 line that can be sent back, with its help,
-    # limits and whether it needs a restart as a comment; not the password, which
-    # M925 Inet_password says is set or not. Example: M503
+    # limits and whether it needs a restart as a comment; the network's password as a
+    # comment that says whether one is set. Example: M503
     def m503(self, line):
         texts = _help_texts()
         for o in self.config.options:
-            if o.kind != SECRET:
-                self.printer.reply("echo:" + self.config.describe(o.name, texts))
+            self.printer.reply("echo:" + self.config.describe(o.name, texts))
 
     # M925 I<option>: print one option the way M503 does. Example: M925 Isteps_per_mm_x
     def m925(self, line):

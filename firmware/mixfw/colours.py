@@ -1,7 +1,7 @@
 # Filament colours and the colour a mix prints: the web page's mix editor and `mixstep
 # preview`. Not loaded at boot: a board keeps every name its modules use in RAM.
 
-from mixfw.defaults import NETWORK
+from mixfw.defaults_net import NETWORK
 
 DRIVE_RGB = NETWORK["drive_colour_rgb"]
 

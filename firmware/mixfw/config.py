@@ -11,8 +11,7 @@
 #
 # Pure logic: no `machine`; the file system is passed in (see FileStorage).
 import os
-from mixfw.options import (SCHEMA, FIRMWARE_DEFAULTS, FLOAT, INT, BOOL, MIX, PAIR, EACH, POW2,
-                           SECRET)
+from mixfw.options import SCHEMA, FIRMWARE_DEFAULTS, FLOAT, INT, BOOL, MIX, PAIR, EACH, POW2
 from mixfw.mixer import normalize, default_tool_mixes
 from mixfw.pwm import CLOCK_HZ, HEATER_OPTIONS, range_hz, clock_text
 
@@ -93,7 +92,7 @@ class Option:
         """row: options.SCHEMA's; index: position in the setting's tuple, -1 for a plain
         value; axis: the name's suffix ("x", "3"); width: drives of a MIX, tools of a
         PAIR."""
-        self.key, _axes, self.kind, self.lo, self.hi, self.restart = row
+        self.key, _axes, self.kind, self.lo, self.hi, self.restart = row[:6]
         self.index = index
         self.axis = axis
         self.name = self.key if index < 0 else self.key + "_" + axis
@@ -102,8 +101,6 @@ class Option:
 
     def parse(self, text):
         """The typed value of text as M926 or the file gives it."""
-        if self.kind == SECRET:
-            return self.check(text)
         if self.kind == PAIR:
             words = text.split(":")
             try:
@@ -126,9 +123,16 @@ class Option:
                 FLOAT: " number", BOOL: " 0 or 1"}.get(self.kind, " whole number")))
         return self.check(v)
 
+    def describe(self, text, v):
+        """Config.describe's line for value v, text the option's help."""
+        if self.index >= 0:
+            text = self.axis.upper() + ": " + text
+        limits = "" if self.kind in (MIX, PAIR) else ", %s..%s" % (
+            self.format(self.lo), self.format(self.hi))
+        return "M926 I%s V%s ; %s%s%s" % (
+            self.name, self.format(v), text, limits, " (restart)" if self.restart else "")
+
     def check(self, v):
-        if self.kind == SECRET:
-            return getattr(_network(), "check_secret")(self, v, ConfigError)
         if self.kind == PAIR:
             tools = self.width
             if len(v) != 4 or not (0 <= v[0] < tools and 0 <= v[1] < tools):
@@ -161,8 +165,6 @@ class Option:
         return v
 
     def format(self, v):
-        if self.kind == SECRET:
-            return v
         if self.kind == PAIR:
             return "%d:%d:%r:%r" % (v[0], v[1], float(v[2]), float(v[3]))
         if self.kind == MIX:
@@ -191,14 +193,9 @@ def _put(settings, o, v):
         settings[o.key] = tuple(t)
 
 
-def _network():
-    """options_net.py, for a board with a network. Its names are strings here, which
-    a chip interns only when this runs: a board without a network never pays for
-    them (see that module)."""
-    return __import__("mixfw.options_net", None, None, ("NETWORK_ROWS",))
-
-
 class Config:
+    schema = SCHEMA  # a board with a network adds its rows (options_net.py)
+
     def __init__(self, board_settings, path, storage=None, warn=None, clock_hz=None):
         """board_settings: the board's SETTINGS (not modified; kept for the defaults).
         path: the file on flash. warn(text): prints one `echo:` line, used when the
@@ -211,9 +208,8 @@ class Config:
         self.appliers = []  # fn(settings) each, called by apply() (M930)
         self.before_save = []  # fn() each: bring running state (counters) into settings
         self.board_settings = board_settings
-        self.schema = SCHEMA
-        if "tcp_port" in board_settings:  # defaults.NETWORK's: its options too
-            self.schema = SCHEMA + getattr(_network(), "NETWORK_ROWS")
+        if "net_password" in board_settings:  # a board with a network: its options too
+            __import__("mixfw.options_net")  # (Config.schema; no name more on a Pico)
         defaults = self._board_defaults()
         self.chip = defaults.get("chip", "sim")
         self.clock_hz = (clock_hz or defaults.get("clock_hz")
@@ -236,7 +232,7 @@ class Config:
         if "drives" in defaults and "tool_mixes" not in defaults:
             defaults["tool_mixes"] = default_tool_mixes(
                 defaults["drives"], defaults.get("virtual_tools", 16))
-        if "drive_colour_rgb" in defaults:  # defaults.NETWORK's, for six drives
+        if "drive_colour_rgb" in defaults:  # defaults_net.NETWORK's, for six drives
             defaults["drive_colour_rgb"] = defaults["drive_colour_rgb"][:defaults["drives"]]
         if "tool_mixes" in defaults and "tool_advance_k" not in defaults:
             defaults["tool_advance_k"] = (0.0,) * len(defaults["tool_mixes"])
@@ -254,7 +250,7 @@ class Config:
 
     def _option(self, row, index, axis):
         width = self.mix_width if row[2] == MIX else self.pair_width if row[2] == PAIR else 0
-        o = Option(row, index, axis, width)
+        o = (Option if len(row) < 7 else row[6])(row, index, axis, width)  # its own kind
         if o.key.endswith("_pwm_hz"):
             self._pwm_limits(o)
         return o
@@ -338,14 +334,7 @@ class Config:
         """One line M926 takes back, its help (from texts: options_help.HELP) as a
         comment."""
         o = self.option(name)
-        text = texts.get(o.key, "")
-        if o.kind == SECRET:
-            return getattr(_network(), "describe_secret")(name, text, self._read_setting(o))
-        if o.index >= 0:
-            text = o.axis.upper() + ": " + text
-        limits = "" if o.kind in (MIX, PAIR) else ", %s..%s" % (o.format(o.lo), o.format(o.hi))
-        return "M926 I%s V%s ; %s%s%s" % (
-            name, self.format(name), text, limits, " (restart)" if o.restart else "")
+        return o.describe(texts.get(o.key, ""), self._read_setting(o))
 
     # --- applying ---
     def _mark_running(self):

@@ -74,23 +74,10 @@ SETTINGS = {
     "mesh_z_nm": (0,) * 25,
     "fan_pwm_hz": 1000,
     "thermal_period_ms": 100,
-    # Consoles: USB serial always, and a UART (console_uart: its id, -1 for none).
+    # Consoles: USB serial always; a UART (console_uart: its id, -1 for none) and, on
+    # boards with a network, a TCP console.
     "console_uart": -1,
     "console_baud": 115200,
-}
-
-# What a board with a network adds (SETTINGS = dict(defaults.SETTINGS,
-# **defaults.NETWORK, ...)): the TCP console and the web page, both off until a
-# password is set (M926 Inet_password V...). A connection that sends no whole line for
-# net_idle_timeout_s is closed (0: never). The filaments' colours, 0xRRGGBB, one per
-# drive (the rest dropped), which the web page shows mixed (`mixstep preview`'s
-# defaults too). A board without a network leaves them out, and keeps their RAM (a
-# name more here costs a Pico more than its bytes: its names' pool).
-NETWORK = {
-    "drive_colour_rgb": (0xE03030, 0x30A0E0, 0xF0D020, 0x40C040, 0xA050D0, 0xF0F0F0),
     "tcp_port": 8888,
     "tcp_max_clients": 4,
-    "net_password": "",
-    "net_idle_timeout_s": 600,
-    "web_page_port": 80,
 }

@@ -142,10 +142,7 @@ class Files:
         job = self.printer.job
         return job if job is not None and not job.paused else None
 
-    def begin_upload(self, name, sink=True):
-        """An upload of name begins; end_upload puts it in place. sink: the lines
-        the consoles send next are its (M28's; else the web page's bytes come through
-        webserver.py)."""
+    def begin_upload(self, name):
         # A refused upload takes the lines that follow all the same, up to M29, which
         # then says nothing was saved: a host that sends the file anyway must never
         # have it run as G-code.
@@ -154,8 +151,7 @@ class Files:
         self.part_written = False
         self.upload_failed = None
         self.upload_name = name
-        if sink:
-            self.printer.sink = self._write
+        self.printer.sink = self._write
         try:
             job = self.printing()
             if job is not None:
@@ -165,10 +161,7 @@ class Files:
             self.chunk = bytearray(_UPLOAD_CHUNK_BYTES)
         except (FileError, MemoryError) as e:
             self.upload_failed = str(e) or "out of memory"
-            if not sink:  # no M29 follows to end it
-                self.upload_name = None
-            raise FileError(self.upload_failed + ("; the lines up to M29 are not run"
-                                                  if sink else ""))
+            raise FileError("%s; the lines up to M29 are not run" % self.upload_failed)
 
     def _write(self, data):
         """One received line into the chunk, the chunk to flash when it is full. After
@@ -192,10 +185,8 @@ class Files:
                 f.close()
         except OSError as e:
             self.upload_failed = str(e)
-            if e.args and e.args[0] == 28:  # ENOSPC
-                self.upload_failed = "the flash is full"
             raise FileError("could not write %s: %s; M29 ends the upload"
-                            % (self.upload_name, self.upload_failed))
+                            % (self.upload_name, e))
         except Exception as e:  # a halt or M410 while waiting for the moves
             self.upload_failed = str(e)
             raise
@@ -213,15 +204,11 @@ class Files:
                 self._flush()
                 # The upload replaces a file of the same name only once it is complete.
                 self.storage.rename(path + ".part", path)
-        except (OSError, FileError) as e:
-            self.upload_failed = self.upload_failed or str(e)
-        self.upload_name = self.chunk = None
+        except OSError as e:
+            raise FileError("%s not saved: %s" % (name, e))
+        finally:
+            self.upload_name = self.chunk = None
         if self.upload_failed is not None:
-            if self.part_written:  # what reached flash goes: the space is the old files'
-                try:
-                    self.storage.remove(self.path(name) + ".part")
-                except OSError:
-                    pass
             raise FileError("%s not saved: %s" % (name, self.upload_failed))
         return name
 

@@ -15,9 +15,6 @@ MIX = "mix"  # drive weights w0:w1:..., normalised to integers (mixer.normalize)
 PAIR = "pair"  # a tool pair's transition from:to:l1_mm:l2_mm; 0:0:0:0 is an empty slot
 EACH = "each"  # axes of a row whose setting is a tuple of any length: _0, _1, ...
 POW2 = "pow2"  # a whole number that is a power of two (microsteps)
-# Text kept by M500 and never shown (the network password, options_net.py): lo..hi is
-# its length, or empty for none. M503 and M925 say whether it is set, never what it is.
-SECRET = "secret_text"  # 10 characters or more: a string object, not a name the chip keeps
 LIVE = False  # takes effect with M930
 RESTART = True  # takes effect after a restart
 

@@ -119,6 +119,30 @@ def _unquote(path):
         raise HttpError(400, "the path is not UTF-8")
 
 
+def _flash_error(e, files):
+    """The answer to a files.FileError of an upload or a deletion (M28's words, less
+    its M29)."""
+    text = str(e).replace("; M29 ends the upload", "")
+    why = files.upload_failed  # str(OSError(ENOSPC)) on a port without errno's names, or with
+    if why in ("28", "[Errno 28] ENOSPC"):
+        return HttpError(507, text.replace(": " + why, ": the flash is full"))
+    return HttpError(409, text)
+
+
+def _end_upload(files):
+    """End the page's upload: in place if all of it reached flash, else what did is
+    removed (its space is the other files') and the error raised."""
+    name = files.upload_name
+    try:
+        files.end_upload()
+    except ValueError:
+        try:
+            files.storage.remove(files.path(name) + ".part")
+        except OSError:
+            pass
+        raise
+
+
 def _upload(files, data):
     """A page's upload as its bytes come: into the upload's chunk (files.py), which
     goes to flash a sector at a time, as M28's lines do."""
@@ -308,10 +332,15 @@ class HttpListener:
             if files.upload_name is not None:  # the files keep one upload at a time
                 raise HttpError(409, "%s is being uploaded; try again after it"
                                 % files.upload_name)
+            sink = self.printer.sink
             try:
-                files.begin_upload(name, False)
+                files.begin_upload(name)
             except ValueError as e:  # files.FileError
-                raise HttpError(409 if "prints" in str(e) else 400, str(e))
+                files.upload_name = None  # M28's would wait for its M29; none comes here
+                raise HttpError(409 if "prints" in str(e) else 400,
+                                str(e).replace("; the lines up to M29 are not run", ""))
+            finally:
+                self.printer.sink = sink  # the consoles' lines stay G-code: M28 takes them
             r.upload = name
         elif r.length > _GCODE_BYTES:
             raise HttpError(413, "request body over %d bytes" % _GCODE_BYTES)
@@ -321,11 +350,11 @@ class HttpListener:
         if r.length >= 0 and r.got > r.length:
             raise HttpError(400, "body longer than its Content-Length")
         if r.upload is not None:
+            files = self._files()
             try:
-                _upload(self._files(), data)
+                _upload(files, data)
             except ValueError as e:  # M28's words: the upload ends here, with no M29
-                raise HttpError(507 if "full" in str(e) else 409,
-                                str(e).replace("; M29 ends the upload", ""))
+                raise _flash_error(e, files)
         else:
             r.body.extend(data)
 
@@ -335,9 +364,9 @@ class HttpListener:
             files = self._files()
             files.upload_failed = files.upload_failed or "the upload was cut short"
             try:
-                files.end_upload()  # drops what reached flash
+                _end_upload(files)
             except ValueError:
-                pass
+                pass  # not saved, as it should not be
 
     def _finish(self, r):
         method, path = r.method, r.path
@@ -375,13 +404,13 @@ class HttpListener:
             try:
                 if method == "PUT":
                     r.upload = None
-                    files.end_upload()
+                    _end_upload(files)
                     return self._answer(r, 201, {"name": name, "bytes": r.got})
                 if method == "DELETE":
                     files.delete(name)
                     return self._answer(r, 200, {"ok": True})
             except ValueError as e:
-                raise HttpError(507 if "full" in str(e) else 409, str(e))
+                raise _flash_error(e, files)
         raise HttpError(404 if method in ("GET", "POST", "PUT", "DELETE") else 405,
                         "no %s %s" % (method, path))
 

@@ -25,6 +25,8 @@ class Commands:
         self.lines.append(text)
 
     def send(self, text):
+        if text.startswith(";"):
+            return  # a comment, which the printer's intake drops (M503's password line)
         b = text.encode()
         line = self.parser.parse(b, len(b))
         self.handlers["%s%d" % (line.letter, line.number)](line)
