@@ -245,3 +245,41 @@ def _wait_for(connect):
         except OSError:
             assert time.time() < deadline
             time.sleep(0.05)
+
+
+def test_a_board_listens_once_on_wi_fi_with_a_password(mp):
+    """webserver.board_listeners, as assemble calls it on a board whose `network`
+    imports (a double of the chip's here): nothing off Wi-Fi, nothing and a warning
+    without a password, then the console and the page sharing one wait after wrong
+    passwords; a port of 0 turns its listener off."""
+    got = mp.json("""
+import json, sys
+sys.path.append(%r)
+import network
+from mixfw.webserver import board_listeners
+class Printer:
+    settings = {"tcp_port": %d, "web_page_port": %d, "net_password": "",
+                "tcp_max_clients": 4, "net_idle_timeout_s": 600}
+def listeners():
+    warnings = []
+    made = board_listeners(Printer, "/web", warnings)
+    names = [type(l).__name__ for l in made]
+    shared = len(made) == 2 and made[0].gate is made[1].gate
+    for l in made:
+        l.sock.close()
+    return [names, warnings, shared]
+out = [listeners()]
+network.CONNECTED[0] = True
+out.append(listeners())
+Printer.settings["net_password"] = %r
+out.append(listeners())
+Printer.settings["web_page_port"] = 0
+out.append(listeners())
+print(json.dumps(out))
+""" % (str(paths.ROOT / "host_tests" / "upy" / "wifi"), free_port(), free_port(), PASSWORD))
+    assert got == [
+        [[], [], False],
+        [[], ["//network console and web page off: no password set "
+              "(M926 Inet_password V<8 to 64 characters>, M500, restart)"], False],
+        [["TcpListener", "HttpListener"], [], True],
+        [["TcpListener"], [], False]]

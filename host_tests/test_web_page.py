@@ -16,8 +16,8 @@ import urllib.request
 import pytest
 
 from mixfw.colours import mix_rgb
-from mixstep import paths, serve, tracecheck, tracepull
-from net import free_port
+from mixstep import paths, serve
+from net import free_port, traced_drive_steps
 
 PASSWORD = "mixing-is-fun"
 CHROMIUM = "/usr/bin/chromium"
@@ -343,15 +343,8 @@ def test_a_mix_edited_on_the_page_is_what_the_next_extrusion_feeds(open_page, pr
     log = page.console_lines()
     sent = [l[2:] for l in log[log.index("> M7300 S1") + 1:] if l.startswith("> ")]
     assert "M567 P0 E25:75:%s" % ":".join(["0"] * (drives - 2)) in sent, sent
-    monkeypatch.setenv("MIXSTEP_NET_PASSWORD", PASSWORD)
-    pulled = tmp_path / "pulled.vcd"
-    assert tracepull.pull(pulled, tcp=printer[1])["overrun"] == 0
-    gcode = tmp_path / "sent.gcode"
-    gcode.write_text("\n".join(sent) + "\n")
-    checks = {c["name"]: c for c in tracecheck.check(pulled, gcode)["checks"]}
-    assert [c["name"] for c in checks.values() if c["ok"] is False] == []
     spm = 415  # the simulated board's filament steps per mm
-    assert (checks["steps_e0"]["measured"], checks["steps_e1"]["measured"]) == (
+    assert traced_drive_steps(tmp_path, printer[1], sent, PASSWORD, monkeypatch) == (
         10 * spm, 30 * spm)
 
     # A drive's filament colour: the tool's colour follows, on the server and the page.

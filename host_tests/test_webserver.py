@@ -10,8 +10,8 @@ import time
 
 import pytest
 
-from mixstep import paths, serve, tracecheck, tracepull
-from net import free_port
+from mixstep import paths, serve
+from net import free_port, traced_drive_steps
 
 PASSWORD = "mixing-is-fun"
 # Real slicer output with progress (M73) in it.
@@ -158,18 +158,11 @@ def test_a_mix_edited_on_the_page_is_the_next_extrusion_s(tmp_path, monkeypatch)
         assert status["tools"][0] == {"mix": [1, 3, 0, 0, 0, 0], "rgb": "#4000bf"}
         fed = [float(v) for v in re.findall(r"e\d:(\S+)", got[-2])]
         assert fed[:2] == pytest.approx([10.0, 30.0], abs=0.01) and sum(fed[2:]) == 0, got
-        monkeypatch.setenv("MIXSTEP_NET_PASSWORD", PASSWORD)
-        pulled = tmp_path / "pulled.vcd"
-        assert tracepull.pull(pulled, tcp="127.0.0.1:%d" % tcp_port)["overrun"] == 0
+        spm = 415  # the simulated board's filament steps per mm
+        assert traced_drive_steps(tmp_path, "127.0.0.1:%d" % tcp_port, lines, PASSWORD,
+                                  monkeypatch) == (10 * spm, 30 * spm)
     finally:
         serve.stop(proc)
-    sent = tmp_path / "sent.gcode"
-    sent.write_text("\n".join(lines) + "\n")
-    checks = {c["name"]: c for c in tracecheck.check(pulled, sent)["checks"]}
-    assert [c["name"] for c in checks.values() if c["ok"] is False] == []
-    spm = 415  # the simulated board's filament steps per mm
-    assert (checks["steps_e0"]["measured"], checks["steps_e1"]["measured"]) == (
-        10 * spm, 30 * spm)
 
 
 def test_an_upload_streams_to_flash_and_prints(tmp_path, printer):
